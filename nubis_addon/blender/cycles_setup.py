@@ -1,0 +1,88 @@
+"""The offline reference: the baked VDB as a Cycles volume whose material matches the viewport."""
+
+from __future__ import annotations
+
+import bpy
+
+from ..core.errors import NubisError
+
+VOLUME_NAME = "Nubis Clouds VDB"
+MATERIAL_NAME = "Nubis Cloud Volume"
+
+
+def build_material(settings) -> bpy.types.Material:
+    """Extinction = density x sigma (the viewport's own); albedo 1; the viewport's two phase lobes
+    as a mix of two Volume Scatter closures, which share one extinction and mix their phases."""
+    mat = bpy.data.materials.get(MATERIAL_NAME) or bpy.data.materials.new(MATERIAL_NAME)
+    mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    attr = nt.nodes.new("ShaderNodeAttribute")
+    attr.attribute_name = "density"
+    attr.attribute_type = "GEOMETRY"
+    scale = nt.nodes.new("ShaderNodeMath")
+    scale.operation = "MULTIPLY"
+    scale.inputs[1].default_value = settings.density_sigma
+    lobes = []
+    for g in (settings.lighting_phase_g0, settings.lighting_phase_g1):
+        node = nt.nodes.new("ShaderNodeVolumeScatter")
+        node.phase = "HENYEY_GREENSTEIN"
+        node.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+        node.inputs["Anisotropy"].default_value = g
+        nt.links.new(scale.outputs[0], node.inputs["Density"])
+        lobes.append(node)
+    mix = nt.nodes.new("ShaderNodeMixShader")
+    mix.inputs["Fac"].default_value = settings.lighting_phase_mix
+    nt.links.new(lobes[0].outputs[0], mix.inputs[1])
+    nt.links.new(lobes[1].outputs[0], mix.inputs[2])
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    nt.links.new(attr.outputs["Fac"], scale.inputs[0])
+    nt.links.new(mix.outputs[0], out.inputs["Volume"])
+    for i, node in enumerate((attr, scale, lobes[0], lobes[1], mix, out)):
+        node.location = (i * 220, 0 if node is not lobes[1] else -250)
+    return mat
+
+
+def import_volume(scene, vdb_path: str) -> bpy.types.Object:
+    remove_volume(scene)
+    vol = bpy.data.volumes.new(VOLUME_NAME)
+    vol.filepath = vdb_path
+    vol.grids.load()
+    if "density" not in [g.name for g in vol.grids]:
+        bpy.data.volumes.remove(vol)
+        raise NubisError(f"the VDB '{vdb_path}' has no 'density' grid: bake it again with Nubis")
+    obj = bpy.data.objects.new(VOLUME_NAME, vol)
+    scene.collection.objects.link(obj)
+    vol.materials.append(build_material(scene.nubis))
+    # The grids carry their world transform; the object must stay at the identity.
+    obj.matrix_world.identity()
+    return obj
+
+
+def remove_volume(scene) -> None:
+    obj = bpy.data.objects.get(VOLUME_NAME)
+    if obj is not None:
+        vol = obj.data
+        bpy.data.objects.remove(obj)
+        if vol is not None and vol.users == 0:
+            bpy.data.volumes.remove(vol)
+
+
+def configure_render(scene, width: int, height: int, samples: int | None, bounces: int | None = None) -> None:
+    scene.render.engine = "CYCLES"
+    scene.cycles.device = "CPU"
+    if samples:
+        scene.cycles.samples = samples
+    if bounces is not None:
+        scene.cycles.volume_bounces = bounces
+    scene.cycles.use_denoising = False
+    scene.render.resolution_x, scene.render.resolution_y = width, height
+    scene.render.resolution_percentage = 100
+    scene.render.film_transparent = True
+    scene.render.image_settings.file_format = "OPEN_EXR"
+    scene.render.image_settings.color_depth = "32"
+    scene.render.image_settings.color_mode = "RGBA"
+    # Cloud interiors need bounces to brighten; everything else stays at Cycles' defaults.
+    scene.cycles.max_bounces = max(scene.cycles.max_bounces, scene.cycles.volume_bounces)
+    if scene.camera is not None:
+        scene.camera.data.clip_end = max(scene.camera.data.clip_end, scene.nubis.layer_draw_radius * 3)

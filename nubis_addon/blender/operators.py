@@ -1,0 +1,248 @@
+"""Operators: every one that changes data supports undo and reports errors as a sentence."""
+
+from __future__ import annotations
+
+import bpy
+from bpy.props import EnumProperty, FloatProperty, IntProperty, StringProperty
+
+from ..core import presets
+from ..core.errors import NubisError
+from . import cycles_setup, pipeline, scene_io, viewport
+
+
+def _preset_items(_self, _context):
+    items = []
+    for name in presets.list_presets():
+        try:
+            label = presets.load_preset(name).name
+        except NubisError:
+            label = f"{name} (broken)"
+        items.append((name, label, ""))
+    return items or [("default", "Default", "")]
+
+
+def _has_cloudscape(context) -> bool:
+    scene = context.scene
+    return scene is not None and getattr(scene, "nubis", None) is not None and scene.nubis.field_a is not None
+
+
+class NubisOperator:
+    def run(self, context):
+        raise NotImplementedError
+
+    def execute(self, context):
+        try:
+            message = self.run(context)
+        except NubisError as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        if message:
+            self.report({"INFO"}, message)
+        viewport.mark_dirty()
+        for area in context.screen.areas if context.screen else ():
+            area.tag_redraw()
+        return {"FINISHED"}
+
+
+class NeedsCloudscape:
+    @classmethod
+    def poll(cls, context):
+        if not _has_cloudscape(context):
+            cls.poll_message_set("Create a cloudscape first (Nubis > New Cloudscape)")
+            return False
+        return True
+
+
+class NUBIS_OT_new_cloudscape(NubisOperator, bpy.types.Operator):
+    """Create the cloud settings, data-field images, sun, sky and camera of a preset"""
+
+    bl_idname = "nubis.new_cloudscape"
+    bl_label = "New Cloudscape"
+    bl_options = {"REGISTER", "UNDO"}
+
+    preset: EnumProperty(name="Preset", items=_preset_items)
+
+    def run(self, context):
+        preset = presets.load_preset(self.preset)
+        scene_io.apply_preset(context.scene, preset)
+        return f"Cloudscape '{preset.name}' created"
+
+
+class NUBIS_OT_generate_field(NeedsCloudscape, NubisOperator, bpy.types.Operator):
+    """Composite the layer stack into the data-field images"""
+
+    bl_idname = "nubis.generate_field"
+    bl_label = "Generate Field"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def run(self, context):
+        scene_io.generate_fields(context.scene)
+        return "Data field generated"
+
+
+class NUBIS_OT_layer_add(NeedsCloudscape, NubisOperator, bpy.types.Operator):
+    """Add a field layer below the active one"""
+
+    bl_idname = "nubis.layer_add"
+    bl_label = "Add Layer"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def run(self, context):
+        s = context.scene.nubis
+        layer = s.layers.add()
+        layer.name = f"Layer {len(s.layers)}"
+        s.layers.move(len(s.layers) - 1, min(s.active_layer + 1, len(s.layers) - 1))
+        s.active_layer = min(s.active_layer + 1, len(s.layers) - 1)
+        return None
+
+
+class NUBIS_OT_layer_remove(NeedsCloudscape, NubisOperator, bpy.types.Operator):
+    """Remove the active field layer"""
+
+    bl_idname = "nubis.layer_remove"
+    bl_label = "Remove Layer"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def run(self, context):
+        s = context.scene.nubis
+        if not s.layers:
+            raise NubisError("there is no layer to remove")
+        s.layers.remove(s.active_layer)
+        s.active_layer = max(0, min(s.active_layer, len(s.layers) - 1))
+        scene_io.generate_fields(context.scene)
+        return None
+
+
+class NUBIS_OT_layer_move(NeedsCloudscape, NubisOperator, bpy.types.Operator):
+    """Move the active field layer up or down the stack"""
+
+    bl_idname = "nubis.layer_move"
+    bl_label = "Move Layer"
+    bl_options = {"REGISTER", "UNDO"}
+
+    direction: EnumProperty(items=(("UP", "Up", ""), ("DOWN", "Down", "")))
+
+    def run(self, context):
+        s = context.scene.nubis
+        target = s.active_layer + (-1 if self.direction == "UP" else 1)
+        if 0 <= target < len(s.layers):
+            s.layers.move(s.active_layer, target)
+            s.active_layer = target
+            scene_io.generate_fields(context.scene)
+        return None
+
+
+class NUBIS_OT_layer_duplicate(NeedsCloudscape, NubisOperator, bpy.types.Operator):
+    """Duplicate the active field layer"""
+
+    bl_idname = "nubis.layer_duplicate"
+    bl_label = "Duplicate Layer"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def run(self, context):
+        from .properties import layer_from_dict, layer_to_dict
+
+        s = context.scene.nubis
+        if not s.layers:
+            raise NubisError("there is no layer to duplicate")
+        data = layer_to_dict(s.layers[s.active_layer])
+        data["name"] += " copy"
+        layer_from_dict(s.layers.add(), data)
+        s.layers.move(len(s.layers) - 1, s.active_layer + 1)
+        s.active_layer += 1
+        scene_io.generate_fields(context.scene)
+        return None
+
+
+class NUBIS_OT_render_image(NeedsCloudscape, NubisOperator, bpy.types.Operator):
+    """Render the clouds from the scene camera into the image 'Nubis Render'"""
+
+    bl_idname = "nubis.render_image"
+    bl_label = "Render Clouds"
+
+    def run(self, context):
+        scene = context.scene
+        w, h = pipeline.resolution(scene, None, None)
+        rgba = pipeline.render_viewport(scene, w, h)
+        img = bpy.data.images.get("Nubis Render") or bpy.data.images.new("Nubis Render", w, h, float_buffer=True)
+        if tuple(img.size) != (w, h):
+            img.scale(w, h)
+        img.pixels.foreach_set(rgba[::-1].ravel())
+        img.update()
+        return f"Rendered {w}x{h} into the image 'Nubis Render'"
+
+
+class NUBIS_OT_bake_vdb(NeedsCloudscape, NubisOperator, bpy.types.Operator):
+    """Bake the viewport's cloud density to an OpenVDB file for Cycles and other renderers"""
+
+    bl_idname = "nubis.bake_vdb"
+    bl_label = "Bake OpenVDB"
+    bl_options = {"REGISTER", "UNDO"}
+
+    filepath: StringProperty(subtype="FILE_PATH", default="//nubis_clouds.vdb")
+    voxel_size: FloatProperty(
+        name="Voxel Size", default=0.0, min=0.0, unit="LENGTH", description="0 uses the scene's bake voxel size"
+    )
+
+    def run(self, context):
+        wm = context.window_manager
+        path = bpy.path.abspath(self.filepath)
+        wm.progress_begin(0, 100)
+        try:
+            result = pipeline.bake(
+                context.scene, path, self.voxel_size or None, lambda f: wm.progress_update(int(f * 100))
+            )
+        finally:
+            wm.progress_end()
+        cycles_setup.import_volume(context.scene, str(result.path))
+        return f"Baked {result.active_voxels} voxels to {result.path} and added them as a Cycles volume"
+
+
+class NUBIS_OT_bake_frames(NeedsCloudscape, NubisOperator, bpy.types.Operator):
+    """Bake one VDB per frame of the scene's range (a sequence Blender's Volume object plays back)"""
+
+    bl_idname = "nubis.bake_frames"
+    bl_label = "Bake Sequence"
+
+    directory: StringProperty(subtype="DIR_PATH", default="//nubis_vdb/")
+    step: IntProperty(name="Frame Step", default=1, min=1)
+
+    def run(self, context):
+        scene = context.scene
+        folder = bpy.path.abspath(self.directory)
+        frames = range(scene.frame_start, scene.frame_end + 1, self.step)
+        wm = context.window_manager
+        wm.progress_begin(0, len(frames))
+        current = scene.frame_current
+        try:
+            for i, frame in enumerate(frames):
+                scene.frame_set(frame)
+                pipeline.bake(scene, f"{folder}/clouds_{frame:04d}.vdb")
+                wm.progress_update(i + 1)
+        finally:
+            scene.frame_set(current)
+            wm.progress_end()
+        return f"Baked {len(frames)} frames into {folder}"
+
+
+CLASSES = (
+    NUBIS_OT_new_cloudscape,
+    NUBIS_OT_generate_field,
+    NUBIS_OT_layer_add,
+    NUBIS_OT_layer_remove,
+    NUBIS_OT_layer_move,
+    NUBIS_OT_layer_duplicate,
+    NUBIS_OT_render_image,
+    NUBIS_OT_bake_vdb,
+    NUBIS_OT_bake_frames,
+)
+
+
+def register() -> None:
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+
+
+def unregister() -> None:
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,125 @@
+"""The sidebar (N panel) of the 3D viewport, tab 'Nubis'."""
+
+from __future__ import annotations
+
+import bpy
+
+from ..core.params import PARAMS
+from . import viewport
+
+
+class NubisPanel:
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Nubis"
+
+    @classmethod
+    def poll(cls, context):
+        return getattr(context.scene, "nubis", None) is not None and context.scene.nubis.field_a is not None
+
+
+def _draw_section(layout, settings, section: str) -> None:
+    col = layout.column(align=True)
+    for p in PARAMS:
+        if p.section == section:
+            col.prop(settings, p.key)
+
+
+class NUBIS_PT_main(bpy.types.Panel):
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Nubis"
+    bl_label = "Nubis Clouds"
+
+    def draw(self, context):
+        layout = self.layout
+        settings = getattr(context.scene, "nubis", None)
+        layout.operator_menu_enum("nubis.new_cloudscape", "preset", text="New Cloudscape", icon="OUTLINER_DATA_VOLUME")
+        if settings is None or settings.field_a is None:
+            layout.label(text="No cloudscape in this scene yet")
+            return
+        row = layout.row()
+        row.prop(settings, "enabled")
+        row.prop(settings, "viewport_scale", text="1/N")
+        if viewport.last_error():
+            layout.label(text=viewport.last_error(), icon="ERROR")
+        layout.operator("nubis.render_image", icon="RENDER_STILL")
+
+
+class NUBIS_PT_field(NubisPanel, bpy.types.Panel):
+    bl_label = "Data Field"
+    bl_parent_id = "NUBIS_PT_main"
+
+    def draw(self, context):
+        layout = self.layout
+        s = context.scene.nubis
+        _draw_section(layout, s, "field")
+        row = layout.row()
+        row.template_list("UI_UL_list", "nubis_layers", s, "layers", s, "active_layer", rows=4)
+        col = row.column(align=True)
+        col.operator("nubis.layer_add", icon="ADD", text="")
+        col.operator("nubis.layer_remove", icon="REMOVE", text="")
+        col.operator("nubis.layer_duplicate", icon="DUPLICATE", text="")
+        col.operator("nubis.layer_move", icon="TRIA_UP", text="").direction = "UP"
+        col.operator("nubis.layer_move", icon="TRIA_DOWN", text="").direction = "DOWN"
+        if s.layers and 0 <= s.active_layer < len(s.layers):
+            layer = s.layers[s.active_layer]
+            box = layout.box()
+            for key in ("kind", "channel", "blend", "enabled", "opacity", "mask", "invert_mask"):
+                box.prop(layer, key)
+            if layer.kind in {"PERLIN", "WORLEY", "PERLIN_WORLEY"}:
+                for key in ("scale", "seed", "octaves"):
+                    box.prop(layer, key)
+            elif layer.kind == "GRADIENT":
+                for key in ("gradient", "angle", "center", "radius"):
+                    box.prop(layer, key)
+            elif layer.kind == "CONSTANT":
+                box.prop(layer, "value")
+            elif layer.kind == "IMAGE":
+                box.template_ID(layer, "image", open="image.open")
+            box.prop(layer, "remap")
+        layout.operator("nubis.generate_field", icon="FILE_REFRESH")
+
+
+def _section_panel(section: str, label: str):
+    def draw(self, context):
+        _draw_section(self.layout, context.scene.nubis, section)
+
+    return type(
+        f"NUBIS_PT_{section}",
+        (NubisPanel, bpy.types.Panel),
+        {"bl_label": label, "bl_parent_id": "NUBIS_PT_main", "bl_options": {"DEFAULT_CLOSED"}, "draw": draw},
+    )
+
+
+class NUBIS_PT_bake(NubisPanel, bpy.types.Panel):
+    bl_label = "Bake"
+    bl_parent_id = "NUBIS_PT_main"
+
+    def draw(self, context):
+        self.layout.prop(context.scene.nubis, "bake_voxel_size")
+        self.layout.operator("nubis.bake_vdb", icon="FILE_VOLUME")
+        self.layout.operator("nubis.bake_frames", icon="SEQUENCE")
+
+
+CLASSES = (
+    NUBIS_PT_main,
+    NUBIS_PT_field,
+    _section_panel("layer", "Layer"),
+    _section_panel("noise", "Noise"),
+    _section_panel("density", "Density"),
+    _section_panel("wind", "Wind"),
+    _section_panel("lighting", "Lighting"),
+    _section_panel("march", "Ray March"),
+    NUBIS_PT_bake,
+)
+
+
+def register() -> None:
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+
+
+def unregister() -> None:
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,167 @@
+"""Scene settings, generated from core/params.py so presets, UI and shaders share one list."""
+
+from __future__ import annotations
+
+import bpy
+from bpy.props import (
+    BoolProperty,
+    CollectionProperty,
+    EnumProperty,
+    FloatProperty,
+    FloatVectorProperty,
+    IntProperty,
+    PointerProperty,
+    StringProperty,
+)
+
+from ..core.params import PARAMS, Param
+from ..core.presets import LAYER_SCHEMA
+
+
+def _tag_redraw(_self, context) -> None:
+    from . import viewport
+
+    viewport.mark_dirty()
+    screen = getattr(context, "screen", None)
+    for area in screen.areas if screen else ():
+        if area.type == "VIEW_3D":
+            area.tag_redraw()
+
+
+def _prop_for(p: Param):
+    label = p.name.replace("_", " ").title()
+    common = {"name": label, "description": p.description, "update": _tag_redraw}
+    if p.kind == "float":
+        kw = {"default": p.default, "min": p.min, "max": p.max, "unit": p.unit}
+        if p.soft_max is not None:
+            kw["soft_max"] = p.soft_max
+        if p.unit == "ROTATION":
+            kw["subtype"] = "ANGLE"
+            kw.pop("unit")
+        return FloatProperty(**common, **kw)
+    if p.kind == "int":
+        return IntProperty(**common, default=p.default, min=int(p.min), max=int(p.max))
+    if p.kind == "bool":
+        return BoolProperty(**common, default=p.default)
+    raise TypeError(f"unsupported parameter kind {p.kind}")
+
+
+def _enum(choices: tuple[str, ...]) -> list[tuple[str, str, str]]:
+    return [(c.upper(), c.replace("_", " ").title(), "") for c in choices]
+
+
+def _layer_annotations() -> dict:
+    ann = {}
+    for key, spec in LAYER_SCHEMA.items():
+        typ, default = spec[0], spec[1]
+        label = key.replace("_", " ").title()
+        if key == "image":
+            ann[key] = PointerProperty(name="Image", type=bpy.types.Image, description="Painted image for image layers")
+        elif key == "name":
+            ann[key] = StringProperty(name="Name", default="Layer")
+        elif typ is str and len(spec) == 3:
+            ann[key] = EnumProperty(name=label, items=_enum(spec[2]), default=default.upper())
+        elif typ is str:
+            ann[key] = StringProperty(name=label, default=default)
+        elif typ is bool:
+            ann[key] = BoolProperty(name=label, default=default)
+        elif typ is int:
+            ann[key] = IntProperty(name=label, default=default, min=spec[2], max=spec[3])
+        elif typ is float:
+            unit = "LENGTH" if key in ("scale", "radius") else "NONE"
+            ann[key] = FloatProperty(name=label, default=default, min=spec[2], max=spec[3], unit=unit)
+        elif typ is list:
+            ann[key] = FloatVectorProperty(name=label, size=len(default), default=default)
+    return ann
+
+
+NubisFieldLayer = type(
+    "NubisFieldLayer",
+    (bpy.types.PropertyGroup,),
+    {"__annotations__": _layer_annotations(), "__doc__": "One layer of the data-field stack"},
+)
+
+
+def _settings_annotations() -> dict:
+    ann = {p.key: _prop_for(p) for p in PARAMS}
+    ann.update(
+        enabled=BoolProperty(
+            name="Show Clouds", default=True, update=_tag_redraw, description="Draw the clouds in the 3D viewport"
+        ),
+        preset=StringProperty(name="Preset", default="default", description="The preset this cloudscape came from"),
+        field_a=PointerProperty(
+            type=bpy.types.Image,
+            name="Field A",
+            update=_tag_redraw,
+            description="Coverage, precipitation, cloud type, bottom type",
+        ),
+        field_b=PointerProperty(
+            type=bpy.types.Image,
+            name="Field B",
+            update=_tag_redraw,
+            description="Storm coverage, min height, max height, density multiplier",
+        ),
+        field_cirrus=PointerProperty(
+            type=bpy.types.Image, name="Cirrus Field", update=_tag_redraw, description="Cirrus coverage and type"
+        ),
+        layers=CollectionProperty(type=NubisFieldLayer),
+        active_layer=IntProperty(name="Active Layer", default=0),
+        viewport_scale=IntProperty(
+            name="Viewport Downscale",
+            default=4,
+            min=1,
+            max=16,
+            update=_tag_redraw,
+            description="The viewport marches one pixel in N x N and upscales",
+        ),
+    )
+    return ann
+
+
+NubisSceneSettings = type(
+    "NubisSceneSettings",
+    (bpy.types.PropertyGroup,),
+    {"__annotations__": _settings_annotations(), "__doc__": "Nubis cloudscape settings of a scene"},
+)
+
+CLASSES = (NubisFieldLayer, NubisSceneSettings)
+
+
+def register() -> None:
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+    bpy.types.Scene.nubis = PointerProperty(type=NubisSceneSettings)
+
+
+def unregister() -> None:
+    del bpy.types.Scene.nubis
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)
+
+
+def params_from_scene(settings) -> dict:
+    return {p.key: getattr(settings, p.key) for p in PARAMS}
+
+
+def layer_to_dict(layer) -> dict:
+    out = {}
+    for key in LAYER_SCHEMA:
+        value = getattr(layer, key)
+        if key == "image":
+            value = value.name if value else ""
+        elif isinstance(value, str) and len(LAYER_SCHEMA[key]) == 3:
+            value = value.lower()
+        elif hasattr(value, "__len__") and not isinstance(value, str):
+            value = list(value)
+        out[key] = value
+    return out
+
+
+def layer_from_dict(layer, data: dict) -> None:
+    for key, value in data.items():
+        if key == "image":
+            layer.image = bpy.data.images.get(value) if value else None
+        elif isinstance(value, str) and len(LAYER_SCHEMA[key]) == 3:
+            setattr(layer, key, value.upper())
+        else:
+            setattr(layer, key, value)

@@ -1,0 +1,230 @@
+"""Translate between Blender data and the plain data core/ and render/ work on."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import bpy
+import numpy as np
+from mathutils import Euler, Vector
+
+from ..core import fields as fieldgen
+from ..core.errors import NubisError
+from ..core.presets import Preset
+from ..core.state import CloudState, sun_vector
+from .properties import layer_from_dict, layer_to_dict, params_from_scene
+
+FIELD_IMAGES = {
+    "a": ("field_a", "Nubis Field A"),
+    "b": ("field_b", "Nubis Field B"),
+    "cirrus": ("field_cirrus", "Nubis Cirrus"),
+}
+SUN_NAME = "Nubis Sun"
+CAMERA_NAME = "Nubis Camera"
+
+
+# ---- field images ----------------------------------------------------------------------------------
+
+
+def write_field_image(settings, which: str, data: np.ndarray):
+    """Store a field array in its image, creating, resizing and packing it so it survives save and reload."""
+    attr, name = FIELD_IMAGES[which]
+    h, w = data.shape[:2]
+    img = getattr(settings, attr)
+    if img is None or tuple(img.size) != (w, h) or not img.is_float:
+        img = bpy.data.images.new(name, w, h, alpha=True, float_buffer=True)
+        setattr(settings, attr, img)
+    # Data, not colour: no view transform, and alpha is a fourth channel, not coverage to premultiply.
+    img.colorspace_settings.name = "Non-Color"
+    img.alpha_mode = "CHANNEL_PACKED"
+    img.pixels.foreach_set(np.ascontiguousarray(data, dtype=np.float32).ravel())
+    img.update()
+    img.pack()
+    return img
+
+
+def read_field_image(img, which: str, resolution: int) -> np.ndarray:
+    if img is None:
+        return fieldgen.base_fields(resolution)[which]
+    w, h = img.size
+    if w == 0 or h == 0 or not img.has_data:
+        raise NubisError(f"the field image '{img.name}' has no pixels: run Generate Field or reload the image")
+    buf = np.empty(w * h * 4, np.float32)
+    img.pixels.foreach_get(buf)
+    arr = buf.reshape(h, w, 4)
+    if not np.all(np.isfinite(arr)):
+        raise NubisError(f"the field image '{img.name}' holds NaN or infinite pixels: regenerate or repaint it")
+    return arr
+
+
+def image_arrays(settings) -> dict[str, np.ndarray]:
+    """Pixels of every image referenced by an image layer, for the compositor."""
+    out = {}
+    for layer in settings.layers:
+        img = layer.image
+        if layer.kind == "IMAGE" and img is not None:
+            w, h = img.size
+            if w and h:
+                buf = np.empty(w * h * img.channels, np.float32)
+                img.pixels.foreach_get(buf)
+                out[img.name] = buf.reshape(h, w, img.channels)
+    return out
+
+
+def generate_fields(scene) -> None:
+    """Composite the layer stack into the field images (the Data Field Generator, GDC22)."""
+    settings = scene.nubis
+    params = params_from_scene(settings)
+    layers = [layer_to_dict(layer) for layer in settings.layers]
+    result = fieldgen.composite(layers, params, image_arrays(settings))
+    for which, data in result.items():
+        write_field_image(settings, which, data)
+
+
+# ---- presets ---------------------------------------------------------------------------------------
+
+
+def apply_preset(scene, preset: Preset) -> None:
+    """Make `scene` the preset's cloudscape: settings, layer stack, field images, sun, world, camera."""
+    settings = scene.nubis
+    for key, value in preset.params.items():
+        setattr(settings, key, value)
+    settings.preset = preset.path.stem if preset.path else preset.name
+    settings.layers.clear()
+    for data in preset.layers:
+        data = dict(data)
+        if data["kind"] == "image":
+            data["image"] = _load_layer_image(data["image"], preset.path)
+        layer_from_dict(settings.layers.add(), data)
+    generate_fields(scene)
+    _setup_sun(scene, preset.extra["sun"])
+    _setup_world(scene, preset.extra["world"])
+    _setup_camera(scene, preset.extra["camera"])
+    r = preset.extra["render"]
+    scene.render.resolution_x, scene.render.resolution_y = r["width"], r["height"]
+    scene.render.resolution_percentage = 100
+    scene.view_settings.view_transform = r["view_transform"]
+    scene.frame_current = r["frame"]
+    scene.cycles.samples = r["samples"]
+    scene.cycles.volume_bounces = r["volume_bounces"]
+
+
+def _load_layer_image(ref: str, preset_path: Path | None) -> str:
+    if ref in bpy.data.images:
+        return ref
+    path = Path(ref)
+    if not path.is_absolute() and preset_path is not None:
+        path = preset_path.parent / path
+    if not path.is_file():
+        raise NubisError(f"the image '{ref}' of a field layer was not found: put it beside the preset or fix the path")
+    try:
+        img = bpy.data.images.load(str(path), check_existing=True)
+    except RuntimeError as err:
+        raise NubisError(f"cannot load the image '{path}' ({err}): check that it is a valid image") from None
+    img.colorspace_settings.name = "Non-Color"
+    return img.name
+
+
+def _setup_sun(scene, sun: dict) -> None:
+    obj = scene.objects.get(SUN_NAME)
+    if obj is None or obj.type != "LIGHT":
+        data = bpy.data.lights.new(SUN_NAME, type="SUN")
+        obj = bpy.data.objects.new(SUN_NAME, data)
+        scene.collection.objects.link(obj)
+    d = Vector(sun_vector(sun["elevation"], sun["azimuth"]))
+    # A sun lamp shines along its local -Z; point +Z at the sun.
+    obj.rotation_euler = d.to_track_quat("Z", "Y").to_euler()
+    obj.location = (0.0, 0.0, 10.0)
+    obj.data.color = sun["color"]
+    obj.data.energy = sun["strength"]
+    obj.data.angle = math.radians(sun["angle"])
+
+
+def _setup_world(scene, world_cfg: dict) -> None:
+    world = scene.world or bpy.data.worlds.new("Nubis Sky")
+    scene.world = world
+    world.color = world_cfg["color"]
+    world.use_nodes = True
+    bg = next((n for n in world.node_tree.nodes if n.type == "BACKGROUND"), None)
+    if bg is None:
+        bg = world.node_tree.nodes.new("ShaderNodeBackground")
+        out = next((n for n in world.node_tree.nodes if n.type == "OUTPUT_WORLD"), None)
+        out = out or world.node_tree.nodes.new("ShaderNodeOutputWorld")
+        world.node_tree.links.new(bg.outputs[0], out.inputs["Surface"])
+    bg.inputs["Color"].default_value = (*world_cfg["color"], 1.0)
+    bg.inputs["Strength"].default_value = world_cfg["strength"]
+
+
+def _setup_camera(scene, cam: dict) -> None:
+    obj = scene.camera
+    if obj is None:
+        obj = scene.objects.get(CAMERA_NAME)
+        if obj is None:
+            obj = bpy.data.objects.new(CAMERA_NAME, bpy.data.cameras.new(CAMERA_NAME))
+            scene.collection.objects.link(obj)
+        scene.camera = obj
+    obj.location = cam["location"]
+    obj.rotation_euler = Euler([math.radians(a) for a in cam["rotation"]], "XYZ")
+    obj.data.lens = cam["lens"]
+    obj.data.clip_end = cam["clip_end"]
+
+
+# ---- scene to state --------------------------------------------------------------------------------
+
+
+def find_sun(scene):
+    for obj in scene.objects:
+        if obj.type == "LIGHT" and obj.data.type == "SUN" and not obj.hide_render:
+            return obj
+    return None
+
+
+def world_ambient(scene) -> tuple[float, float, float]:
+    world = scene.world
+    if world is None:
+        return (0.0, 0.0, 0.0)
+    if world.use_nodes and world.node_tree:
+        bg = next((n for n in world.node_tree.nodes if n.type == "BACKGROUND"), None)
+        if bg is not None:
+            c = bg.inputs["Color"].default_value
+            s = bg.inputs["Strength"].default_value
+            return (c[0] * s, c[1] * s, c[2] * s)
+    return tuple(world.color)
+
+
+def state_from_scene(scene, camera_location=None) -> CloudState:
+    settings = scene.nubis
+    params = params_from_scene(settings)
+    res = params["field_resolution"]
+    sun = find_sun(scene)
+    if sun is not None:
+        direction = tuple(sun.matrix_world.to_3x3() @ Vector((0.0, 0.0, 1.0)))
+        radiance = tuple(c * sun.data.energy for c in sun.data.color)
+    else:
+        direction, radiance = (0.0, 0.0, 1.0), (0.0, 0.0, 0.0)
+    if camera_location is None:
+        camera_location = scene.camera.matrix_world.translation if scene.camera else (0.0, 0.0, 0.0)
+    fps = scene.render.fps / scene.render.fps_base
+    time = (scene.frame_current + scene.frame_subframe) / fps * params["wind_time_scale"] + params["wind_time_offset"]
+    return CloudState(
+        params=params,
+        field_a=read_field_image(settings.field_a, "a", res),
+        field_b=read_field_image(settings.field_b, "b", res),
+        sun_direction=direction,
+        sun_radiance=radiance,
+        ambient=world_ambient(scene),
+        draw_center=(float(camera_location[0]), float(camera_location[1])),
+        time=time,
+    )
+
+
+def camera_inv_view_proj(scene, width: int, height: int):
+    """Inverse view-projection of the scene camera at this resolution, as a mathutils Matrix."""
+    cam = scene.camera
+    if cam is None:
+        raise NubisError("the scene has no camera: add one or use New Cloudscape")
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    proj = cam.calc_matrix_camera(depsgraph, x=width, y=height, scale_x=1.0, scale_y=1.0)
+    view = cam.matrix_world.normalized().inverted()
+    return (proj @ view).inverted()

@@ -1,0 +1,133 @@
+"""The 3D viewport draw: the same cloud shader as the headless render, at reduced resolution."""
+
+from __future__ import annotations
+
+import bpy
+import gpu
+from gpu.types import GPUShaderCreateInfo, GPUStageInterfaceInfo
+from gpu_extras.batch import batch_for_shader
+
+from ..core.errors import NubisError
+from ..render import engine
+from ..render.sources import read_shader
+from . import runtime, scene_io
+
+_handle = None
+_state_cache: dict = {"key": None, "state": None}
+_offscreen: dict = {"size": None, "buffer": None}
+_composite: dict = {}
+_last_error: list[str] = []
+
+
+def mark_dirty(*_args) -> None:
+    _state_cache["key"] = None
+
+
+def _composite_shader():
+    if "shader" not in _composite:
+        iface = GPUStageInterfaceInfo("nubis_composite_iface")
+        iface.smooth("VEC2", "uv")
+        info = GPUShaderCreateInfo()
+        info.sampler(0, "FLOAT_2D", "cloud_buffer")
+        info.vertex_in(0, "VEC2", "pos")
+        info.vertex_out(iface)
+        info.fragment_out(0, "VEC4", "color")
+        info.vertex_source(read_shader("nubis_background_vert.glsl"))
+        info.fragment_source(read_shader("nubis_composite_frag.glsl"))
+        sh = gpu.shader.create_from_info(info)
+        _composite["shader"] = sh
+        _composite["batch"] = batch_for_shader(sh, "TRIS", {"pos": ((-1, -1), (3, -1), (-1, 3))})
+    return _composite["shader"], _composite["batch"]
+
+
+def _state(scene, view_origin):
+    key = (scene.name, scene.frame_current, tuple(round(c, 1) for c in view_origin[:2]))
+    if _state_cache["key"] != key:
+        _state_cache["state"] = scene_io.state_from_scene(scene, camera_location=view_origin)
+        _state_cache["key"] = key
+    return _state_cache["state"]
+
+
+def draw_view(scene, inv_view_proj, view_origin, width: int, height: int) -> None:
+    """March the clouds into a buffer of 1/N the size and composite it over the background."""
+    settings = scene.nubis
+    state = _state(scene, view_origin)
+    clouds = runtime.cloud_gpu(settings.noise_seed)
+    clouds.update(state)
+    n = max(1, settings.viewport_scale)
+    size = (max(1, width // n), max(1, height // n))
+    if _offscreen["size"] != size:
+        if _offscreen["buffer"] is not None:
+            _offscreen["buffer"].free()
+        _offscreen["buffer"] = gpu.types.GPUOffScreen(*size, format="RGBA16F")
+        _offscreen["size"] = size
+    buffer = _offscreen["buffer"]
+    with buffer.bind():
+        gpu.state.active_framebuffer_get().clear(color=(0.0, 0.0, 0.0, 0.0))
+        gpu.state.blend_set("NONE")
+        gpu.state.depth_test_set("NONE")
+        engine.draw_clouds(clouds, inv_view_proj)
+    sh, batch = _composite_shader()
+    gpu.state.blend_set("ALPHA_PREMULT")
+    gpu.state.depth_test_set("LESS_EQUAL")
+    gpu.state.depth_mask_set(False)
+    sh.bind()
+    sh.uniform_sampler("cloud_buffer", buffer.texture_color)
+    batch.draw(sh)
+    gpu.state.depth_test_set("NONE")
+    gpu.state.blend_set("NONE")
+
+
+def _draw_callback() -> None:
+    context = bpy.context
+    scene = context.scene
+    settings = getattr(scene, "nubis", None)
+    if settings is None or not settings.enabled or settings.field_a is None:
+        return
+    region, rv3d = context.region, context.region_data
+    if region is None or rv3d is None:
+        return
+    try:
+        draw_view(
+            scene,
+            rv3d.perspective_matrix.inverted(),
+            rv3d.view_matrix.inverted().translation,
+            region.width,
+            region.height,
+        )
+        _last_error.clear()
+    except NubisError as err:
+        # A draw callback cannot report; remember the message for the sidebar instead of spamming the console.
+        if not _last_error or _last_error[0] != str(err):
+            _last_error[:] = [str(err)]
+
+
+def last_error() -> str:
+    return _last_error[0] if _last_error else ""
+
+
+def register() -> None:
+    global _handle
+    if _handle is None:
+        _handle = bpy.types.SpaceView3D.draw_handler_add(_draw_callback, (), "WINDOW", "POST_VIEW")
+    bpy.app.handlers.depsgraph_update_post.append(mark_dirty)
+    bpy.app.handlers.frame_change_post.append(mark_dirty)
+
+
+def unregister() -> None:
+    global _handle
+    if _handle is not None:
+        bpy.types.SpaceView3D.draw_handler_remove(_handle, "WINDOW")
+        _handle = None
+    for handlers in (bpy.app.handlers.depsgraph_update_post, bpy.app.handlers.frame_change_post):
+        if mark_dirty in handlers:
+            handlers.remove(mark_dirty)
+    if _offscreen["buffer"] is not None:
+        _offscreen["buffer"].free()
+    _offscreen.update(size=None, buffer=None)
+    _composite.clear()
+    _state_cache.update(key=None, state=None)
+
+
+def is_registered() -> bool:
+    return _handle is not None

@@ -1,0 +1,225 @@
+"""The headless command line, a stable contract:
+
+    python -m nubis_addon render  [--preset NAME | --blend FILE] --out PATH [--width W --height H --frame F]
+    python -m nubis_addon bake    [--preset NAME | --blend FILE] --out PATH.vdb [--voxel-size METRES]
+    python -m nubis_addon cycles  [--preset NAME | --blend FILE] --out PATH [--samples N --width W --height H]
+    python -m nubis_addon compare [--preset NAME | --blend FILE] --out DIR [--samples N --width W --height H]
+
+and the same as ``blender -b [FILE.blend] --command nubis ...``. Each command prints a one-line summary and
+exits 0, or prints a one-line error that says what to do and exits non-zero.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import sys
+import tempfile
+import time
+import traceback
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+
+from .core.errors import NubisError
+from .core.fsutil import check_output_dir, check_output_path
+from .core.imageio import IMAGE_SUFFIXES
+
+PROG = "nubis"
+
+
+class _ArgumentParser(argparse.ArgumentParser):
+    def error(self, message: str):  # one line, not argparse's usage dump
+        raise NubisError(f"{message} (see '{self.prog} --help')")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _ArgumentParser(prog=PROG, description="Nubis volumetric clouds, headless.")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_ArgumentParser)
+
+    def common(p: argparse.ArgumentParser) -> None:
+        src = p.add_mutually_exclusive_group()
+        src.add_argument("--preset", help="preset name in presets/ (default: 'default') or a .toml path")
+        src.add_argument("--blend", help="a .blend file saved with a Nubis cloudscape")
+        p.add_argument("--out", required=True, help="output path")
+        p.add_argument("--frame", type=int, help="frame to render (wind time)")
+
+    def size(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--width", type=int, help="image width in pixels (default: the scene's)")
+        p.add_argument("--height", type=int, help="image height in pixels (default: the scene's)")
+
+    p = sub.add_parser("render", help="render the viewport's clouds from the scene camera (PNG or EXR)")
+    common(p)
+    size(p)
+    p = sub.add_parser("bake", help="bake the cloud density to an OpenVDB file")
+    common(p)
+    p.add_argument("--voxel-size", type=float, help="voxel edge in metres (default: the scene's bake setting)")
+    for name, what in (
+        ("cycles", "render the baked clouds with Cycles"),
+        ("compare", "render viewport and Cycles side by side, with metrics"),
+    ):
+        p = sub.add_parser(name, help=what)
+        common(p)
+        size(p)
+        p.add_argument("--samples", type=int, help="Cycles samples per pixel (default: the preset's)")
+        p.add_argument("--voxel-size", type=float, help="voxel edge of the bake in metres")
+    return parser
+
+
+@contextlib.contextmanager
+def _quiet(log: Path) -> Iterator[None]:
+    """Send Blender's and Mesa's own chatter (render progress, EGL notices) to a log file so the user
+    sees one summary line; with NUBIS_VERBOSE=1 everything stays on the terminal."""
+    if os.environ.get("NUBIS_VERBOSE"):
+        yield
+        return
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = os.dup(1), os.dup(2)
+    with open(log, "ab") as f:
+        os.dup2(f.fileno(), 1)
+        os.dup2(f.fileno(), 2)
+        try:
+            yield
+        finally:
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            os.close(saved[0])
+            os.close(saved[1])
+
+
+def _progress(label: str):
+    if not sys.__stderr__.isatty():
+        return None
+
+    def report(fraction: float) -> None:
+        bar = "#" * int(fraction * 30)
+        sys.__stderr__.write(f"\r{label} [{bar:<30}] {fraction * 100:5.1f}%")
+        if fraction >= 1.0:
+            sys.__stderr__.write("\n")
+        sys.__stderr__.flush()
+
+    return report
+
+
+def load_scene(args, in_blender: bool):
+    """The scene to work on: a saved .blend, a preset, or (inside Blender) the open file's cloudscape."""
+    import bpy
+
+    from .blender import ensure_registered, scene_io
+    from .core.presets import load_preset
+
+    if args.blend:
+        path = Path(args.blend).expanduser()
+        if not path.is_file():
+            raise NubisError(f"the .blend file '{path}' does not exist: check the path")
+        try:
+            bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False)
+        except RuntimeError as err:
+            first = str(err).strip().splitlines()[-1] if str(err).strip() else "unreadable"
+            raise NubisError(f"cannot open '{path}' ({first}): check that it is a Blender file") from None
+        ensure_registered()
+        scene = bpy.context.scene
+        if getattr(scene.nubis, "field_a", None) is None:
+            raise NubisError(f"'{path}' holds no Nubis cloudscape: add one with New Cloudscape and save the file")
+        return scene
+    if in_blender and not args.preset and bpy.data.filepath and bpy.context.scene.nubis.field_a is not None:
+        return bpy.context.scene
+    preset = load_preset(args.preset or "default")
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    ensure_registered()
+    scene = bpy.context.scene
+    scene_io.apply_preset(scene, preset)
+    return scene
+
+
+def run(argv: Sequence[str], in_blender: bool = False) -> int:
+    """Run one command; returns the exit code. Never raises for user errors."""
+    try:
+        args = build_parser().parse_args(list(argv))
+    except SystemExit as exc:  # --help
+        return int(exc.code or 0)
+    except NubisError as err:
+        print(f"{PROG}: error: {err}", file=sys.stderr)
+        return 2
+    log_dir = tempfile.mkdtemp(prefix="nubis-log-")
+    log = Path(log_dir) / "blender.log"
+    try:
+        summary = _execute(args, in_blender, log)
+    except NubisError as err:
+        print(f"{PROG}: error: {err}", file=sys.stderr)
+        return 1
+    except Exception as err:  # an unexpected fault: one line, the details in the log
+        with open(log, "a") as f:
+            traceback.print_exc(file=f)
+        if os.environ.get("NUBIS_DEBUG"):
+            traceback.print_exc()
+        print(f"{PROG}: internal error: {type(err).__name__}: {err} (details in {log})", file=sys.stderr)
+        return 3
+    print(summary)
+    return 0
+
+
+def _execute(args, in_blender: bool, log: Path) -> str:
+    start = time.perf_counter()
+    cmd = args.command
+    # Check the destination before minutes of work, and never leave a partial file there.
+    if cmd == "compare":
+        out = check_output_dir(args.out)
+    elif cmd == "bake":
+        out = check_output_path(args.out, (".vdb",))
+    else:
+        out = check_output_path(args.out, IMAGE_SUFFIXES)
+    for name in ("width", "height", "samples"):
+        value = getattr(args, name, None)
+        if value is not None and value < 1:
+            raise NubisError(f"--{name} must be a positive whole number, not {value}")
+    voxel = getattr(args, "voxel_size", None)
+    if voxel is not None and not voxel > 0:
+        raise NubisError(f"--voxel-size must be a positive number of metres, not {voxel}")
+
+    with _quiet(log):
+        from .blender import pipeline
+        from .render.gpu_context import ensure_gpu_context
+
+        scene = load_scene(args, in_blender)
+        if args.frame is not None:
+            scene.frame_set(args.frame)
+        ensure_gpu_context()
+    label = scene.nubis.preset or "scene"
+
+    if cmd == "render":
+        w, h = pipeline.resolution(scene, args.width, args.height)
+        with _quiet(log):
+            rgba = pipeline.render_viewport(scene, w, h)
+            pipeline.save_render(scene, out, rgba)
+        cover = float((rgba[..., 3] > 0.05).mean()) * 100
+        return f"rendered {label} at {w}x{h} ({cover:.0f}% cloud cover) in {time.perf_counter() - start:.1f} s -> {out}"
+    if cmd == "bake":
+        progress = _progress("baking")
+        with _quiet(log):
+            result = pipeline.bake(scene, out, voxel, progress)
+        nx, ny, nz = result.plan.dims
+        return (
+            f"baked {label}: {nx}x{ny}x{nz} voxels of {result.plan.voxel_size:g} m, "
+            f"{result.active_voxels} active, in {result.seconds:.1f} s -> {out}"
+        )
+    w, h = pipeline.resolution(scene, args.width, args.height)
+    if cmd == "cycles":
+        with _quiet(log):
+            rgba = pipeline.render_cycles(scene, w, h, args.samples, voxel_size=voxel)
+            pipeline.save_render(scene, out, rgba)
+        return f"rendered {label} with Cycles at {w}x{h} in {time.perf_counter() - start:.1f} s -> {out}"
+    with _quiet(log):
+        m = pipeline.compare(scene, out, w, h, args.samples)
+    return (
+        f"compared {label} at {w}x{h}: alpha RMSE {m['alpha_rmse']:.4f}, luminance error "
+        f"{m['luminance_rel_error'] * 100:.1f}%, silhouette IoU {m['silhouette_iou']:.3f} "
+        f"in {time.perf_counter() - start:.1f} s -> {out}"
+    )
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    return run(sys.argv[1:] if argv is None else argv)

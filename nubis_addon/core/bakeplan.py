@@ -1,0 +1,61 @@
+"""Where and how finely to bake, and whether the machine can afford it (estimated before any work)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .errors import NubisError
+from .state import CloudState
+
+# A float32 working copy, the transposed copy handed to OpenVDB and the sparse tree itself.
+BYTES_PER_VOXEL = 12
+DEFAULT_MEMORY_LIMIT = 4 * 1024**3
+MAX_SLICE = 8192  # texels per side of one GPU slice
+
+
+@dataclass(frozen=True)
+class BakePlan:
+    origin: tuple[float, float, float]  # world centre of voxel (0, 0, 0)
+    voxel_size: float
+    dims: tuple[int, int, int]  # voxels along x, y, z
+
+    @property
+    def voxels(self) -> int:
+        return self.dims[0] * self.dims[1] * self.dims[2]
+
+    @property
+    def bytes_estimate(self) -> int:
+        return self.voxels * BYTES_PER_VOXEL
+
+
+def plan_bake(state: CloudState, voxel_size: float, memory_limit: int = DEFAULT_MEMORY_LIMIT) -> BakePlan:
+    """The box holding every cloud the viewport can draw: the field, clipped to the draw radius, and the
+    shell's altitudes, lowered by the planet's curvature at the box's far corners."""
+    if not (math.isfinite(voxel_size) and voxel_size > 0):
+        raise NubisError(f"the voxel size must be a positive number of metres, not {voxel_size!r}")
+    p = state.params
+    half = p["field_size"] / 2
+    radius = p["layer_draw_radius"]
+    cx, cy = state.draw_center
+    x0 = max(p["field_origin_x"] - half, cx - radius)
+    x1 = min(p["field_origin_x"] + half, cx + radius)
+    y0 = max(p["field_origin_y"] - half, cy - radius)
+    y1 = min(p["field_origin_y"] + half, cy + radius)
+    if x1 <= x0 or y1 <= y0:
+        raise NubisError("the data field lies outside the draw radius around the camera: move the camera or the field")
+    lo, hi = state.shell()
+    planet = p["layer_planet_radius"]
+    far = max(math.hypot(x, y) for x in (x0, x1) for y in (y0, y1))
+    sag = planet + lo - math.sqrt(max((planet + lo) ** 2 - far**2, 0.0))
+    z0, z1 = lo - sag, hi
+    v = voxel_size
+    dims = tuple(max(1, math.ceil((b - a) / v)) for a, b in ((x0, x1), (y0, y1), (z0, z1)))
+    plan = BakePlan((x0 + v / 2, y0 + v / 2, z0 + v / 2), v, dims)
+    if plan.bytes_estimate > memory_limit or max(dims[:2]) > MAX_SLICE:
+        suggested = v * max((plan.bytes_estimate / memory_limit) ** (1 / 3), max(dims[:2]) / MAX_SLICE) * 1.05
+        raise NubisError(
+            f"a bake at {v:g} m voxels needs {dims[0]}x{dims[1]}x{dims[2]} voxels "
+            f"(about {plan.bytes_estimate / 1024**3:.1f} GB): use a voxel size of at least {math.ceil(suggested)} m"
+        )
+    return plan

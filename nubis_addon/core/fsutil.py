@@ -1,0 +1,65 @@
+"""File-system helpers: outputs are checked before expensive work and always written atomically."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+from .errors import NubisError
+
+
+def check_output_path(path: str | os.PathLike, suffixes: tuple[str, ...] | None = None) -> Path:
+    """Fail early, before minutes of rendering, when ``path`` cannot be written."""
+    out = Path(path).expanduser()
+    if suffixes is not None and out.suffix.lower() not in suffixes:
+        raise NubisError(f"cannot write '{out}': use one of the extensions {', '.join(suffixes)}")
+    if out.is_dir():
+        raise NubisError(f"cannot write '{out}': it is a folder, give a file name")
+    parent = out.parent if str(out.parent) else Path(".")
+    check_output_dir(parent, create=True)
+    if out.exists() and not os.access(out, os.W_OK):
+        raise NubisError(f"cannot write '{out}': the file is read-only, choose another path or change its permissions")
+    return out
+
+
+def check_output_dir(folder: str | os.PathLike, create: bool = True) -> Path:
+    d = Path(folder).expanduser()
+    if create:
+        try:
+            d.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise NubisError(f"cannot create the folder '{d}' ({err.strerror}): choose a writable location") from None
+    if not d.is_dir():
+        raise NubisError(f"the folder '{d}' does not exist: create it or choose another location")
+    # os.access lies for root on read-only mounts, so probe with a real file.
+    try:
+        with tempfile.NamedTemporaryFile(dir=d, prefix=".nubis-probe-"):
+            pass
+    except OSError as err:
+        raise NubisError(f"cannot write into '{d}' ({err.strerror}): choose a writable location") from None
+    return d
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; it replaces ``path`` only if the block succeeds.
+
+    A failed write therefore never leaves a half-written file where a good one was.
+    """
+    final = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=final.parent, prefix=f".{final.stem}-", suffix=final.suffix)
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        # mkstemp creates 0600 files; give the result the permissions a normal file would get.
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp_path, 0o666 & ~umask)
+        os.replace(tmp_path, final)
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            tmp_path.unlink()

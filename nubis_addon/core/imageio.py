@@ -1,0 +1,83 @@
+"""Image files: EXR holds scene-linear premultiplied RGBA; PNG is display-referred.
+
+Both are written atomically. The PNG goes through Blender's own OCIO configuration so that a
+viewport render and a Cycles render of the same scene get the same view transform.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from . import bundled
+from .errors import NubisError
+from .fsutil import atomic_path
+
+IMAGE_SUFFIXES = (".png", ".exr")
+
+
+def read_image(path: str | os.PathLike) -> np.ndarray:
+    """Return float32 pixels, shape (height, width, channels), top row first."""
+    oiio = bundled.oiio()
+    buf = oiio.ImageBuf(str(path))
+    if buf.has_error:
+        raise NubisError(f"cannot read the image '{path}' ({buf.geterror().strip()}): check the file")
+    px = buf.get_pixels(oiio.FLOAT)
+    if px is None or buf.has_error:
+        raise NubisError(f"cannot read the image '{path}': the file is damaged")
+    return np.asarray(px, dtype=np.float32)
+
+
+def composite_over(rgba: np.ndarray, background: np.ndarray | tuple[float, float, float]) -> np.ndarray:
+    """Premultiplied RGBA over an opaque background (a colour or an image)."""
+    bg = np.broadcast_to(np.asarray(background, dtype=np.float32), rgba.shape[:2] + (3,))
+    out = np.empty(rgba.shape[:2] + (4,), np.float32)
+    out[..., :3] = rgba[..., :3] + bg * (1.0 - rgba[..., 3:4])
+    out[..., 3] = 1.0
+    return out
+
+
+def to_display(rgba: np.ndarray, view_transform: str, ocio_config: str | None, look: str = "None") -> np.ndarray:
+    """Scene-linear Rec.709 to sRGB display values through Blender's OCIO config; sRGB OETF without it."""
+    oiio = bundled.oiio()
+    if ocio_config and Path(ocio_config).is_file():
+        buf = oiio.ImageBuf(oiio.ImageSpec(rgba.shape[1], rgba.shape[0], rgba.shape[2], oiio.FLOAT))
+        buf.set_pixels(oiio.ROI(), np.ascontiguousarray(rgba, dtype=np.float32))
+        out = oiio.ImageBufAlgo.ociodisplay(buf, "sRGB", view_transform, "Linear Rec.709", colorconfig=ocio_config)
+        if not out.has_error:
+            disp = np.asarray(out.get_pixels(oiio.FLOAT), np.float32)
+            if rgba.shape[2] == 4:
+                disp[..., 3] = rgba[..., 3]
+            return np.clip(disp, 0.0, 1.0)
+    lin = np.clip(rgba[..., :3], 0.0, None)
+    srgb = np.where(lin <= 0.0031308, lin * 12.92, 1.055 * np.power(lin, 1 / 2.4) - 0.055)
+    out = np.concatenate([srgb, rgba[..., 3:]], axis=-1) if rgba.shape[2] == 4 else srgb
+    return np.clip(out, 0.0, 1.0)
+
+
+def write_image(path: str | os.PathLike, pixels: np.ndarray) -> Path:
+    """Write float pixels (H, W, C), top row first: EXR as half float, PNG as 8-bit. Atomic."""
+    oiio = bundled.oiio()
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in IMAGE_SUFFIXES:
+        raise NubisError(f"cannot write '{path}': image outputs must end in .png or .exr")
+    pixels = np.ascontiguousarray(pixels, dtype=np.float32)
+    if not np.all(np.isfinite(pixels)):
+        raise NubisError(f"refusing to write '{path}': the image holds NaN or infinite values (a shader fault)")
+    h, w, c = pixels.shape
+    fmt = oiio.HALF if suffix == ".exr" else oiio.UINT8
+    spec = oiio.ImageSpec(w, h, c, fmt)
+    if suffix == ".exr":
+        spec.attribute("compression", "zip")
+    with atomic_path(path) as tmp:
+        out = oiio.ImageOutput.create(str(tmp))
+        if out is None or not out.open(str(tmp), spec):
+            raise NubisError(f"cannot write '{path}' ({oiio.geterror().strip()}): check the folder's permissions")
+        ok = out.write_image(pixels)
+        out.close()
+        if not ok:
+            raise NubisError(f"writing '{path}' failed ({out.geterror().strip()}): check the free disk space")
+    return path

@@ -1,0 +1,141 @@
+"""The cloud settings, declared once.
+
+This table is the single source of truth for the Scene property group (blender/properties.py), preset
+validation (core/presets.py) and the shader's uniform block (render/uniforms.py). A setting's flat
+name is ``<section>_<name>``; presets write it as ``[section] name = value``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+
+@dataclass(frozen=True)
+class Param:
+    section: str
+    name: str
+    kind: str  # "float" | "int" | "bool" | "color" | "enum"
+    default: Any
+    min: float | None = None
+    max: float | None = None
+    description: str = ""
+    unit: str = "NONE"  # Blender property unit: NONE, LENGTH, ROTATION, TIME
+    soft_max: float | None = None
+    items: tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def key(self) -> str:
+        return f"{self.section}_{self.name}"
+
+
+P = Param
+PARAMS: tuple[Param, ...] = (
+    # SPEC 1.1: low layer 1500-4000 m (S15, GPU Pro 7); S15 draw radius 35 km; planet radius is ours to choose.
+    P("layer", "bottom", "float", 1500.0, 0.0, 20000.0, "Altitude of the cloud layer's base above sea level", "LENGTH"),
+    P(
+        "layer",
+        "top",
+        "float",
+        4000.0,
+        100.0,
+        30000.0,
+        "Altitude of the cloud layer's top (cumulonimbus reach 8 km)",
+        "LENGTH",
+    ),
+    P(
+        "layer",
+        "planet_radius",
+        "float",
+        6371000.0,
+        10000.0,
+        1e8,
+        "Planet radius: shrink it to make clouds fall into the horizon sooner (S15)",
+        "LENGTH",
+    ),
+    P(
+        "layer",
+        "draw_radius",
+        "float",
+        35000.0,
+        1000.0,
+        500000.0,
+        "Clouds are drawn within this distance of the camera",
+        "LENGTH",
+    ),
+    P("field", "size", "float", 70000.0, 100.0, 1e7, "World-space width of the square data field", "LENGTH"),
+    P("field", "origin_x", "float", 0.0, -1e7, 1e7, "Centre of the data field (X)", "LENGTH"),
+    P("field", "origin_y", "float", 0.0, -1e7, 1e7, "Centre of the data field (Y)", "LENGTH"),
+    P("field", "resolution", "int", 512, 16, 4096, "Pixels per side of the data-field images"),
+    P("noise", "seed", "int", 0, 0, 2**31 - 1, "Seed of the 3D noise volumes"),
+    P("noise", "lf_period", "float", 12000.0, 100.0, 1e6, "Tile size of the low-frequency shape noise", "LENGTH"),
+    P("noise", "hf_period", "float", 1600.0, 10.0, 1e5, "Tile size of the high-frequency detail noise", "LENGTH"),
+    P(
+        "noise",
+        "curl_period",
+        "float",
+        6000.0,
+        10.0,
+        1e6,
+        "Tile size of the curl noise that swirls cloud bases",
+        "LENGTH",
+    ),
+    P(
+        "noise",
+        "curl_strength",
+        "float",
+        250.0,
+        0.0,
+        10000.0,
+        "How far curl noise displaces the detail at cloud bases",
+        "LENGTH",
+    ),
+    # SPEC 1.6.5 / 2.12: one extinction coefficient shared by the viewport and the VDB's Cycles material.
+    P(
+        "density",
+        "sigma",
+        "float",
+        0.04,
+        0.0,
+        10.0,
+        "Extinction per metre at density 1 (shared with Cycles)",
+        soft_max=0.5,
+    ),
+    P("density", "coverage", "float", 1.0, 0.0, 2.0, "Multiplier on the coverage field"),
+    P("density", "erosion", "float", 0.2, 0.0, 1.0, "Strength of the detail erosion (GPU Pro 7: 0.2)"),
+    P("density", "multiply_coverage", "bool", True, description="Make small clouds lighter (GPU Pro 7 x coverage)"),
+    P("wind", "direction", "float", 0.0, -6.2832, 6.2832, "Wind heading, 0 = towards +X", "ROTATION"),
+    P("wind", "speed", "float", 10.0, 0.0, 500.0, "Wind speed in metres per second (GPU Pro 7: 10)"),
+    P(
+        "wind",
+        "top_offset",
+        "float",
+        500.0,
+        -10000.0,
+        10000.0,
+        "How far cloud tops lean downwind (GPU Pro 7: 500)",
+        "LENGTH",
+    ),
+    P("wind", "upward_bias", "float", 0.1, -1.0, 1.0, "Upward drift relative to the wind (GPU Pro 7: 0.1)"),
+    P("wind", "detail_speed", "float", 2.0, 0.0, 20.0, "Detail-noise speed relative to the shape noise"),
+    P("wind", "time_offset", "float", 0.0, -1e7, 1e7, "Seconds added to the frame time", "TIME"),
+    P("wind", "time_scale", "float", 1.0, 0.0, 1e4, "Simulated seconds per second of animation"),
+    # SPEC 2.3: GDC22 eccentricity 0.2; a second lobe for the silver lining.
+    P("lighting", "phase_g0", "float", 0.2, -0.99, 0.99, "Eccentricity of the main phase lobe (GDC22: 0.2)"),
+    P("lighting", "phase_g1", "float", 0.8, -0.99, 0.99, "Eccentricity of the silver-lining lobe"),
+    P("lighting", "phase_mix", "float", 0.2, 0.0, 1.0, "Weight of the silver-lining lobe"),
+    P("lighting", "ambient", "float", 1.0, 0.0, 10.0, "Strength of the sky's ambient light"),
+    P("lighting", "ambient_bottom", "float", 0.5, 0.0, 1.0, "Ambient at the cloud base relative to the top (S15)"),
+    P("lighting", "rain_absorption", "float", 3.0, 1.0, 20.0, "Extra light absorption of raining clouds (GPU Pro 7)"),
+    P("march", "steps_min", "int", 64, 8, 1024, "View samples looking straight up (GPU Pro 7: 64)"),
+    P("march", "steps_max", "int", 128, 8, 2048, "View samples towards the horizon (GPU Pro 7: 128)"),
+    P("march", "light_step", "float", 200.0, 1.0, 5000.0, "Length of a light-march step", "LENGTH"),
+    P("bake", "voxel_size", "float", 100.0, 1.0, 10000.0, "Edge of a voxel in the OpenVDB bake", "LENGTH"),
+)
+del P
+
+PARAMS_BY_KEY: dict[str, Param] = {p.key: p for p in PARAMS}
+
+
+def defaults() -> dict[str, Any]:
+    return {p.key: p.default for p in PARAMS}

@@ -1,0 +1,248 @@
+"""Presets are TOML data, validated on load and never executed.
+
+Every error names the file and the field, and says what to do.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from .errors import NubisError
+from .params import PARAMS, PARAMS_BY_KEY, defaults
+
+FIELD_CHANNELS = (
+    "coverage",
+    "precipitation",
+    "type",
+    "bottom_type",
+    "storm",
+    "min_height",
+    "max_height",
+    "density",
+    "cirrus_coverage",
+    "cirrus_type",
+    "none",
+)
+LAYER_KINDS = ("perlin", "worley", "perlin_worley", "gradient", "constant", "image")
+BLEND_MODES = ("replace", "add", "multiply", "min", "max")
+GRADIENT_SHAPES = ("linear", "radial")
+
+# Every field-layer key, with (type, default, min, max) or (type, default, choices).
+LAYER_SCHEMA: dict[str, tuple] = {
+    "name": (str, ""),
+    "kind": (str, "perlin", LAYER_KINDS),
+    "channel": (str, "coverage", FIELD_CHANNELS),
+    "blend": (str, "replace", BLEND_MODES),
+    "enabled": (bool, True),
+    "opacity": (float, 1.0, 0.0, 1.0),
+    "mask": (str, ""),
+    "invert_mask": (bool, False),
+    "scale": (float, 8000.0, 1.0, 1e7),
+    "seed": (int, 0, 0, 2**31 - 1),
+    "octaves": (int, 4, 1, 10),
+    "remap": (list, [0.0, 1.0, 0.0, 1.0]),
+    "value": (float, 1.0, -1e6, 1e6),
+    "gradient": (str, "linear", GRADIENT_SHAPES),
+    "angle": (float, 0.0, -360.0, 360.0),
+    "center": (list, [0.0, 0.0]),
+    "radius": (float, 10000.0, 1.0, 1e7),
+    "image": (str, ""),
+}
+
+EXTRA_SCHEMA: dict[str, dict[str, tuple]] = {
+    "preset": {"name": (str, "Untitled"), "description": (str, "")},
+    "sun": {
+        "elevation": (float, 35.0, -90.0, 90.0),
+        "azimuth": (float, 135.0, -360.0, 360.0),
+        "color": (list, [1.0, 0.96, 0.9]),
+        "strength": (float, 4.0, 0.0, 1e5),
+        "angle": (float, 0.53, 0.0, 180.0),
+    },
+    "world": {"color": (list, [0.35, 0.5, 0.8]), "strength": (float, 1.0, 0.0, 1e5)},
+    "camera": {
+        "location": (list, [0.0, 0.0, 2.0]),
+        "rotation": (list, [80.0, 0.0, 0.0]),
+        "lens": (float, 24.0, 1.0, 5000.0),
+        "clip_end": (float, 200000.0, 10.0, 1e8),
+    },
+    "render": {
+        "width": (int, 640, 4, 16384),
+        "height": (int, 360, 4, 16384),
+        "samples": (int, 64, 1, 65536),
+        "volume_bounces": (int, 8, 0, 1024),
+        "view_transform": (str, "AgX", ("AgX", "Standard", "Filmic", "Khronos PBR Neutral")),
+        "frame": (int, 1, -1048574, 1048574),
+    },
+}
+
+
+@dataclass
+class Preset:
+    name: str
+    path: Path | None
+    params: dict[str, Any]
+    extra: dict[str, dict[str, Any]]
+    layers: list[dict[str, Any]] = field(default_factory=list)
+    description: str = ""
+
+
+def preset_dir() -> Path:
+    return Path(__file__).resolve().parents[2] / "presets"
+
+
+def list_presets(folder: Path | None = None) -> list[str]:
+    folder = folder or preset_dir()
+    return sorted(p.stem for p in folder.glob("*.toml"))
+
+
+def find_preset(name: str, folder: Path | None = None) -> Path:
+    """Presets are found by name in presets/, or by an explicit path to a .toml file."""
+    folder = folder or preset_dir()
+    if name.endswith(".toml") or os.sep in name:
+        path = Path(name).expanduser()
+        if not path.is_file():
+            raise NubisError(f"preset file '{path}' not found: check the path")
+        return path
+    path = folder / f"{name}.toml"
+    if not path.is_file():
+        known = ", ".join(list_presets(folder)) or "none"
+        raise NubisError(f"no preset named '{name}': choose one of {known}")
+    return path
+
+
+def load_preset(name_or_path: str | os.PathLike, folder: Path | None = None) -> Preset:
+    path = find_preset(str(name_or_path), folder)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError:
+        raise NubisError(f"preset '{path}' is not UTF-8 text: restore it from the presets folder") from None
+    except tomllib.TOMLDecodeError as err:
+        raise NubisError(f"preset '{path}' is not valid TOML ({err}): fix the file or restore it") from None
+    except OSError as err:
+        raise NubisError(f"cannot read preset '{path}' ({err.strerror}): check its permissions") from None
+    return parse_preset(data, path)
+
+
+def parse_preset(data: dict[str, Any], path: Path | None = None) -> Preset:
+    where = str(path) if path else "<preset>"
+    params = defaults()
+    extra: dict[str, dict[str, Any]] = {
+        sec: {k: spec[1] for k, spec in keys.items()} for sec, keys in EXTRA_SCHEMA.items()
+    }
+    sections = {p.section for p in PARAMS}
+    layers: list[dict[str, Any]] = []
+    for sec, table in data.items():
+        if not isinstance(table, dict):
+            raise NubisError(f"{where}: '{sec}' must be a table like [{sec}], not a single value")
+        if sec not in sections and sec not in EXTRA_SCHEMA:
+            known = ", ".join(sorted(sections | set(EXTRA_SCHEMA)))
+            raise NubisError(f"{where}: unknown section [{sec}]; sections are {known}")
+        for key, value in table.items():
+            if sec == "field" and key == "layers":
+                layers = _parse_layers(value, where)
+                continue
+            flat = f"{sec}_{key}"
+            if flat in PARAMS_BY_KEY:
+                params[flat] = _check_param(PARAMS_BY_KEY[flat], value, f"{where}: {sec}.{key}")
+            elif sec in EXTRA_SCHEMA and key in EXTRA_SCHEMA[sec]:
+                extra[sec][key] = _check_value(EXTRA_SCHEMA[sec][key], value, f"{where}: {sec}.{key}")
+            else:
+                raise NubisError(f"{where}: unknown setting {sec}.{key}: remove it or check the spelling")
+    if params["layer_top"] <= params["layer_bottom"]:
+        raise NubisError(f"{where}: layer.top must be above layer.bottom")
+    if params["march_steps_max"] < params["march_steps_min"]:
+        raise NubisError(f"{where}: march.steps_max must be at least march.steps_min")
+    for sec, key, n in (
+        ("sun", "color", 3),
+        ("world", "color", 3),
+        ("camera", "location", 3),
+        ("camera", "rotation", 3),
+    ):
+        _check_vector(extra[sec][key], n, f"{where}: {sec}.{key}")
+    _check_masks(layers, where)
+    meta = extra.pop("preset")
+    return Preset(meta["name"], path, params, extra, layers, meta["description"])
+
+
+def _check_param(p, value: Any, where: str) -> Any:
+    if p.kind == "bool":
+        if not isinstance(value, bool):
+            raise NubisError(f"{where} must be true or false, not {value!r}")
+        return value
+    if p.kind == "int":
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise NubisError(f"{where} must be a whole number, not {value!r}")
+    elif p.kind == "float":
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise NubisError(f"{where} must be a number, not {value!r}")
+        value = float(value)
+        if not math.isfinite(value):
+            raise NubisError(f"{where} must be a finite number, not {value!r}")
+    if p.min is not None and value < p.min or p.max is not None and value > p.max:
+        raise NubisError(f"{where} = {value!r} is out of range: use a value between {p.min:g} and {p.max:g}")
+    return value
+
+
+def _check_value(spec: tuple, value: Any, where: str) -> Any:
+    typ = spec[0]
+    if typ is float:
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+            raise NubisError(f"{where} must be a finite number, not {value!r}")
+        value = float(value)
+    elif typ is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise NubisError(f"{where} must be a whole number, not {value!r}")
+    elif not isinstance(value, typ):
+        raise NubisError(f"{where} must be a {typ.__name__}, not {value!r}")
+    if len(spec) == 3 and isinstance(spec[2], tuple) and value not in spec[2]:
+        raise NubisError(f"{where} = {value!r} is not allowed: use one of {', '.join(spec[2])}")
+    if len(spec) == 4 and not spec[2] <= value <= spec[3]:
+        raise NubisError(f"{where} = {value!r} is out of range: use a value between {spec[2]:g} and {spec[3]:g}")
+    return value
+
+
+def _check_vector(value: list, n: int, where: str) -> None:
+    if len(value) != n or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value):
+        raise NubisError(f"{where} must be a list of {n} numbers, not {value!r}")
+    if not all(math.isfinite(v) for v in value):
+        raise NubisError(f"{where} must hold finite numbers, not {value!r}")
+
+
+def _parse_layers(value: Any, where: str) -> list[dict[str, Any]]:
+    if not isinstance(value, list):
+        raise NubisError(f"{where}: field.layers must be written as [[field.layers]] tables")
+    layers = []
+    for i, raw in enumerate(value):
+        here = f"{where}: field.layers[{i}]"
+        if not isinstance(raw, dict):
+            raise NubisError(f"{here} must be a table")
+        layer = {k: (list(spec[1]) if isinstance(spec[1], list) else spec[1]) for k, spec in LAYER_SCHEMA.items()}
+        for key, val in raw.items():
+            if key not in LAYER_SCHEMA:
+                raise NubisError(f"{here}: unknown key '{key}'; keys are {', '.join(LAYER_SCHEMA)}")
+            layer[key] = _check_value(LAYER_SCHEMA[key], val, f"{here}.{key}")
+        _check_vector(layer["remap"], 4, f"{here}.remap")
+        _check_vector(layer["center"], 2, f"{here}.center")
+        if layer["remap"][0] == layer["remap"][1]:
+            raise NubisError(f"{here}.remap: the input range is empty; make remap[0] and remap[1] differ")
+        if layer["kind"] == "image" and not layer["image"]:
+            raise NubisError(f"{here}.image: an image layer needs the name or path of an image")
+        layer["name"] = layer["name"] or f"Layer {i + 1}"
+        layers.append(layer)
+    return layers
+
+
+def _check_masks(layers: list[dict[str, Any]], where: str) -> None:
+    seen: set[str] = set()
+    for i, layer in enumerate(layers):
+        if layer["mask"] and layer["mask"] not in seen:
+            raise NubisError(
+                f"{where}: field.layers[{i}].mask names '{layer['mask']}', which is not an earlier layer: "
+                "masks must refer to a layer above them"
+            )
+        seen.add(layer["name"])

@@ -1,0 +1,46 @@
+"""Everything one frame of clouds depends on, as plain data: what Blender state turns into before
+the GPU sees it. Building it from a preset needs no Blender at all, which keeps core/ testable."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .params import defaults
+
+
+@dataclass
+class CloudState:
+    params: dict[str, Any] = field(default_factory=defaults)
+    field_a: np.ndarray | None = None  # (H, W, 4) float32, bottom row first like Blender images
+    field_b: np.ndarray | None = None
+    sun_direction: tuple[float, float, float] = (0.0, 0.0, 1.0)  # unit vector towards the sun
+    sun_radiance: tuple[float, float, float] = (4.0, 4.0, 4.0)  # colour x strength
+    ambient: tuple[float, float, float] = (0.35, 0.5, 0.8)  # world colour x strength
+    draw_center: tuple[float, float] = (0.0, 0.0)
+    time: float = 0.0  # seconds of simulated wind
+    light_mode: int = 0  # 0 real-time cone march, 1 reference march
+    jitter: bool = True
+
+    def shell(self) -> tuple[float, float]:
+        """Lowest and highest altitude a cloud can occupy, from the min/max height channels (SPEC 1.9.4)."""
+        bottom, top = self.params["layer_bottom"], self.params["layer_top"]
+        if self.field_b is None:
+            return bottom, top
+        thickness = top - bottom
+        lo = float(np.min(self.field_b[..., 1]))
+        hi = float(np.max(self.field_b[..., 2]))
+        return bottom + min(lo, 0.0) * thickness, bottom + max(hi, 1.0) * thickness
+
+
+def sun_vector(elevation_deg: float, azimuth_deg: float) -> tuple[float, float, float]:
+    """Azimuth is measured from +Y (north) towards +X (east), like a compass."""
+    el, az = math.radians(elevation_deg), math.radians(azimuth_deg)
+    return (math.cos(el) * math.sin(az), math.cos(el) * math.cos(az), math.sin(el))
+
+
+def wind_vector(heading: float) -> tuple[float, float]:
+    return (math.cos(heading), math.sin(heading))

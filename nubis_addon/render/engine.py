@@ -1,0 +1,152 @@
+"""The GPU side of Nubis: one set of shaders and inputs, three consumers (viewport, offscreen render, bake)."""
+
+from __future__ import annotations
+
+import gpu
+import numpy as np
+from gpu.types import GPUShaderCreateInfo, GPUStageInterfaceInfo
+from gpu_extras.batch import batch_for_shader
+
+from ..core import noise
+from ..core.state import CloudState
+from . import uniforms
+from .sources import CLOUD_LIBS, assemble, read_shader
+from .textures import NoiseTextures, field_texture
+
+CLOUD_SAMPLERS = (
+    ("FLOAT_2D", "field_a"),
+    ("FLOAT_2D", "field_b"),
+    ("FLOAT_3D", "noise_lf"),
+    ("FLOAT_3D", "noise_lf_mip1"),
+    ("FLOAT_3D", "noise_hf"),
+    ("FLOAT_2D", "noise_curl"),
+    ("FLOAT_2D", "noise_cirrus"),
+)
+_shaders: dict[str, gpu.types.GPUShader] = {}
+_batches: dict[str, gpu.types.GPUBatch] = {}
+
+
+def _create_info(stage: str, push_constants: tuple[tuple[str, str], ...]) -> GPUShaderCreateInfo:
+    iface = GPUStageInterfaceInfo(f"nubis_{stage}_iface")
+    iface.smooth("VEC2", "uv")
+    info = GPUShaderCreateInfo()
+    info.typedef_source(read_shader("nubis_params.glsl"))
+    info.uniform_buf(0, "NubisParams", "P")
+    for slot, (kind, name) in enumerate(CLOUD_SAMPLERS):
+        info.sampler(slot, kind, name)
+    for kind, name in push_constants:
+        info.push_constant(kind, name)
+    info.vertex_in(0, "VEC2", "pos")
+    info.vertex_out(iface)
+    info.fragment_out(0, "VEC4", "color")
+    info.vertex_source(read_shader("nubis_fullscreen_vert.glsl"))
+    info.fragment_source(assemble(*CLOUD_LIBS, f"nubis_{stage}_frag.glsl"))
+    return info
+
+
+STAGES = {
+    "raymarch": (("MAT4", "inv_view_proj"),),
+    "bake": (("VEC4", "bake_origin"), ("VEC4", "bake_voxel")),
+}
+
+
+def shader(stage: str) -> gpu.types.GPUShader:
+    if stage not in _shaders:
+        _shaders[stage] = gpu.shader.create_from_info(_create_info(stage, STAGES[stage]))
+    return _shaders[stage]
+
+
+def fullscreen_batch(stage: str) -> gpu.types.GPUBatch:
+    if stage not in _batches:
+        _batches[stage] = batch_for_shader(shader(stage), "TRIS", {"pos": ((-1, -1), (3, -1), (-1, 3))})
+    return _batches[stage]
+
+
+class CloudGPU:
+    """GPU inputs of the cloud shaders, updated from a CloudState."""
+
+    def __init__(self, noise_set: noise.NoiseSet):
+        self.noise = NoiseTextures(noise_set)
+        self._field_keys: tuple = ()
+        self.field_a = self.field_b = None
+        self.ubo = None
+
+    def update(self, state: CloudState) -> None:
+        key = (id(state.field_a), id(state.field_b), _version(state.field_a), _version(state.field_b))
+        if key != self._field_keys:
+            self.field_a = field_texture(state.field_a)
+            self.field_b = field_texture(state.field_b)
+            self._field_keys = key
+        self.ubo = gpu.types.GPUUniformBuf(uniforms.pack(state).tobytes())
+
+    def bind(self, sh: gpu.types.GPUShader) -> None:
+        sh.bind()
+        sh.uniform_block("P", self.ubo)
+        textures = {
+            "field_a": self.field_a,
+            "field_b": self.field_b,
+            "noise_lf": self.noise.lf,
+            "noise_lf_mip1": self.noise.lf_mip1,
+            "noise_hf": self.noise.hf,
+            "noise_curl": self.noise.curl,
+            "noise_cirrus": self.noise.cirrus,
+        }
+        for _kind, name in CLOUD_SAMPLERS:
+            sh.uniform_sampler(name, textures[name])
+
+
+def _version(arr: np.ndarray | None) -> int:
+    # Fields are replaced, not edited in place, by everything that changes them; a cheap checksum of a
+    # strided subset still catches in-place edits from scripts.
+    if arr is None:
+        return 0
+    return hash(arr[::7, ::7].tobytes())
+
+
+def draw_clouds(gpu_inputs: CloudGPU, inv_view_proj) -> None:
+    """Draw the clouds into the bound framebuffer (premultiplied radiance, alpha)."""
+    sh = shader("raymarch")
+    gpu_inputs.bind(sh)
+    sh.uniform_float("inv_view_proj", inv_view_proj)
+    fullscreen_batch("raymarch").draw(sh)
+
+
+def render_offscreen(gpu_inputs: CloudGPU, inv_view_proj, width: int, height: int, tile: int = 256) -> np.ndarray:
+    """Scene-linear premultiplied RGBA, shape (height, width, 4), top row first.
+
+    The frame is drawn in tiles so that one huge draw call never stalls a software rasterizer.
+    """
+    out = np.zeros((height, width, 4), np.float32)
+    offscreen = gpu.types.GPUOffScreen(width, height, format="RGBA32F")
+    try:
+        with offscreen.bind():
+            fb = gpu.state.active_framebuffer_get()
+            fb.clear(color=(0.0, 0.0, 0.0, 0.0))
+            gpu.state.blend_set("NONE")
+            for y in range(0, height, tile):
+                for x in range(0, width, tile):
+                    w, h = min(tile, width - x), min(tile, height - y)
+                    gpu.state.scissor_test_set(True)
+                    gpu.state.scissor_set(x, y, w, h)
+                    draw_clouds(gpu_inputs, inv_view_proj)
+            gpu.state.scissor_test_set(False)
+            px = read_pixels(fb, width, height)
+    finally:
+        offscreen.free()
+    out[:] = px[::-1]
+    return out
+
+
+def read_pixels(fb, width: int, height: int) -> np.ndarray:
+    """Float RGBA of the framebuffer, (height, width, 4), bottom row first.
+
+    Blender's Buffer exports its memory with reversed strides to the buffer protocol (seen in 5.0.1),
+    so we view the C-ordered memory with the strides it really has instead of trusting them.
+    """
+    view = np.asarray(fb.read_color(0, 0, width, height, 4, 0, "FLOAT"))
+    if view.dtype != np.float32 or view.size != width * height * 4:
+        raise RuntimeError(f"unexpected framebuffer read-back {view.dtype} {view.shape}")
+    if view.flags.c_contiguous and view.shape == (height, width, 4):
+        return view.copy()
+    strides = (width * 16, 16, 4)
+    return np.lib.stride_tricks.as_strided(view, shape=(height, width, 4), strides=strides).copy()

@@ -1,0 +1,86 @@
+"""Pack a CloudState into the NubisParams uniform block declared in shaders/nubis_params.glsl.
+
+The layout is read from the GLSL struct itself, so Python and the shaders cannot drift apart.
+"""
+
+from __future__ import annotations
+
+import re
+from functools import cache
+
+import numpy as np
+
+from ..core.state import CloudState, wind_vector
+from .sources import read_shader
+
+
+@cache
+def struct_fields() -> tuple[str, ...]:
+    src = read_shader("nubis_params.glsl")
+    body = re.search(r"struct\s+NubisParams\s*{(.*?)}", src, re.S)
+    if body is None:
+        raise RuntimeError("nubis_params.glsl no longer declares struct NubisParams")
+    text = re.sub(r"/\*.*?\*/", "", body.group(1), flags=re.S)
+    members = re.findall(r"(\w+)\s+(\w+)\s*;", text)
+    bad = [name for typ, name in members if typ != "vec4"]
+    if bad:
+        raise RuntimeError(f"NubisParams members must be vec4, not: {bad}")
+    return tuple(name for _typ, name in members)
+
+
+def param_vectors(state: CloudState) -> dict[str, tuple[float, float, float, float]]:
+    p = state.params
+    shell_lo, shell_hi = state.shell()
+    wx, wy = wind_vector(p["wind_direction"])
+    field_size = p["field_size"]
+    return {
+        "layer": (p["layer_planet_radius"], p["layer_bottom"], p["layer_top"], p["layer_draw_radius"]),
+        "shell": (shell_lo, shell_hi, 0.0, 0.0),
+        "field": (p["field_origin_x"], p["field_origin_y"], field_size, 1.0 / field_size),
+        "draw": (*state.draw_center, 0.05 * p["layer_draw_radius"], 0.0),
+        "noise": (p["noise_lf_period"], p["noise_hf_period"], p["noise_curl_period"], p["noise_curl_strength"]),
+        "wind": (wx, wy, p["wind_speed"] * state.time, p["wind_detail_speed"]),
+        "wind2": (p["wind_top_offset"], p["wind_upward_bias"], state.time, 0.0),
+        "density": (
+            p["density_sigma"],
+            p["density_coverage"],
+            p["density_erosion"],
+            1.0 if p["density_multiply_coverage"] else 0.0,
+        ),
+        "sun_dir": (*_normalized(state.sun_direction), 0.0),
+        "sun_rad": (*state.sun_radiance, 0.0),
+        "ambient": (*(c * p["lighting_ambient"] for c in state.ambient), p["lighting_ambient_bottom"]),
+        "phase": (
+            p["lighting_phase_g0"],
+            p["lighting_phase_g1"],
+            p["lighting_phase_mix"],
+            p["lighting_rain_absorption"],
+        ),
+        "march": (
+            float(p["march_steps_min"]),
+            float(p["march_steps_max"]),
+            p["march_light_step"],
+            float(state.light_mode),
+        ),
+        "options": (1.0 if state.jitter else 0.0, 0.0, 0.0, 0.0),
+    }
+
+
+def pack(state: CloudState) -> np.ndarray:
+    vectors = param_vectors(state)
+    names = struct_fields()
+    missing = set(names) - set(vectors)
+    extra = set(vectors) - set(names)
+    if missing or extra:
+        raise RuntimeError(f"NubisParams and param_vectors disagree: missing {missing}, unknown {extra}")
+    data = np.array([vectors[n] for n in names], dtype=np.float32)
+    if not np.all(np.isfinite(data)):
+        bad = [n for n, v in zip(names, data, strict=True) if not np.all(np.isfinite(v))]
+        raise ValueError(f"non-finite cloud settings in {bad}")
+    return data
+
+
+def _normalized(v) -> tuple[float, float, float]:
+    a = np.asarray(v, dtype=np.float64)
+    n = float(np.linalg.norm(a))
+    return tuple(float(x) for x in (a / n if n > 0 else np.array([0.0, 0.0, 1.0])))

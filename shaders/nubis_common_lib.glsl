@@ -1,0 +1,70 @@
+/* Small pure helpers shared by the Nubis stages. */
+
+#define NUBIS_PI 3.14159265358979
+
+float clamp01(float x)
+{
+  return clamp(x, 0.0, 1.0);
+}
+
+/* SPEC 1.2 (GPU Pro 7, GDC22, HABR agree): unclamped; a zero-width input range maps to new_min. */
+float remap(float value, float old_min, float old_max, float new_min, float new_max)
+{
+  float span = old_max - old_min;
+  if (abs(span) < 1e-8) {
+    return new_min;
+  }
+  return new_min + (value - old_min) / span * (new_max - new_min);
+}
+
+/* Interleaved gradient noise (Jimenez 2014): a cheap per-pixel jitter that hides step banding. */
+float interleaved_gradient_noise(vec2 pixel)
+{
+  return fract(52.9829189 * fract(dot(pixel, vec2(0.06711056, 0.00583715))));
+}
+
+/* Ray against a sphere centred on the planet, for rays starting near sea level.
+ * `oc` is the ray origin relative to the planet centre minus (0, 0, R) (i.e. the world position),
+ * so that |oc|^2 - r^2 is formed without the catastrophic cancellation of 6.4e6^2 in float.
+ * Returns the two distances (near, far); near > far when the sphere is missed. */
+vec2 nubis_ray_sphere(vec3 origin, vec3 dir, float planet_radius, float altitude)
+{
+  /* |o - c|^2 - r^2 with c = (0, 0, -R), r = R + altitude, expanded to keep precision. */
+  float c = dot(origin.xy, origin.xy) + (origin.z - altitude) * (origin.z + altitude) +
+            2.0 * planet_radius * (origin.z - altitude);
+  float b = dot(origin + vec3(0.0, 0.0, planet_radius), dir);
+  float disc = b * b - c;
+  if (disc < 0.0) {
+    return vec2(1.0, -1.0);
+  }
+  /* Stable quadratic roots (Numerical Recipes 5.6). */
+  float q = -(b + sign(b) * sqrt(disc));
+  if (abs(q) < 1e-12) {
+    return vec2(0.0, 0.0);
+  }
+  float t0 = q;
+  float t1 = c / q;
+  return vec2(min(t0, t1), max(t0, t1));
+}
+
+/* Altitude above the sphere of radius R centred at (0, 0, -R), precise to millimetres near the surface. */
+float nubis_altitude(vec3 p, float planet_radius)
+{
+  float len = length(p + vec3(0.0, 0.0, planet_radius));
+  return (dot(p, p) + 2.0 * planet_radius * p.z) / (len + planet_radius);
+}
+
+/* The noise textures are stored with one extra wrapped texel per axis because Blender's Python
+ * textures clamp at the edge; this maps a repeating coordinate onto that padded layout so the
+ * hardware's linear filter blends across the seam exactly as a REPEAT sampler would. */
+vec3 nubis_tile_uvw(vec3 uvw, vec3 padded_size)
+{
+  vec3 n = padded_size - 1.0;
+  return (fract(uvw) * n + 0.5) / padded_size;
+}
+
+vec2 nubis_tile_uv(vec2 uv, vec2 padded_size)
+{
+  vec2 n = padded_size - 1.0;
+  return (fract(uv) * n + 0.5) / padded_size;
+}

@@ -1,0 +1,131 @@
+/* The cloud density: the one function the viewport, the headless render and the VDB bake all call.
+ * Requires: nubis_common_lib.glsl, the NubisParams block `P`, and the samplers
+ * field_a (coverage, precipitation, top type, bottom type), field_b (storm coverage, min height,
+ * max height, density multiplier), noise_lf, noise_lf_mip1, noise_hf, noise_curl. */
+
+/* SPEC 1.4.2, GPU Pro 7: the weights of the pre-built Worley fBm. */
+const vec3 NUBIS_FBM_WEIGHTS = vec3(0.625, 0.25, 0.125);
+
+struct NubisFieldSample {
+  vec4 a;
+  vec4 b;
+  float inside; /* 1 inside the field and the draw radius, fading to 0 at their edges */
+};
+
+NubisFieldSample nubis_sample_field(vec2 xy)
+{
+  NubisFieldSample f;
+  vec2 uv = (xy - P.field.xy) * P.field.w + 0.5;
+  f.a = textureLod(field_a, clamp(uv, 0.0, 1.0), 0.0);
+  f.b = textureLod(field_b, clamp(uv, 0.0, 1.0), 0.0);
+  /* Nothing outside the painted field: repeating it would invent clouds nobody authored. */
+  vec2 edge = min(uv, 1.0 - uv) * P.field.z;
+  float in_field = clamp01(min(edge.x, edge.y) / max(P.draw.z, 1.0));
+  /* SPEC 1.1, S15: clouds are drawn within the draw radius; the fade lives in the density itself so
+   * that the bake holds exactly what the viewport shows. */
+  float dist = length(xy - P.draw.xy);
+  float in_radius = clamp01((P.layer.w - dist) / max(P.draw.z, 1.0));
+  f.inside = in_field * in_radius;
+  return f;
+}
+
+/* Vertical profile: SPEC 1.5. The sources show the curves only as figures; these trapezoids follow
+ * SPEC 1.5's community defaults. HFW split (GDC22): the top ramp follows the top type (0 stratus,
+ * 0.5 stratocumulus, 1 cumulus), the bottom ramp follows the bottom type and relaxes as it rises,
+ * and the two lookups multiply. Bottom type 0 is the crisp flat base of fair-weather clouds. */
+float nubis_vertical_profile(float h, float top_type, float bottom_type)
+{
+  float t = clamp01(top_type);
+  vec2 top_ramp = t < 0.5 ? mix(vec2(0.10, 0.20), vec2(0.40, 0.60), t * 2.0) :
+                            mix(vec2(0.40, 0.60), vec2(0.70, 1.00), t * 2.0 - 1.0);
+  float bottom_end = mix(0.05, 0.35, clamp01(bottom_type));
+  float bottom = clamp01(h / bottom_end);
+  float top = clamp01(remap(h, top_ramp.x, top_ramp.y, 1.0, 0.0));
+  return bottom * top;
+}
+
+/* Height fraction in the column's own layer (SPEC 1.2 on the spherical shell; SPEC 1.9.4 min/max field). */
+float nubis_height_fraction(float altitude, vec4 field_b_sample)
+{
+  float thickness = P.layer.z - P.layer.y;
+  float lo = P.layer.y + field_b_sample.g * thickness;
+  float hi = P.layer.y + field_b_sample.b * thickness;
+  return (altitude - lo) / max(hi - lo, 1.0);
+}
+
+struct NubisDensity {
+  float fine;   /* the full sample, detail erosion included */
+  float coarse; /* the cheap sample: never below `fine` (SPEC 1.6.4) */
+  float h;      /* height fraction */
+  float precipitation;
+};
+
+/* SPEC 1.6.5 (the add-on's canonical sampler), following GPU Pro 7's order: base shape, profile,
+ * coverage, then detail erosion. `cheap` stops after the coverage step (GPU Pro 7's cheap sample:
+ * one 3D fetch). `lod` 0 reads the full-resolution noise, 1 the half-resolution copy. */
+NubisDensity nubis_density(vec3 p, bool cheap, float lod)
+{
+  NubisDensity d;
+  d.fine = 0.0;
+  d.coarse = 0.0;
+  d.h = 0.0;
+  d.precipitation = 0.0;
+
+  float altitude = nubis_altitude(p, P.layer.x);
+  if (altitude < P.shell.x || altitude > P.shell.y) {
+    return d;
+  }
+  NubisFieldSample f = nubis_sample_field(p.xy);
+  float h = nubis_height_fraction(altitude, f.b);
+  d.h = clamp01(h);
+  d.precipitation = f.a.g;
+  float coverage = clamp01(f.a.r * P.density.y) * f.inside;
+  if (h <= 0.0 || h >= 1.0 || coverage <= 0.0) {
+    return d;
+  }
+  float profile = nubis_vertical_profile(h, f.a.b, f.a.a);
+  if (profile <= 0.0) {
+    return d;
+  }
+
+  /* SPEC 1.7, GPU Pro 7: tops skew downwind and both noises drift with the wind and slightly
+   * upward, each at its own speed. We subtract the offsets (GDC22, SPEC 6 Q16) so features move
+   * downwind and rise; the coverage/type field itself never moves (GDC22, SPEC 1.3.1). */
+  vec3 wind_dir = vec3(P.wind.xy, 0.0);
+  vec3 drift = (wind_dir + vec3(0.0, 0.0, P.wind2.y)) * P.wind.z;
+  vec3 skewed = p - h * wind_dir * P.wind2.x;
+  vec3 p_lf = skewed - drift;
+
+  vec3 lf_uvw = p_lf / P.noise.x;
+  vec4 lf = lod < 0.5 ? textureLod(noise_lf, nubis_tile_uvw(lf_uvw, vec3(textureSize(noise_lf, 0))), 0.0) :
+                        textureLod(noise_lf_mip1, nubis_tile_uvw(lf_uvw, vec3(textureSize(noise_lf_mip1, 0))), 0.0);
+  float lf_fbm = dot(lf.gba, NUBIS_FBM_WEIGHTS);
+  /* SPEC 1.6.2, GPU Pro 7: the Worley fBm dilates the Perlin-Worley base shape. */
+  float base = remap(lf.r, -(1.0 - lf_fbm), 1.0, 0.0, 1.0) * profile;
+  /* SPEC 6 Q1: GDC22's 1 - coverage, so clouds inflate as coverage rises; GPU Pro 7's
+   * "smaller clouds are lighter" multiply is the option in P.density.w. */
+  float with_coverage = clamp01(remap(base, 1.0 - coverage, 1.0, 0.0, 1.0));
+  with_coverage *= mix(1.0, coverage, P.density.w);
+  float multiplier = max(f.b.a, 0.0);
+  d.coarse = with_coverage * multiplier;
+  if (cheap || with_coverage <= 0.0) {
+    d.fine = d.coarse;
+    return d;
+  }
+
+  /* SPEC 1.6.2, GPU Pro 7: animated curl noise twists the detail at the base, fading to none at the top. */
+  vec3 p_hf = skewed - drift * P.wind.w;
+  vec2 curl_uv = nubis_tile_uv(p_hf.xy / P.noise.z, vec2(textureSize(noise_curl, 0)));
+  vec2 curl = textureLod(noise_curl, curl_uv, 0.0).xy * 2.0 - 1.0;
+  p_hf.xy += curl * (1.0 - h) * P.noise.w;
+  vec3 hf_uvw = nubis_tile_uvw(p_hf / P.noise.y, vec3(textureSize(noise_hf, 0)));
+  float hf_fbm = dot(textureLod(noise_hf, hf_uvw, 0.0).rgb, NUBIS_FBM_WEIGHTS);
+  /* GPU Pro 7: wispy (Worley) at the base, billowy (inverted) above the lowest 10 %. SPEC 7.1: a
+   * rising bottom type keeps the wisps higher up the cloud, for ragged undersides (GDC22). */
+  float billow = clamp01(h * mix(10.0, 2.0, clamp01(f.a.a)));
+  float hf_modifier = mix(hf_fbm, 1.0 - hf_fbm, billow);
+  /* GPU Pro 7: erosion strength 0.2; the remap never raises a value, so fine <= coarse. */
+  float eroded = clamp01(remap(with_coverage, hf_modifier * P.density.z, 1.0, 0.0, 1.0));
+  d.fine = eroded * multiplier;
+  return d;
+}

@@ -1,0 +1,70 @@
+/* Cloud lighting. Requires nubis_common_lib.glsl and nubis_density_lib.glsl. */
+
+/* SPEC 2.3, GDC22: normalised Henyey-Greenstein (GPU Pro 7's listing multiplies by pi; not used). */
+float nubis_henyey_greenstein(float cos_angle, float g)
+{
+  float g2 = g * g;
+  float denom = 1.0 + g2 - 2.0 * g * cos_angle;
+  return (1.0 - g2) / (4.0 * NUBIS_PI * denom * sqrt(denom));
+}
+
+/* SPEC 2.3: GDC22 combines lobes of different eccentricity for an art-directed silver lining. */
+float nubis_phase(float cos_angle)
+{
+  return mix(nubis_henyey_greenstein(cos_angle, P.phase.x), nubis_henyey_greenstein(cos_angle, P.phase.y), P.phase.z);
+}
+
+/* GPU Pro 7: six offsets in [-1, 1]^3 that widen the light march into a cone (SPEC 2.8). */
+const vec3 NUBIS_CONE_KERNEL[6] = vec3[6](vec3(0.38051305, 0.92453449, -0.02111345),
+                                          vec3(-0.50625799, -0.03590792, -0.86163418),
+                                          vec3(-0.32509218, -0.94557439, 0.01428793),
+                                          vec3(0.09026238, -0.27376545, 0.95755165),
+                                          vec3(0.28128598, 0.42443639, -0.86065785),
+                                          vec3(-0.16852403, 0.14748697, 0.97460106));
+
+/* Optical depth towards the sun. Mode 0: the real-time march of GPU Pro 7 / S15, five samples in a
+ * widening cone plus one long-distance sample at three times the cone length, at the half-resolution
+ * noise, switching to cheap samples once the view ray is 30 % opaque. Mode 1: a reference march of
+ * many fine samples out of the cloud layer, for measuring the real-time one. */
+float nubis_light_optical_depth(vec3 p, float view_alpha)
+{
+  vec3 sun = P.sun_dir.xyz;
+  float step_len = P.march.z;
+  float tau = 0.0;
+  if (P.march.w < 0.5) {
+    bool cheap = view_alpha > 0.3; /* S15: "2x faster", no visible change */
+    for (int i = 0; i < 5; i++) {
+      float t = step_len * (float(i) + 0.5);
+      vec3 q = p + sun * t + NUBIS_CONE_KERNEL[i] * (step_len * float(i) * 0.5);
+      NubisDensity s = nubis_density(q, cheap, 1.0);
+      tau += (cheap ? s.coarse : s.fine) * step_len;
+    }
+    /* The long sample catches shadows of distant clouds (GPU Pro 7 fig 4.36). It stands for the
+     * stretch between the cone's end and itself, so it is weighted by that length. */
+    vec3 far_point = p + sun * (step_len * 15.0);
+    tau += nubis_density(far_point, true, 1.0).coarse * step_len * 10.0;
+  }
+  else {
+    /* Reference: 64 midpoint samples up to where the ray leaves the cloud layer. */
+    vec2 hit = nubis_ray_sphere(p, sun, P.layer.x, P.shell.y);
+    float len = max(hit.y, 0.0);
+    float dt = len / 64.0;
+    for (int i = 0; i < 64; i++) {
+      tau += nubis_density(p + sun * (dt * (float(i) + 0.5)), false, 0.0).fine * dt;
+    }
+  }
+  return tau * P.density.x;
+}
+
+/* Light scattered towards the eye per unit of scattering at a point inside the cloud. */
+vec3 nubis_in_scattering(vec3 p, vec3 view_dir, NubisDensity d, float view_alpha)
+{
+  float tau = nubis_light_optical_depth(p, view_alpha);
+  /* SPEC 2.5, GPU Pro 7: raining clouds absorb more light. */
+  float rain = mix(1.0, P.phase.w, clamp01(d.precipitation));
+  float transmittance = exp(-tau * rain);
+  vec3 direct = P.sun_rad.rgb * transmittance * nubis_phase(dot(view_dir, P.sun_dir.xyz));
+  /* SPEC 2.7: GDC22's ambient probability from the coarse density, growing with height (S15). */
+  float ambient_probability = sqrt(1.0 - clamp01(d.coarse)) * mix(P.ambient.w, 1.0, d.h);
+  return direct + P.ambient.rgb * ambient_probability;
+}

@@ -1,0 +1,19 @@
+/* The uniform block shared by every Nubis shader. Python packs it by parsing this struct
+ * (render/uniforms.py), so a field added here must also be filled there. Only vec4 members:
+ * std140 then needs no padding rules. Units are metres, seconds and radiance. */
+struct NubisParams {
+  vec4 layer;      /* planet radius, layer bottom altitude, layer top altitude, draw radius */
+  vec4 shell;      /* lowest and highest altitude any cloud can reach (the field's min/max heights), -, - */
+  vec4 field;      /* field centre x, y, field size, 1 / field size */
+  vec4 draw;       /* draw centre x, y (the camera), fade width at the draw radius, - */
+  vec4 noise;      /* LF period, HF period, curl period, curl displacement */
+  vec4 wind;       /* wind direction x, y, distance travelled (speed * time), detail speed factor */
+  vec4 wind2;      /* cloud-top offset, upward bias, time in seconds, - */
+  vec4 density;    /* extinction per metre, coverage multiplier, erosion strength, multiply by coverage (0/1) */
+  vec4 sun_dir;    /* unit vector towards the sun, - */
+  vec4 sun_rad;    /* sun colour * strength (irradiance), - */
+  vec4 ambient;    /* ambient sky colour * strength, ambient at the base relative to the top */
+  vec4 phase;      /* g0, g1, weight of lobe 1, rain absorption multiplier */
+  vec4 march;      /* view steps looking up, view steps to the horizon, light step length, light mode */
+  vec4 options;    /* jitter (0/1), -, -, - */
+};
