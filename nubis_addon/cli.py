@@ -213,7 +213,7 @@ def _execute(args, in_blender: bool, log: Path) -> str:
             pipeline.save_render(scene, out, rgba)
         return f"rendered {label} with Cycles at {w}x{h} in {time.perf_counter() - start:.1f} s -> {out}"
     with _quiet(log):
-        m = pipeline.compare(scene, out, w, h, args.samples)
+        m = pipeline.compare(scene, out, w, h, args.samples, voxel_size=voxel)
     return (
         f"compared {label} at {w}x{h}: alpha RMSE {m['alpha_rmse']:.4f}, luminance error "
         f"{m['luminance_rel_error'] * 100:.1f}%, silhouette IoU {m['silhouette_iou']:.3f} "

@@ -14,7 +14,8 @@ def build_material(settings) -> bpy.types.Material:
     """Extinction = density x sigma (the viewport's own); albedo 1; the viewport's two phase lobes
     as a mix of two Volume Scatter closures, which share one extinction and mix their phases."""
     mat = bpy.data.materials.get(MATERIAL_NAME) or bpy.data.materials.new(MATERIAL_NAME)
-    mat.use_nodes = True
+    if mat.node_tree is None:  # materials made before 5.0 may lack a node tree
+        mat.use_nodes = True
     nt = mat.node_tree
     nt.nodes.clear()
     attr = nt.nodes.new("ShaderNodeAttribute")

@@ -121,12 +121,23 @@ def compare(
     samples: int | None = None,
     light_mode: int = 0,
     bounces: int | None = None,
+    voxel_size: float | None = None,
 ) -> dict:
+    """Viewport and Cycles renders of the same shot, their side-by-side, and metrics.json; the bake the
+    Cycles render used is kept as clouds.vdb."""
     out = check_output_dir(out_dir)
     viewport = render_viewport(scene, width, height, light_mode)
-    cycles = render_cycles(scene, width, height, samples, bounces=bounces)
+    baked = bake(scene, out / "clouds.vdb", voxel_size)
+    cycles = render_cycles(scene, width, height, samples, vdb_path=str(baked.path), bounces=bounces)
     result = metrics.compare(viewport, cycles)
-    result.update(width=width, height=height, samples=samples or scene.cycles.samples, preset=scene.nubis.preset)
+    result.update(
+        width=width,
+        height=height,
+        samples=samples or scene.cycles.samples,
+        preset=scene.nubis.preset,
+        voxel_size=baked.plan.voxel_size,
+        volume_bounces=scene.cycles.volume_bounces,
+    )
     save_render(scene, out / "viewport.exr", viewport)
     save_render(scene, out / "cycles.exr", cycles)
     view_png, cyc_png = display_image(scene, viewport), display_image(scene, cycles)

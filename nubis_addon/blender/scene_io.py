@@ -26,6 +26,13 @@ CAMERA_NAME = "Nubis Camera"
 
 # ---- field images ----------------------------------------------------------------------------------
 
+_field_generation = [0]
+
+
+def field_generation() -> int:
+    """Bumped whenever Nubis writes a field image, so cached copies of the pixels know to refresh."""
+    return _field_generation[0]
+
 
 def write_field_image(settings, which: str, data: np.ndarray):
     """Store a field array in its image, creating, resizing and packing it so it survives save and reload."""
@@ -41,6 +48,7 @@ def write_field_image(settings, which: str, data: np.ndarray):
     img.pixels.foreach_set(np.ascontiguousarray(data, dtype=np.float32).ravel())
     img.update()
     img.pack()
+    _field_generation[0] += 1
     return img
 
 
@@ -145,7 +153,8 @@ def _setup_world(scene, world_cfg: dict) -> None:
     world = scene.world or bpy.data.worlds.new("Nubis Sky")
     scene.world = world
     world.color = world_cfg["color"]
-    world.use_nodes = True
+    if world.node_tree is None:  # worlds made before 5.0 may lack a node tree
+        world.use_nodes = True
     bg = next((n for n in world.node_tree.nodes if n.type == "BACKGROUND"), None)
     if bg is None:
         bg = world.node_tree.nodes.new("ShaderNodeBackground")
@@ -184,7 +193,7 @@ def world_ambient(scene) -> tuple[float, float, float]:
     world = scene.world
     if world is None:
         return (0.0, 0.0, 0.0)
-    if world.use_nodes and world.node_tree:
+    if world.node_tree is not None:
         bg = next((n for n in world.node_tree.nodes if n.type == "BACKGROUND"), None)
         if bg is not None:
             c = bg.inputs["Color"].default_value
@@ -193,24 +202,27 @@ def world_ambient(scene) -> tuple[float, float, float]:
     return tuple(world.color)
 
 
-def state_from_scene(scene, camera_location=None) -> CloudState:
+def state_from_scene(scene, camera_location=None, fields: tuple | None = None) -> CloudState:
+    """The frame's CloudState; `fields` passes already-read (field_a, field_b) arrays to skip reading pixels."""
     settings = scene.nubis
     params = params_from_scene(settings)
     res = params["field_resolution"]
     sun = find_sun(scene)
     if sun is not None:
-        direction = tuple(sun.matrix_world.to_3x3() @ Vector((0.0, 0.0, 1.0)))
+        direction = tuple(evaluated_matrix(sun).to_3x3() @ Vector((0.0, 0.0, 1.0)))
         radiance = tuple(c * sun.data.energy for c in sun.data.color)
     else:
         direction, radiance = (0.0, 0.0, 1.0), (0.0, 0.0, 0.0)
     if camera_location is None:
-        camera_location = scene.camera.matrix_world.translation if scene.camera else (0.0, 0.0, 0.0)
+        camera_location = evaluated_matrix(scene.camera).translation if scene.camera else (0.0, 0.0, 0.0)
     fps = scene.render.fps / scene.render.fps_base
     time = (scene.frame_current + scene.frame_subframe) / fps * params["wind_time_scale"] + params["wind_time_offset"]
+    if fields is None:
+        fields = (read_field_image(settings.field_a, "a", res), read_field_image(settings.field_b, "b", res))
     return CloudState(
         params=params,
-        field_a=read_field_image(settings.field_a, "a", res),
-        field_b=read_field_image(settings.field_b, "b", res),
+        field_a=fields[0],
+        field_b=fields[1],
         sun_direction=direction,
         sun_radiance=radiance,
         ambient=world_ambient(scene),
@@ -225,6 +237,13 @@ def camera_inv_view_proj(scene, width: int, height: int):
     if cam is None:
         raise NubisError("the scene has no camera: add one or use New Cloudscape")
     depsgraph = bpy.context.evaluated_depsgraph_get()
-    proj = cam.calc_matrix_camera(depsgraph, x=width, y=height, scale_x=1.0, scale_y=1.0)
-    view = cam.matrix_world.normalized().inverted()
+    proj = cam.evaluated_get(depsgraph).calc_matrix_camera(depsgraph, x=width, y=height, scale_x=1.0, scale_y=1.0)
+    view = evaluated_matrix(cam).normalized().inverted()
     return (proj @ view).inverted()
+
+
+def evaluated_matrix(obj):
+    """An object's evaluated world matrix: right after a script moves it, `matrix_world` is stale
+    until the depsgraph updates, and drivers and constraints only show in the evaluated copy."""
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    return obj.evaluated_get(depsgraph).matrix_world.copy()

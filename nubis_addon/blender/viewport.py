@@ -13,14 +13,15 @@ from ..render.sources import read_shader
 from . import runtime, scene_io
 
 _handle = None
-_state_cache: dict = {"key": None, "state": None}
+_fields_cache: dict = {"key": None, "fields": None}
 _offscreen: dict = {"size": None, "buffer": None}
 _composite: dict = {}
 _last_error: list[str] = []
 
 
 def mark_dirty(*_args) -> None:
-    _state_cache["key"] = None
+    """Forget the cached field pixels (on depsgraph updates, file loads and setting edits)."""
+    _fields_cache["key"] = None
 
 
 def _composite_shader():
@@ -41,16 +42,30 @@ def _composite_shader():
 
 
 def _state(scene, view_origin):
-    key = (scene.name, scene.frame_current, tuple(round(c, 1) for c in view_origin[:2]))
-    if _state_cache["key"] != key:
-        _state_cache["state"] = scene_io.state_from_scene(scene, camera_location=view_origin)
-        _state_cache["key"] = key
-    return _state_cache["state"]
+    """Settings, sun and sky are read every redraw (cheap); the field pixels only when they changed."""
+    s = scene.nubis
+    key = (
+        scene.as_pointer(),
+        s.field_a.as_pointer(),
+        s.field_b.as_pointer(),
+        s.field_resolution,
+        scene_io.field_generation(),
+    )
+    if _fields_cache["key"] != key:
+        res = s.field_resolution
+        _fields_cache["fields"] = (
+            scene_io.read_field_image(s.field_a, "a", res),
+            scene_io.read_field_image(s.field_b, "b", res),
+        )
+        _fields_cache["key"] = key
+    return scene_io.state_from_scene(scene, camera_location=view_origin, fields=_fields_cache["fields"])
 
 
 def draw_view(scene, inv_view_proj, view_origin, width: int, height: int) -> None:
     """March the clouds into a buffer of 1/N the size and composite it over the background."""
     settings = scene.nubis
+    # Creating an offscreen rebinds framebuffers; remember the target so the composite lands there.
+    target = gpu.state.active_framebuffer_get()
     state = _state(scene, view_origin)
     clouds = runtime.cloud_gpu(settings.noise_seed)
     clouds.update(state)
@@ -68,12 +83,15 @@ def draw_view(scene, inv_view_proj, view_origin, width: int, height: int) -> Non
         gpu.state.depth_test_set("NONE")
         engine.draw_clouds(clouds, inv_view_proj)
     sh, batch = _composite_shader()
-    gpu.state.blend_set("ALPHA_PREMULT")
-    gpu.state.depth_test_set("LESS_EQUAL")
-    gpu.state.depth_mask_set(False)
-    sh.bind()
-    sh.uniform_sampler("cloud_buffer", buffer.texture_color)
-    batch.draw(sh)
+    with target.bind():
+        gpu.state.blend_set("ALPHA_PREMULT")
+        gpu.state.depth_test_set("LESS_EQUAL")
+        gpu.state.depth_mask_set(False)
+        sh.bind()
+        sh.uniform_sampler("cloud_buffer", buffer.texture_color)
+        batch.draw(sh)
+    # Leave Blender's default state behind: a disabled depth mask would also stop later depth clears.
+    gpu.state.depth_mask_set(True)
     gpu.state.depth_test_set("NONE")
     gpu.state.blend_set("NONE")
 
@@ -110,8 +128,9 @@ def register() -> None:
     global _handle
     if _handle is None:
         _handle = bpy.types.SpaceView3D.draw_handler_add(_draw_callback, (), "WINDOW", "POST_VIEW")
-    bpy.app.handlers.depsgraph_update_post.append(mark_dirty)
-    bpy.app.handlers.frame_change_post.append(mark_dirty)
+    for handlers in (bpy.app.handlers.depsgraph_update_post, bpy.app.handlers.load_post):
+        if mark_dirty not in handlers:
+            handlers.append(mark_dirty)
 
 
 def unregister() -> None:
@@ -119,14 +138,14 @@ def unregister() -> None:
     if _handle is not None:
         bpy.types.SpaceView3D.draw_handler_remove(_handle, "WINDOW")
         _handle = None
-    for handlers in (bpy.app.handlers.depsgraph_update_post, bpy.app.handlers.frame_change_post):
+    for handlers in (bpy.app.handlers.depsgraph_update_post, bpy.app.handlers.load_post):
         if mark_dirty in handlers:
             handlers.remove(mark_dirty)
     if _offscreen["buffer"] is not None:
         _offscreen["buffer"].free()
     _offscreen.update(size=None, buffer=None)
     _composite.clear()
-    _state_cache.update(key=None, state=None)
+    _fields_cache.update(key=None, fields=None)
 
 
 def is_registered() -> bool:

@@ -182,7 +182,7 @@ def tiling_perlin_3d(size: int, cells: int | Sequence[int], rng: RngLike = None)
     """Tiling 3D gradient (Perlin) noise, float32 ``(size, size, size)`` in [0, 1], indexed ``[z, y, x]``.
 
     ``cells`` lattice cells per tile (an int or ``(z, y, x)``); ``size`` must be a multiple of each.
-    ``rng`` is a seed or a ``numpy.random.Generator``. The mean is 0.5.
+    ``rng`` is a seed or a ``numpy.random.Generator``. The expected value is 0.5.
     """
     n = _perlin_3d_signed(size, cells, rng)
     return np.clip(0.5 + 0.5 * n / _PERLIN3_RANGE, 0.0, 1.0).astype(np.float32, copy=False)
@@ -289,7 +289,7 @@ def perlin_worley(perlin: np.ndarray, inverted_worley: np.ndarray, strength: flo
     # Perlin with the Worley fBm as the old minimum. Using minus the *inverted* Worley as that minimum lowers
     # the bar exactly at the Worley feature points, so any Perlin iso-surface bulges outward into round
     # billows there while staying where Perlin put it between them: Perlin's connected blobs, cauliflower
-    # rims. (The literal "+inverted Worley" minimum dents the rims inward instead; S6 Q38.) Where Perlin is 1
+    # rims. (The literal "+inverted Worley" minimum dents the rims inward instead; SPEC 6 Q38.) Where Perlin is 1
     # the result stays 1, so cores keep full density.
     old_min = -np.float32(strength) * inverted_worley
     return np.clip((perlin - old_min) / (1.0 - old_min), 0.0, 1.0).astype(np.float32, copy=False)
@@ -308,10 +308,12 @@ def _perlin_2d_at(x: np.ndarray, y: np.ndarray, grads: np.ndarray) -> np.ndarray
     # Wrap once in float, then index a table padded by one wrapped row/column: the +1 corners need no modulo.
     x = x - np.float32(cx) * np.floor(x / np.float32(cx))
     y = y - np.float32(cy) * np.floor(y / np.float32(cy))
+    # Float rounding can land a wrapped coordinate exactly on cx: clamp to the last cell (with t = 1 there,
+    # which is the same point).
     ix = np.minimum(x.astype(np.int32), cx - 1)
     iy = np.minimum(y.astype(np.int32), cy - 1)
-    tx = x - ix
-    ty = y - iy
+    tx = x - ix.astype(np.float32)
+    ty = y - iy.astype(np.float32)
     padded = np.concatenate([grads, grads[:1]], axis=0)
     padded = np.concatenate([padded, padded[:, :1]], axis=1)
     gx = padded[..., 0].ravel()
@@ -395,7 +397,8 @@ def perlin_fbm_2d(
 def tiling_worley_2d(size: int, cells: int | Sequence[int], rng: RngLike = None) -> np.ndarray:
     """Tiling 2D Worley F1 noise, float32 ``(size, size)`` in [0, 1], indexed ``[y, x]``.
 
-    Same conventions as :func:`tiling_worley_3d`; ``cells`` may be ``(cells_y, cells_x)``.
+    Same conventions as :func:`tiling_worley_3d`; ``cells`` may be ``(cells_y, cells_x)`` and ``size`` must be a
+    multiple of each.
     """
     cy, cx = _axes_cells(cells, 2)
     sy, sx = _block_layout(size, (cy, cx))
@@ -653,7 +656,7 @@ def cirrus_layers(size: int = CIRRUS_SIZE, rng: RngLike = None) -> np.ndarray:
     # A large-scale warp bends the streaks so they do not look ruled; it tiles, so the layers tile.
     warp = (
         0.03 * perlin_fbm_2d(size, 2, 3, gen, signed=True),
-        0.08 * perlin_fbm_2d(size, 3, 3, gen, signed=True),
+        0.06 * perlin_fbm_2d(size, 3, 3, gen, signed=True),
     )
 
     # R: cirrostratus, a thin veil: broad soft sheets with faint streaks (Perlin fBm stretched 6:1 along x).
@@ -759,9 +762,7 @@ def _read_cache(path: Path, seed: int) -> NoiseSet | None:
                 arrays[name] = a
             if str(z["digest"]) != _digest(arrays, seed):
                 return None
-    except FileNotFoundError:
-        return None
-    except Exception:  # noqa: BLE001 - any unreadable/corrupt file just means "regenerate"
+    except Exception:  # missing, unreadable or corrupt (zip, header, digest): all just mean "regenerate"
         return None
     return NoiseSet(seed=seed, **arrays)
 
@@ -783,10 +784,9 @@ def _write_cache(path: Path, ns: NoiseSet) -> None:
             )
             f.flush()
             os.fsync(f.fileno())
-        # mkstemp makes 0600 files; give the cache the permissions an ordinary file would get.
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
+        # mkstemp makes 0600 files; the cache holds nothing private. (A fixed mode, because reading the umask
+        # means briefly changing it for the whole process, Blender's other threads included.)
+        os.chmod(tmp, 0o644)
         os.replace(tmp, path)
     finally:
         with contextlib.suppress(OSError):

@@ -1,0 +1,61 @@
+"""The VDB bake (same GLSL density) and its Cycles render."""
+
+import numpy as np
+import pytest
+from gpu_helpers import split_coverage_scene
+
+
+@pytest.fixture
+def baked(make_scene, tmp_path):
+    from nubis_addon.blender import pipeline
+
+    scene = split_coverage_scene(make_scene)
+    result = pipeline.bake(scene, tmp_path / "clouds.vdb", voxel_size=400.0)
+    return scene, result
+
+
+def test_vdb_has_density_grid_transform_and_voxels(baked):
+    from nubis_addon.core import vdbio
+
+    scene, result = baked
+    info = vdbio.read_grid_info(result.path)
+    assert list(info) == ["density"]
+    grid = info["density"]
+    assert grid.voxel_size == pytest.approx(400.0)
+    assert grid.origin == pytest.approx(result.plan.origin)
+    assert grid.active_voxels > 1000 and grid.active_voxels == result.active_voxels
+    assert 0.0 < grid.min_max[1] <= 1.0
+    dense, lo = vdbio.read_grid_array(result.path, "density")
+    z, y, x = np.nonzero(dense > 0)
+    world_x = result.plan.origin[0] + (x + lo[0]) * 400.0
+    world_z = result.plan.origin[2] + (z + lo[2]) * 400.0
+    # Clouds only where coverage > 0 (the -X half), and only inside the layer's altitudes.
+    assert world_x.max() <= 400.0
+    assert world_z.min() >= scene.nubis.layer_bottom - 400.0 - 200.0  # curvature sag at the field's corners
+    assert world_z.max() <= scene.nubis.layer_top + 400.0
+
+
+def test_failed_bake_keeps_the_previous_vdb(baked, tmp_path):
+    from nubis_addon.blender import pipeline
+    from nubis_addon.core.errors import NubisError
+
+    scene, result = baked
+    before = result.path.read_bytes()
+    with pytest.raises(NubisError, match="voxel size of at least"):
+        pipeline.bake(scene, result.path, voxel_size=2.0)
+    assert result.path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["clouds.vdb"]
+
+
+def test_cycles_renders_the_bake(baked):
+    from nubis_addon.blender import pipeline
+
+    scene, result = baked
+    rgba = pipeline.render_cycles(scene, 48, 48, samples=4, vdb_path=str(result.path))
+    viewport = pipeline.render_viewport(scene, 48, 48)
+    assert rgba[:, :18, 3].mean() > 0.2  # clouds on the covered half
+    assert rgba[:, 30:, 3].mean() < 0.02  # clear sky on the other
+    assert rgba[:, :18, :3].mean() > 0.02  # lit by sun and sky
+    overlap = ((rgba[..., 3] > 0.05) & (viewport[..., 3] > 0.05)).sum()
+    union = ((rgba[..., 3] > 0.05) | (viewport[..., 3] > 0.05)).sum()
+    assert overlap / union > 0.8

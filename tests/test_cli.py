@@ -1,0 +1,118 @@
+"""The command line as users and render farms run it: exit codes, one-line messages, no partial files."""
+
+import json
+
+import numpy as np
+import pytest
+from conftest import run_cli
+
+
+def _one_line(text: str) -> str:
+    lines = [ln for ln in text.strip().splitlines() if ln.strip()]
+    assert len(lines) == 1, text
+    return lines[0]
+
+
+def test_render_default_png_and_exr(tmp_path):
+    from nubis_addon.core.imageio import read_image
+
+    png, exr = tmp_path / "a.png", tmp_path / "a.exr"
+    r = run_cli("render", "--out", str(png), "--width", "64", "--height", "36")
+    assert r.returncode == 0, r.stderr
+    assert _one_line(r.stdout).startswith("rendered default at 64x36")
+    r = run_cli("render", "--preset", "default", "--out", str(exr), "--width", "64", "--height", "36", "--frame", "5")
+    assert r.returncode == 0, r.stderr
+    img = read_image(exr)
+    assert img.shape == (36, 64, 4) and img[..., 3].max() > 0.5  # scene-linear with alpha
+    disp = read_image(png)
+    assert disp.shape[:2] == (36, 64) and disp[..., 3].min() == 1.0  # display-referred over the sky
+
+
+def test_compare_writes_every_output(tmp_path):
+    out = tmp_path / "cmp"
+    r = run_cli(
+        "compare", "--out", str(out), "--width", "48", "--height", "27", "--samples", "4", "--voxel-size", "300"
+    )
+    assert r.returncode == 0, r.stderr
+    assert _one_line(r.stdout).startswith("compared default at 48x27")
+    names = {p.name for p in out.iterdir()}
+    assert {
+        "viewport.png",
+        "viewport.exr",
+        "cycles.png",
+        "cycles.exr",
+        "side_by_side.png",
+        "metrics.json",
+        "clouds.vdb",
+    } <= names
+    m = json.loads((out / "metrics.json").read_text())
+    assert 0.0 <= m["alpha_rmse"] < 0.2 and m["silhouette_iou"] > 0.7
+
+
+def test_bake_and_cycles_commands(tmp_path):
+    from nubis_addon.core import imageio, vdbio
+
+    vdb = tmp_path / "c.vdb"
+    r = run_cli("bake", "--out", str(vdb), "--voxel-size", "500")
+    assert r.returncode == 0, r.stderr
+    assert "baked default" in _one_line(r.stdout)
+    assert vdbio.read_grid_info(vdb)["density"].active_voxels > 0
+    png = tmp_path / "c.png"
+    r = run_cli("cycles", "--out", str(png), "--width", "32", "--height", "18", "--samples", "2", "--voxel-size", "500")
+    assert r.returncode == 0, r.stderr
+    assert imageio.read_image(png).shape == (18, 32, 4)
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["render", "--preset", "no_such_preset"], "no preset named 'no_such_preset': choose one of"),
+        (["render", "--blend", "{tmp}/garbage.blend"], "cannot open"),
+        (["render", "--blend", "{tmp}/missing.blend"], "does not exist"),
+        (["bake", "--voxel-size", "0.5"], "use a voxel size of at least"),
+        (["bake", "--voxel-size", "-3"], "--voxel-size must be a positive number"),
+        (["render", "--width", "0"], "--width must be a positive whole number"),
+        (["render", "--bogus"], "unrecognized arguments"),
+    ],
+)
+def test_errors_are_one_line_and_leave_the_good_file(tmp_path, args, message):
+    (tmp_path / "garbage.blend").write_bytes(b"this is not a blend file" * 10)
+    out = tmp_path / ("good.vdb" if args[0] == "bake" else "good.png")
+    out.write_bytes(b"the previous good output")
+    r = run_cli(*[a.format(tmp=tmp_path) for a in args], "--out", str(out))
+    assert r.returncode != 0
+    line = _one_line(r.stderr)
+    assert line.startswith("nubis: error:") and message in line, r.stderr
+    assert out.read_bytes() == b"the previous good output"
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["garbage.blend", out.name])
+
+
+def test_unwritable_output_is_refused_before_any_work(tmp_path):
+    r = run_cli("render", "--out", "/proc/nubis/clouds.png")
+    assert r.returncode == 1
+    assert "choose a writable location" in _one_line(r.stderr)
+    r = run_cli("render", "--out", str(tmp_path / "clouds.jpg"))
+    assert r.returncode == 1 and "use one of the extensions .png, .exr" in _one_line(r.stderr)
+
+
+def test_blender_command_is_registered_and_runs(blender, tmp_path):
+    """`blender -b --command nubis ...` calls cli_command.execute with the argument list."""
+    from nubis_addon.blender import cli_command
+
+    assert cli_command.is_registered()
+    out = tmp_path / "cmd.exr"
+    code = cli_command.execute(["render", "--out", str(out), "--width", "32", "--height", "18"])
+    assert code == 0
+    from nubis_addon.core.imageio import read_image
+
+    assert np.isfinite(read_image(out)).all()
+    assert cli_command.execute(["render", "--preset", "nope", "--out", str(out)]) == 1
+
+
+def test_blend_file_round_trip_through_the_cli(blender, make_scene, tmp_path):
+    scene = make_scene("default")
+    path = tmp_path / "sky.blend"
+    blender.ops.wm.save_as_mainfile(filepath=str(path))
+    r = run_cli("render", "--blend", str(path), "--out", str(tmp_path / "b.png"), "--width", "32", "--height", "18")
+    assert r.returncode == 0, r.stderr
+    assert scene is not None

@@ -1,0 +1,151 @@
+"""core/: field compositing, metrics, bake planning, atomic files, VDB and image I/O (no Blender)."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from nubis_addon.core import fields, imageio, metrics, vdbio
+from nubis_addon.core.bakeplan import plan_bake
+from nubis_addon.core.errors import NubisError
+from nubis_addon.core.fsutil import atomic_path, check_output_path
+from nubis_addon.core.params import defaults
+from nubis_addon.core.presets import load_preset
+from nubis_addon.core.state import CloudState
+
+
+def small_params(**kw):
+    p = defaults()
+    p.update(field_resolution=64, **kw)
+    return p
+
+
+def test_composite_default_preset_is_in_range_and_deterministic():
+    preset = load_preset("default")
+    params = dict(preset.params, field_resolution=64)
+    a = fields.composite(preset.layers, params)
+    b = fields.composite(preset.layers, params)
+    for key in ("a", "b", "cirrus"):
+        assert a[key].shape == (64, 64, 4) and a[key].dtype == np.float32
+        np.testing.assert_array_equal(a[key], b[key])
+    assert 0.0 <= a["a"].min() and a["a"].max() <= 1.0
+    assert a["a"][..., 0].std() > 0.05  # coverage varies across the sky
+
+
+def _layer(**kw):
+    from nubis_addon.core.presets import LAYER_SCHEMA
+
+    layer = {k: (list(v[1]) if isinstance(v[1], list) else v[1]) for k, v in LAYER_SCHEMA.items()}
+    layer.update(kw)
+    return layer
+
+
+@pytest.mark.parametrize(
+    ("mode", "expected"), [("replace", 0.8), ("add", 1.0), ("multiply", 0.4), ("min", 0.5), ("max", 0.8)]
+)
+def test_blend_modes(mode, expected):
+    layers = [
+        _layer(name="base", kind="constant", value=0.5),
+        _layer(name="top", kind="constant", value=0.8, blend=mode),
+    ]
+    out = fields.composite(layers, small_params())
+    assert out["a"][..., 0] == pytest.approx(expected)
+
+
+def test_opacity_mask_and_remap():
+    layers = [
+        _layer(name="left", kind="gradient", angle=0.0, radius=35000.0, channel="none"),
+        _layer(name="cov", kind="constant", value=1.0, mask="left", opacity=0.5, remap=[0.0, 1.0, 0.0, 0.8]),
+    ]
+    cov = fields.composite(layers, small_params())["a"][..., 0]
+    assert cov[:, 0].max() < 0.02  # mask ~0 on the -X side
+    assert cov[:, -1].min() == pytest.approx(0.4, abs=0.02)  # 0.8 remapped x opacity 0.5 x mask ~1
+
+
+def test_image_layer_errors_are_clear():
+    with pytest.raises(NubisError, match="uses the image 'paint', which is missing"):
+        fields.composite([_layer(kind="image", image="paint")], small_params())
+    bad = np.full((8, 8), np.nan, np.float32)
+    with pytest.raises(NubisError, match="NaN"):
+        fields.composite([_layer(kind="image", image="paint")], small_params(), {"paint": bad})
+
+
+def test_rain_and_horizon_rules():
+    f = fields.base_fields(64)
+    f["a"][..., 1] = 1.0  # 100 % chance of rain everywhere
+    fields.apply_rain_rule(f, cumulonimbus_top=2.6)
+    assert f["a"][..., 0].min() >= 0.7 - 1e-6 and f["a"][..., 2].min() == pytest.approx(1.0)
+    assert f["b"][..., 2].min() == pytest.approx(2.6)
+    g = fields.base_fields(64)
+    p = small_params()
+    fields.apply_horizon_rule(g, p, (0.0, 0.0))
+    assert g["a"][32, 32, 0] == pytest.approx(0.0)  # near the centre nothing changes
+    assert g["a"][0, 0, 2] == pytest.approx(1.0)  # the far corner turns to cumulus at ~50 %
+    assert g["a"][0, 0, 0] == pytest.approx(0.5)
+
+
+def test_metrics_identical_and_shifted():
+    rng = np.random.default_rng(1)
+    a = rng.random((16, 16, 4)).astype(np.float32)
+    m = metrics.compare(a, a)
+    assert m["alpha_rmse"] == 0 and m["luminance_rel_error"] == 0 and m["silhouette_iou"] == 1
+    b = a.copy()
+    b[..., :3] *= 1.1
+    assert metrics.compare(a, b)["luminance_rel_error"] == pytest.approx(0.1 / 1.1, rel=1e-4)
+
+
+def test_bake_plan_covers_the_draw_radius_and_refuses_absurd_sizes():
+    state = CloudState()
+    plan = plan_bake(state, 500.0)
+    nx, ny, nz = plan.dims
+    assert nx * 500 >= 70000 and ny * 500 >= 70000
+    z0 = plan.origin[2] - 250  # origin is the first voxel's centre
+    assert z0 < state.params["layer_bottom"] and z0 + nz * 500 >= state.params["layer_top"]
+    with pytest.raises(NubisError, match="use a voxel size of at least"):
+        plan_bake(state, 1.0)
+    with pytest.raises(NubisError, match="positive"):
+        plan_bake(state, float("nan"))
+
+
+def test_atomic_write_keeps_the_old_file_on_failure(tmp_path: Path):
+    target = tmp_path / "keep.txt"
+    target.write_text("good")
+    with pytest.raises(RuntimeError), atomic_path(target) as tmp:
+        tmp.write_text("half")
+        raise RuntimeError("crash mid-write")
+    assert target.read_text() == "good"
+    assert list(tmp_path.iterdir()) == [target]
+
+
+def test_output_path_checks(tmp_path: Path):
+    with pytest.raises(NubisError, match="use one of the extensions"):
+        check_output_path(tmp_path / "x.jpg", (".png", ".exr"))
+    with pytest.raises(NubisError, match="cannot create the folder|cannot write into"):
+        check_output_path("/proc/nubis/x.png", (".png",))
+    assert check_output_path(tmp_path / "new" / "x.png", (".png",)).parent.is_dir()
+
+
+def test_vdb_round_trip(tmp_path: Path):
+    vol = np.zeros((4, 5, 6), np.float32)  # z, y, x
+    vol[1, 2, 3] = 0.75
+    path = vdbio.write_vdb(tmp_path / "t.vdb", {"density": vol}, 50.0, (100.0, 200.0, 1500.0))
+    info = vdbio.read_grid_info(path)["density"]
+    assert info.active_voxels == 1 and info.voxel_size == pytest.approx(50.0)
+    assert info.origin == pytest.approx((100.0, 200.0, 1500.0))
+    assert info.index_bbox == ((3, 2, 1), (3, 2, 1))  # x, y, z
+    with pytest.raises(NubisError, match="NaN"):
+        vdbio.write_vdb(tmp_path / "t.vdb", {"density": vol * np.nan}, 50.0, (0, 0, 0))
+    assert vdbio.read_grid_info(path)["density"].active_voxels == 1  # the good file survived
+
+
+def test_image_round_trip(tmp_path: Path):
+    px = np.zeros((6, 8, 4), np.float32)
+    px[0, 0] = (2.5, 0.5, 0.25, 0.5)
+    imageio.write_image(tmp_path / "a.exr", px)
+    back = imageio.read_image(tmp_path / "a.exr")
+    np.testing.assert_allclose(back, px, atol=1e-3)
+    imageio.write_image(tmp_path / "a.png", np.clip(px, 0, 1))
+    assert imageio.read_image(tmp_path / "a.png").shape == (6, 8, 4)
+    with pytest.raises(NubisError, match="NaN"):
+        imageio.write_image(tmp_path / "b.exr", px * np.nan)
+    assert not (tmp_path / "b.exr").exists()

@@ -1,0 +1,70 @@
+"""The extension as Blender sees it: Blender's own validator, a built zip, install, enable, disable."""
+
+import os
+import subprocess
+import sys
+import textwrap
+import zipfile
+
+from conftest import ROOT
+
+
+def _blender_ext() -> str:
+    out = subprocess.run(
+        [sys.executable, "-c", "import bpy; print(bpy.utils.system_resource('SCRIPTS'))"],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    scripts = out.stdout.strip().splitlines()[-1]
+    return os.path.join(scripts, "addons_core", "bl_pkg", "cli", "blender_ext.py")
+
+
+def test_manifest_passes_blenders_validator():
+    r = subprocess.run([sys.executable, _blender_ext(), "validate", str(ROOT)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr
+
+
+def test_built_zip_installs_enables_and_unregisters_cleanly(tmp_path):
+    build = tmp_path / "build"
+    build.mkdir()
+    r = subprocess.run(
+        [sys.executable, _blender_ext(), "build", "--source-dir", str(ROOT), "--output-dir", str(build)],
+        capture_output=True,
+        text=True,
+    )
+    assert r.returncode == 0, r.stdout + r.stderr
+    (zip_path,) = build.glob("*.zip")
+    names = zipfile.ZipFile(zip_path).namelist()
+    assert "blender_manifest.toml" in names and "__init__.py" in names
+    assert any(n.startswith("shaders/") for n in names) and any(n.startswith("presets/") for n in names)
+    assert not any(n.startswith(("tests/", ".ci/", ".venv/", ".git/")) for n in names), names
+    assert sum(zipfile.ZipFile(zip_path).getinfo(n).file_size for n in names) < 2_000_000
+
+    script = textwrap.dedent(f"""
+        import sys, bpy, addon_utils
+        bpy.ops.extensions.package_install_files(filepath={str(zip_path)!r}, repo="user_default",
+                                                 enable_on_install=True)
+        mod = "bl_ext.user_default.nubis"
+        assert mod in {{a.module for a in bpy.context.preferences.addons}}, "not enabled"
+        assert hasattr(bpy.types.Scene, "nubis"), "settings not registered"
+        pkg = sys.modules[mod + ".nubis_addon.blender"]
+        assert sys.modules[mod + ".nubis_addon.blender.cli_command"].is_registered()
+        assert sys.modules[mod + ".nubis_addon.blender.viewport"].is_registered()
+        bpy.ops.nubis.new_cloudscape(preset="default")
+        assert bpy.context.scene.nubis.field_a is not None
+        cache = sys.modules[mod + ".nubis_addon.blender.runtime"].cache_dir()
+        assert str(cache).startswith(bpy.utils.extension_path_user(mod)), cache
+        assert {str(ROOT)!r} not in str(cache)
+        bpy.ops.preferences.addon_disable(module=mod)
+        assert not hasattr(bpy.types.Scene, "nubis"), "settings left behind"
+        assert not [c for c in dir(bpy.types) if c.startswith("NUBIS_")], "classes left behind"
+        assert not sys.modules[mod + ".nubis_addon.blender.cli_command"].is_registered()
+        assert not sys.modules[mod + ".nubis_addon.blender.viewport"].is_registered()
+        print("EXTENSION-OK")
+    """)
+    env = dict(os.environ, HOME=str(tmp_path / "home"))
+    env.pop("NUBIS_CACHE_DIR", None)
+    env.pop("BLENDER_USER_RESOURCES", None)
+    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=600)
+    assert "EXTENSION-OK" in r.stdout, r.stdout[-3000:] + r.stderr[-3000:]
