@@ -4,5 +4,11 @@ void main()
   vec2 ij = floor(gl_FragCoord.xy);
   vec3 p = bake_origin.xyz + vec3(ij, bake_origin.w) * bake_voxel.x;
   NubisDensity d = nubis_density(p, false, 0.0);
-  color = vec4(d.fine, d.coarse, 0.0, 1.0);
+  float density = d.fine;
+  /* The 2D cirrus layer becomes a thin slab holding the same optical depth the march gives it. */
+  float from_cirrus = abs(nubis_altitude(p, P.layer.x) - P.cirrus.x);
+  if (from_cirrus < 0.5 * P.cirrus2.z && P.density.x > 0.0) {
+    density += nubis_cirrus_density(p.xy) * P.cirrus.w / (P.cirrus2.z * P.density.x);
+  }
+  color = vec4(density, d.coarse, 0.0, 1.0);
 }

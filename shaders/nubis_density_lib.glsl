@@ -1,7 +1,8 @@
 /* The cloud density: the one function the viewport, the headless render and the VDB bake all call.
  * Requires: nubis_common_lib.glsl, the NubisParams block `P`, and the samplers
  * field_a (coverage, precipitation, top type, bottom type), field_b (storm coverage, min height,
- * max height, density multiplier), noise_lf, noise_lf_mip1, noise_hf, noise_curl. */
+ * max height, density multiplier), field_c (cirrus coverage, cirrus type), noise_lf, noise_lf_mip1,
+ * noise_hf, noise_curl, noise_cirrus. */
 
 /* SPEC 1.4.2, GPU Pro 7: the weights of the pre-built Worley fBm. */
 const vec3 NUBIS_FBM_WEIGHTS = vec3(0.625, 0.25, 0.125);
@@ -128,4 +129,24 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
   float eroded = clamp01(remap(with_coverage, hf_modifier * P.density.z, 1.0, 0.0, 1.0));
   d.fine = eroded * multiplier;
   return d;
+}
+
+/* SPEC 1.8 (GDC22): the cirrus layer is 2D: three tiling cloudscapes from wispy cirrostratus (type 0)
+ * through cirrus (0.5) to billowy cirrocumulus (1), blended by type and eroded by the inverse of
+ * coverage; it scrolls with its own wind (GPU Pro 7, S15). Returns the density at world xy. */
+float nubis_cirrus_density(vec2 xy)
+{
+  vec2 uv = (xy - P.field.xy) * P.field.w + 0.5;
+  vec4 c = textureLod(field_c, clamp(uv, 0.0, 1.0), 0.0);
+  vec2 edge = min(uv, 1.0 - uv) * P.field.z;
+  float inside = clamp01(min(edge.x, edge.y) / max(P.draw.z, 1.0));
+  float coverage = clamp01(c.r * P.cirrus.y) * inside;
+  if (coverage <= 0.0) {
+    return 0.0;
+  }
+  vec2 tex_uv = nubis_tile_uv((xy - P.cirrus2.xy) * P.cirrus.z, vec2(textureSize(noise_cirrus, 0)));
+  vec3 layers = textureLod(noise_cirrus, tex_uv, 0.0).rgb;
+  float t = clamp01(c.g);
+  float v = t < 0.5 ? mix(layers.r, layers.g, t * 2.0) : mix(layers.g, layers.b, t * 2.0 - 1.0);
+  return clamp01(remap(v, 1.0 - coverage, 1.0, 0.0, 1.0));
 }

@@ -8,10 +8,13 @@ float nubis_henyey_greenstein(float cos_angle, float g)
   return (1.0 - g2) / (4.0 * NUBIS_PI * denom * sqrt(denom));
 }
 
-/* SPEC 2.3: GDC22 combines lobes of different eccentricity for an art-directed silver lining. */
-float nubis_phase(float cos_angle)
+/* SPEC 2.3: GDC22 combines lobes of different eccentricity for an art-directed silver lining.
+ * `eccentricity_scale` < 1 flattens both lobes for the multiple-scattering octaves. */
+float nubis_phase(float cos_angle, float eccentricity_scale)
 {
-  return mix(nubis_henyey_greenstein(cos_angle, P.phase.x), nubis_henyey_greenstein(cos_angle, P.phase.y), P.phase.z);
+  return mix(nubis_henyey_greenstein(cos_angle, P.phase.x * eccentricity_scale),
+             nubis_henyey_greenstein(cos_angle, P.phase.y * eccentricity_scale),
+             P.phase.z);
 }
 
 /* GPU Pro 7: six offsets in [-1, 1]^3 that widen the light march into a cone (SPEC 2.8). */
@@ -59,11 +62,27 @@ float nubis_light_optical_depth(vec3 p, float view_alpha)
 /* Light scattered towards the eye per unit of scattering at a point inside the cloud. */
 vec3 nubis_in_scattering(vec3 p, vec3 view_dir, NubisDensity d, float view_alpha)
 {
-  float tau = nubis_light_optical_depth(p, view_alpha);
-  /* SPEC 2.5, GPU Pro 7: raining clouds absorb more light. */
-  float rain = mix(1.0, P.phase.w, clamp01(d.precipitation));
-  float transmittance = exp(-tau * rain);
-  vec3 direct = P.sun_rad.rgb * transmittance * nubis_phase(dot(view_dir, P.sun_dir.xyz));
+  /* SPEC 2.5, GPU Pro 7: raining clouds absorb more light: thicken what the light passes through. */
+  float tau = nubis_light_optical_depth(p, view_alpha) * mix(1.0, P.phase.w, clamp01(d.precipitation));
+  float cos_angle = dot(view_dir, P.sun_dir.xyz);
+  /* SPEC 2.9: NOT from the Guerrilla sources. Wrenninge's octaves (Oz, 2013) stand in for the light
+   * that scatters more than once: each octave sees a thinner cloud and a flatter phase. Octave 1 alone
+   * is plain single scattering (Beer-Lambert x phase). */
+  float direct_energy = 0.0;
+  float a = 1.0, b = 1.0, c = 1.0;
+  int octaves = int(P.scatter.x);
+  for (int i = 0; i < octaves; i++) {
+    direct_energy += b * exp(-a * tau) * nubis_phase(cos_angle, c);
+    a *= P.scatter.y;
+    b *= P.scatter.z;
+    c *= P.scatter.w;
+  }
+  /* SPEC 2.4 (GPU Pro 7 "Beer's powder", S15 view dependence): the in-scatter probability darkens
+   * the edges facing the sun, visible only with the sun behind the viewer; GPU Pro 7's factor 2
+   * restores the energy where it applies. */
+  float powder_weight = P.scatter2.x * clamp01(0.5 - 0.5 * cos_angle);
+  direct_energy *= mix(1.0, 2.0 * (1.0 - exp(-2.0 * tau)), powder_weight);
+  vec3 direct = P.sun_rad.rgb * direct_energy;
   /* SPEC 2.7: GDC22's ambient probability from the coarse density, growing with height (S15). */
   float ambient_probability = sqrt(1.0 - clamp01(d.coarse)) * mix(P.ambient.w, 1.0, d.h);
   return direct + P.ambient.rgb * ambient_probability;

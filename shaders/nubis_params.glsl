@@ -15,5 +15,9 @@ struct NubisParams {
   vec4 ambient;    /* ambient sky colour * strength, ambient at the base relative to the top */
   vec4 phase;      /* g0, g1, weight of lobe 1, rain absorption multiplier */
   vec4 march;      /* view steps looking up, view steps to the horizon, light step length, light mode */
+  vec4 scatter;    /* multiple-scattering octaves, attenuation a, contribution b, eccentricity scale c */
+  vec4 scatter2;   /* powder strength, fade distance (0 = off), -, - */
+  vec4 cirrus;     /* altitude, coverage multiplier, 1 / texture period, optical depth at density 1 */
+  vec4 cirrus2;    /* scroll offset x, y (metres), bake slab thickness, - */
   vec4 options;    /* jitter (0/1), -, -, - */
 };

@@ -1,5 +1,33 @@
 /* The view-ray march: premultiplied scene-linear radiance and alpha (SPEC 2.12, 3.1, 3.3). */
 
+/* SPEC 3.7: the cirrus layer, sampled once where the ray crosses its sphere, lit by a thin-layer
+ * single-scattering term (sun x phase, plus sky). Returns premultiplied radiance and alpha. */
+vec4 nubis_cirrus(vec3 origin, vec3 dir)
+{
+  float altitude = nubis_altitude(origin, P.layer.x);
+  vec2 hit = nubis_ray_sphere(origin, dir, P.layer.x, P.cirrus.x);
+  if (hit.x > hit.y) {
+    return vec4(0.0);
+  }
+  float t = altitude < P.cirrus.x ? hit.y : hit.x;
+  vec2 ground = nubis_ray_sphere(origin, dir, P.layer.x, 0.0);
+  bool hits_ground = ground.x <= ground.y && ground.y > 0.0 && ground.x < t;
+  if (t <= 0.0 || (hits_ground && altitude >= 0.0)) {
+    return vec4(0.0);
+  }
+  vec3 p = origin + dir * t;
+  float density = nubis_cirrus_density(p.xy);
+  if (density <= 0.0) {
+    return vec4(0.0);
+  }
+  /* Slant path through a thin layer: optical depth grows with 1 / cos of the zenith angle. */
+  vec3 up = normalize(p + vec3(0.0, 0.0, P.layer.x));
+  float slant = 1.0 / max(abs(dot(dir, up)), 0.05);
+  float alpha = 1.0 - exp(-density * P.cirrus.w * slant);
+  vec3 light = P.sun_rad.rgb * nubis_phase(dot(dir, P.sun_dir.xyz), 1.0) + P.ambient.rgb;
+  return vec4(light * alpha, alpha);
+}
+
 vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel)
 {
   float R = P.layer.x;
@@ -55,6 +83,7 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel)
 
   vec3 radiance = vec3(0.0);
   float transmittance = 1.0;
+  float depth_sum = 0.0;
   for (int i = 0; i < steps; i++) {
     float t = t0 + (float(i) + jitter) * dt;
     vec3 p = origin + dir * t;
@@ -67,6 +96,7 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel)
       /* Energy-conserving step (Hillaire 2016): the exact integral of constant in-scattering over
        * the step, for albedo 1, instead of a Riemann sum that brightens with larger steps. */
       radiance += transmittance * s * (1.0 - step_t);
+      depth_sum += t * transmittance * (1.0 - step_t);
       transmittance *= step_t;
       /* SPEC 3.5: stop once the ray is practically opaque. */
       if (transmittance < 0.005) {
@@ -74,7 +104,13 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel)
       }
     }
   }
-  return vec4(radiance, 1.0 - transmittance);
+  float alpha = 1.0 - transmittance;
+  /* SPEC 2.11 (S15): clouds fade into the atmosphere with the depth of what the ray saw. */
+  if (P.scatter2.y > 0.0 && alpha > 0.0) {
+    float fade = exp(-(depth_sum / alpha) / P.scatter2.y);
+    radiance = mix(P.ambient.rgb * alpha, radiance, fade);
+  }
+  return vec4(radiance, alpha);
 }
 
 void main()
@@ -84,5 +120,8 @@ void main()
   vec4 far_h = inv_view_proj * vec4(ndc, 1.0, 1.0);
   vec3 origin = near_h.xyz / near_h.w;
   vec3 dir = normalize(far_h.xyz / far_h.w - origin);
-  color = nubis_march(origin, dir, gl_FragCoord.xy);
+  vec4 clouds = nubis_march(origin, dir, gl_FragCoord.xy);
+  /* SPEC 1.8, GPU Pro 7: the high layer is sampled at the end of the march, behind the volume. */
+  vec4 cirrus = nubis_cirrus(origin, dir);
+  color = clouds + (1.0 - clouds.a) * cirrus;
 }

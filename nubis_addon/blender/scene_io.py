@@ -66,6 +66,11 @@ def read_field_image(img, which: str, resolution: int) -> np.ndarray:
     return arr
 
 
+def read_fields(settings) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    res = settings.field_resolution
+    return tuple(read_field_image(getattr(settings, attr), which, res) for which, (attr, _n) in FIELD_IMAGES.items())
+
+
 def image_arrays(settings) -> dict[str, np.ndarray]:
     """Pixels of every image referenced by an image layer, for the compositor."""
     out = {}
@@ -206,7 +211,6 @@ def state_from_scene(scene, camera_location=None, fields: tuple | None = None) -
     """The frame's CloudState; `fields` passes already-read (field_a, field_b) arrays to skip reading pixels."""
     settings = scene.nubis
     params = params_from_scene(settings)
-    res = params["field_resolution"]
     sun = find_sun(scene)
     if sun is not None:
         direction = tuple(evaluated_matrix(sun).to_3x3() @ Vector((0.0, 0.0, 1.0)))
@@ -218,11 +222,12 @@ def state_from_scene(scene, camera_location=None, fields: tuple | None = None) -
     fps = scene.render.fps / scene.render.fps_base
     time = (scene.frame_current + scene.frame_subframe) / fps * params["wind_time_scale"] + params["wind_time_offset"]
     if fields is None:
-        fields = (read_field_image(settings.field_a, "a", res), read_field_image(settings.field_b, "b", res))
+        fields = read_fields(settings)
     return CloudState(
         params=params,
         field_a=fields[0],
         field_b=fields[1],
+        field_c=fields[2],
         sun_direction=direction,
         sun_radiance=radiance,
         ambient=world_ambient(scene),

@@ -44,19 +44,12 @@ def _composite_shader():
 def _state(scene, view_origin):
     """Settings, sun and sky are read every redraw (cheap); the field pixels only when they changed."""
     s = scene.nubis
-    key = (
-        scene.as_pointer(),
-        s.field_a.as_pointer(),
-        s.field_b.as_pointer(),
-        s.field_resolution,
-        scene_io.field_generation(),
+    images = (s.field_a, s.field_b, s.field_cirrus)
+    key = (scene.as_pointer(), s.field_resolution, scene_io.field_generation()) + tuple(
+        img.as_pointer() if img else 0 for img in images
     )
     if _fields_cache["key"] != key:
-        res = s.field_resolution
-        _fields_cache["fields"] = (
-            scene_io.read_field_image(s.field_a, "a", res),
-            scene_io.read_field_image(s.field_b, "b", res),
-        )
+        _fields_cache["fields"] = scene_io.read_fields(s)
         _fields_cache["key"] = key
     return scene_io.state_from_scene(scene, camera_location=view_origin, fields=_fields_cache["fields"])
 

@@ -45,6 +45,11 @@ def plan_bake(state: CloudState, voxel_size: float, memory_limit: int = DEFAULT_
     if x1 <= x0 or y1 <= y0:
         raise NubisError("the data field lies outside the draw radius around the camera: move the camera or the field")
     lo, hi = state.shell()
+    if state.has_cirrus():
+        # The 2D cirrus layer bakes as a slab at least two voxels thick, so voxel centres cannot miss it.
+        slab = max(p["cirrus_thickness"], 2.0 * voxel_size)
+        state.cirrus_slab = slab
+        hi = max(hi, p["cirrus_altitude"] + slab / 2)
     planet = p["layer_planet_radius"]
     far = max(math.hypot(x, y) for x in (x0, x1) for y in (y0, y1))
     sag = planet + lo - math.sqrt(max((planet + lo) ** 2 - far**2, 0.0))

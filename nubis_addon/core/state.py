@@ -17,6 +17,7 @@ class CloudState:
     params: dict[str, Any] = field(default_factory=defaults)
     field_a: np.ndarray | None = None  # (H, W, 4) float32, bottom row first like Blender images
     field_b: np.ndarray | None = None
+    field_c: np.ndarray | None = None  # cirrus coverage and type
     sun_direction: tuple[float, float, float] = (0.0, 0.0, 1.0)  # unit vector towards the sun
     sun_radiance: tuple[float, float, float] = (4.0, 4.0, 4.0)  # colour x strength
     ambient: tuple[float, float, float] = (0.35, 0.5, 0.8)  # world colour x strength
@@ -24,6 +25,10 @@ class CloudState:
     time: float = 0.0  # seconds of simulated wind
     light_mode: int = 0  # 0 real-time cone march, 1 reference march
     jitter: bool = True
+    cirrus_slab: float | None = None  # the bake's cirrus slab thickness, when wider than the setting
+
+    def has_cirrus(self) -> bool:
+        return self.field_c is not None and self.params["cirrus_coverage"] > 0 and float(self.field_c[..., 0].max()) > 0
 
     def shell(self) -> tuple[float, float]:
         """Lowest and highest altitude a cloud can occupy, from the min/max height channels (SPEC 1.9.4)."""

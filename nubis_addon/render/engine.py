@@ -16,6 +16,7 @@ from .textures import NoiseTextures, field_texture
 CLOUD_SAMPLERS = (
     ("FLOAT_2D", "field_a"),
     ("FLOAT_2D", "field_b"),
+    ("FLOAT_2D", "field_c"),
     ("FLOAT_3D", "noise_lf"),
     ("FLOAT_3D", "noise_lf_mip1"),
     ("FLOAT_3D", "noise_hf"),
@@ -68,14 +69,14 @@ class CloudGPU:
     def __init__(self, noise_set: noise.NoiseSet):
         self.noise = NoiseTextures(noise_set)
         self._field_keys: tuple = ()
-        self.field_a = self.field_b = None
+        self.field_a = self.field_b = self.field_c = None
         self.ubo = None
 
     def update(self, state: CloudState) -> None:
-        key = (id(state.field_a), id(state.field_b), _version(state.field_a), _version(state.field_b))
+        arrays = (state.field_a, state.field_b, state.field_c)
+        key = tuple(id(a) for a in arrays) + tuple(_version(a) for a in arrays)
         if key != self._field_keys:
-            self.field_a = field_texture(state.field_a)
-            self.field_b = field_texture(state.field_b)
+            self.field_a, self.field_b, self.field_c = (field_texture(a) for a in arrays)
             self._field_keys = key
         self.ubo = gpu.types.GPUUniformBuf(uniforms.pack(state).tobytes())
 
@@ -85,6 +86,7 @@ class CloudGPU:
         textures = {
             "field_a": self.field_a,
             "field_b": self.field_b,
+            "field_c": self.field_c,
             "noise_lf": self.noise.lf,
             "noise_lf_mip1": self.noise.lf_mip1,
             "noise_hf": self.noise.hf,

@@ -32,6 +32,7 @@ def param_vectors(state: CloudState) -> dict[str, tuple[float, float, float, flo
     p = state.params
     shell_lo, shell_hi = state.shell()
     wx, wy = wind_vector(p["wind_direction"])
+    cwind = wind_vector(p["cirrus_wind_direction"])
     field_size = p["field_size"]
     return {
         "layer": (p["layer_planet_radius"], p["layer_bottom"], p["layer_top"], p["layer_draw_radius"]),
@@ -61,6 +62,19 @@ def param_vectors(state: CloudState) -> dict[str, tuple[float, float, float, flo
             float(p["march_steps_max"]),
             p["march_light_step"],
             float(state.light_mode),
+        ),
+        "scatter": (
+            float(p["lighting_ms_octaves"]),
+            p["lighting_ms_attenuation"],
+            p["lighting_ms_contribution"],
+            p["lighting_ms_eccentricity"],
+        ),
+        "scatter2": (p["lighting_powder"], p["lighting_fade_distance"], 0.0, 0.0),
+        "cirrus": (p["cirrus_altitude"], p["cirrus_coverage"], 1.0 / p["cirrus_period"], p["cirrus_opacity"]),
+        "cirrus2": (
+            *(c * p["cirrus_wind_speed"] * state.time for c in cwind),
+            state.cirrus_slab or p["cirrus_thickness"],
+            0.0,
         ),
         "options": (1.0 if state.jitter else 0.0, 0.0, 0.0, 0.0),
     }
