@@ -27,13 +27,15 @@ _shaders: dict[str, gpu.types.GPUShader] = {}
 _batches: dict[str, gpu.types.GPUBatch] = {}
 
 
-def _create_info(stage: str, push_constants: tuple[tuple[str, str], ...]) -> GPUShaderCreateInfo:
+def _create_info(
+    stage: str, push_constants: tuple[tuple[str, str], ...], extra_samplers: tuple[tuple[str, str], ...] = ()
+) -> GPUShaderCreateInfo:
     iface = GPUStageInterfaceInfo(f"nubis_{stage}_iface")
     iface.smooth("VEC2", "uv")
     info = GPUShaderCreateInfo()
     info.typedef_source(read_shader("nubis_params.glsl"))
     info.uniform_buf(0, "NubisParams", "P")
-    for slot, (kind, name) in enumerate(CLOUD_SAMPLERS):
+    for slot, (kind, name) in enumerate(CLOUD_SAMPLERS + extra_samplers):
         info.sampler(slot, kind, name)
     for kind, name in push_constants:
         info.push_constant(kind, name)
@@ -45,15 +47,18 @@ def _create_info(stage: str, push_constants: tuple[tuple[str, str], ...]) -> GPU
     return info
 
 
-STAGES = {
-    "raymarch": (("MAT4", "inv_view_proj"),),
-    "bake": (("VEC4", "bake_origin"), ("VEC4", "bake_voxel")),
+# Each stage: its push constants and any samplers beyond the cloud inputs. Fragment source is
+# shaders/nubis_<stage>_frag.glsl, compiled after the cloud libraries.
+STAGES: dict[str, tuple[tuple[tuple[str, str], ...], tuple[tuple[str, str], ...]]] = {
+    "raymarch": ((("MAT4", "inv_view_proj"),), ()),
+    "bake": ((("VEC4", "bake_origin"), ("VEC4", "bake_voxel")), ()),
 }
 
 
 def shader(stage: str) -> gpu.types.GPUShader:
     if stage not in _shaders:
-        _shaders[stage] = gpu.shader.create_from_info(_create_info(stage, STAGES[stage]))
+        push_constants, extra_samplers = STAGES[stage]
+        _shaders[stage] = gpu.shader.create_from_info(_create_info(stage, push_constants, extra_samplers))
     return _shaders[stage]
 
 
