@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import bpy
-from bpy.props import EnumProperty, FloatProperty, IntProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
 from ..core import presets
 from ..core.errors import NubisError
@@ -154,6 +154,25 @@ class NUBIS_OT_layer_duplicate(NeedsCloudscape, NubisOperator, bpy.types.Operato
         return None
 
 
+class NUBIS_OT_apply_weather_rules(NeedsCloudscape, NubisOperator, bpy.types.Operator):
+    """Apply the rain rule (raining clouds become cumulonimbus, at least 70% coverage) and the horizon
+    rule (cumulus at about 50% coverage from 15 km out) to the data field"""
+
+    bl_idname = "nubis.apply_weather_rules"
+    bl_label = "Apply Weather Rules"
+    bl_options = {"REGISTER", "UNDO"}
+
+    rain: BoolProperty(name="Rain Rule", default=True)
+    horizon: BoolProperty(name="Horizon Rule", default=True)
+
+    def run(self, context):
+        s = context.scene.nubis
+        s.rule_rain, s.rule_horizon = self.rain, self.horizon
+        scene_io.generate_fields(context.scene)
+        rules = [name for name, on in (("rain", self.rain), ("horizon", self.horizon)) if on]
+        return f"Weather rules applied: {', '.join(rules) or 'none'}"
+
+
 class NUBIS_OT_render_image(NeedsCloudscape, NubisOperator, bpy.types.Operator):
     """Render the clouds from the scene camera into the image 'Nubis Render'"""
 
@@ -232,6 +251,7 @@ CLASSES = (
     NUBIS_OT_layer_remove,
     NUBIS_OT_layer_move,
     NUBIS_OT_layer_duplicate,
+    NUBIS_OT_apply_weather_rules,
     NUBIS_OT_render_image,
     NUBIS_OT_bake_vdb,
     NUBIS_OT_bake_frames,

@@ -78,6 +78,9 @@ class NUBIS_PT_field(NubisPanel, bpy.types.Panel):
             elif layer.kind == "IMAGE":
                 box.template_ID(layer, "image", open="image.open")
             box.prop(layer, "remap")
+        row = layout.row(align=True)
+        row.prop(s, "rule_rain", toggle=True)
+        row.prop(s, "rule_horizon", toggle=True)
         layout.operator("nubis.generate_field", icon="FILE_REFRESH")
 
 

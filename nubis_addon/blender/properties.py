@@ -105,6 +105,30 @@ def _settings_annotations() -> dict:
             type=bpy.types.Image, name="Cirrus Field", update=_tag_redraw, description="Cirrus coverage and type"
         ),
         layers=CollectionProperty(type=NubisFieldLayer),
+        rule_rain=BoolProperty(
+            name="Rain Rule",
+            default=False,
+            description="Where it rains, turn clouds to cumulonimbus covering at least 70% (GPU Pro 7)",
+        ),
+        rule_horizon=BoolProperty(
+            name="Horizon Rule",
+            default=False,
+            description="Blend towards cumulus at ~50% coverage far from the camera (S15)",
+        ),
+        rule_cumulonimbus_top=FloatProperty(
+            name="Cumulonimbus Top",
+            default=2.6,
+            min=0.0,
+            max=8.0,
+            description="Max height, in layer thicknesses, of fully raining clouds",
+        ),
+        rule_horizon_start=FloatProperty(
+            name="Horizon Start",
+            default=15000.0,
+            min=0.0,
+            unit="LENGTH",
+            description="Distance from the camera where the horizon rule begins (S15: 15 km)",
+        ),
         active_layer=IntProperty(name="Active Layer", default=0),
         viewport_scale=IntProperty(
             name="Viewport Downscale",

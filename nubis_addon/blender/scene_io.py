@@ -86,13 +86,29 @@ def image_arrays(settings) -> dict[str, np.ndarray]:
 
 
 def generate_fields(scene) -> None:
-    """Composite the layer stack into the field images (the Data Field Generator, GDC22)."""
+    """Composite the layer stack into the field images (the Data Field Generator, GDC22), then apply
+    the weather rules the scene has switched on."""
     settings = scene.nubis
     params = params_from_scene(settings)
     layers = [layer_to_dict(layer) for layer in settings.layers]
     result = fieldgen.composite(layers, params, image_arrays(settings))
+    if settings.rule_rain:
+        fieldgen.apply_rain_rule(result, settings.rule_cumulonimbus_top)
+    if settings.rule_horizon:
+        fieldgen.apply_horizon_rule(result, params, _camera_xy(scene), settings.rule_horizon_start)
     for which, data in result.items():
         write_field_image(settings, which, data)
+
+
+def _camera_xy(scene) -> tuple[float, float]:
+    if scene.camera is None:
+        return (0.0, 0.0)
+    t = evaluated_matrix(scene.camera).translation
+    return (float(t.x), float(t.y))
+
+
+def layer_images(settings) -> set[str]:
+    return {layer.image.name for layer in settings.layers if layer.kind == "IMAGE" and layer.image is not None}
 
 
 # ---- presets ---------------------------------------------------------------------------------------
@@ -104,16 +120,19 @@ def apply_preset(scene, preset: Preset) -> None:
     for key, value in preset.params.items():
         setattr(settings, key, value)
     settings.preset = preset.path.stem if preset.path else preset.name
+    rules = preset.extra["rules"]
+    settings.rule_rain, settings.rule_horizon = rules["rain"], rules["horizon"]
+    settings.rule_cumulonimbus_top, settings.rule_horizon_start = rules["cumulonimbus_top"], rules["horizon_start"]
     settings.layers.clear()
     for data in preset.layers:
         data = dict(data)
         if data["kind"] == "image":
             data["image"] = _load_layer_image(data["image"], preset.path)
         layer_from_dict(settings.layers.add(), data)
-    generate_fields(scene)
     _setup_sun(scene, preset.extra["sun"])
     _setup_world(scene, preset.extra["world"])
     _setup_camera(scene, preset.extra["camera"])
+    generate_fields(scene)  # after the camera: the horizon rule is centred on it
     r = preset.extra["render"]
     scene.render.resolution_x, scene.render.resolution_y = r["width"], r["height"]
     scene.render.resolution_percentage = 100

@@ -19,9 +19,42 @@ _composite: dict = {}
 _last_error: list[str] = []
 
 
+@bpy.app.handlers.persistent
 def mark_dirty(*_args) -> None:
-    """Forget the cached field pixels (on depsgraph updates, file loads and setting edits)."""
+    """Forget the cached field pixels (on file loads and setting edits)."""
     _fields_cache["key"] = None
+
+
+_pending_images: set[str] = set()
+
+
+@bpy.app.handlers.persistent
+def on_depsgraph_update(scene, depsgraph) -> None:
+    """Painting an image layer in the image editor re-composites the field. Strokes arrive as image
+    updates; a short timer gathers them so a fast brush does not re-composite on every dab."""
+    settings = getattr(scene, "nubis", None)
+    if settings is None or settings.field_a is None:
+        return
+    used = scene_io.layer_images(settings)
+    edited = {u.id.name for u in depsgraph.updates if isinstance(u.id, bpy.types.Image) and u.id.name in used}
+    if edited and not _pending_images:
+        bpy.app.timers.register(_regenerate_after_paint, first_interval=0.25)
+    _pending_images.update(edited)
+
+
+def _regenerate_after_paint():
+    _pending_images.clear()
+    scene = bpy.context.scene
+    if getattr(scene, "nubis", None) is not None and scene.nubis.field_a is not None:
+        try:
+            scene_io.generate_fields(scene)
+        except NubisError as err:
+            _last_error[:] = [str(err)]
+        for window in bpy.context.window_manager.windows:
+            for area in window.screen.areas:
+                if area.type == "VIEW_3D":
+                    area.tag_redraw()
+    return None
 
 
 def _composite_shader():
@@ -121,9 +154,10 @@ def register() -> None:
     global _handle
     if _handle is None:
         _handle = bpy.types.SpaceView3D.draw_handler_add(_draw_callback, (), "WINDOW", "POST_VIEW")
-    for handlers in (bpy.app.handlers.depsgraph_update_post, bpy.app.handlers.load_post):
-        if mark_dirty not in handlers:
-            handlers.append(mark_dirty)
+    if mark_dirty not in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.append(mark_dirty)
+    if on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
 
 
 def unregister() -> None:
@@ -131,9 +165,10 @@ def unregister() -> None:
     if _handle is not None:
         bpy.types.SpaceView3D.draw_handler_remove(_handle, "WINDOW")
         _handle = None
-    for handlers in (bpy.app.handlers.depsgraph_update_post, bpy.app.handlers.load_post):
-        if mark_dirty in handlers:
-            handlers.remove(mark_dirty)
+    if mark_dirty in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.remove(mark_dirty)
+    if on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
     if _offscreen["buffer"] is not None:
         _offscreen["buffer"].free()
     _offscreen.update(size=None, buffer=None)

@@ -109,7 +109,38 @@ def fbm(kind: str, x: np.ndarray, y: np.ndarray, octaves: int, seed: int) -> np.
     return total / norm
 
 
+_CACHE: dict[tuple, np.ndarray] = {}
+_CACHE_SIZE = 16
+
+
+def _cache_key(layer: Mapping[str, Any], xs: np.ndarray, ys: np.ndarray) -> tuple:
+    shape_keys = ("kind", "scale", "seed", "octaves", "value", "gradient", "angle", "radius")
+    return (
+        tuple(layer[k] for k in shape_keys),
+        tuple(layer["center"]),
+        xs.shape,
+        float(xs[0, 0]),
+        float(xs[0, -1]),
+        float(ys[0, 0]),
+        float(ys[-1, 0]),
+    )
+
+
 def layer_values(layer: Mapping[str, Any], xs: np.ndarray, ys: np.ndarray, images: Mapping[str, np.ndarray]):
+    """A layer's raw values over the field. Procedural layers are cached, so that re-compositing after a
+    brush stroke on an image layer only recomputes that image."""
+    if layer["kind"] == "image":
+        return _image_values(layer, xs.shape, images)
+    key = _cache_key(layer, xs, ys)
+    if key not in _CACHE:
+        if len(_CACHE) >= _CACHE_SIZE:
+            _CACHE.pop(next(iter(_CACHE)))
+        _CACHE[key] = _procedural_values(layer, xs, ys)
+        _CACHE[key].setflags(write=False)
+    return _CACHE[key]
+
+
+def _procedural_values(layer: Mapping[str, Any], xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
     kind = layer["kind"]
     if kind in ("perlin", "worley", "perlin_worley"):
         u, v = xs / layer["scale"], ys / layer["scale"]
@@ -131,8 +162,6 @@ def layer_values(layer: Mapping[str, Any], xs: np.ndarray, ys: np.ndarray, image
         a = np.radians(layer["angle"])
         along = (xs - cx) * np.cos(a) + (ys - cy) * np.sin(a)
         return np.clip(0.5 + along / (2.0 * layer["radius"]), 0.0, 1.0)
-    if kind == "image":
-        return _image_values(layer, xs.shape, images)
     raise NubisError(f"field layer '{layer['name']}' has an unknown kind '{kind}'")
 
 

@@ -64,6 +64,13 @@ EXTRA_SCHEMA: dict[str, dict[str, tuple]] = {
         "angle": (float, 0.53, 0.0, 180.0),
     },
     "world": {"color": (list, [0.35, 0.5, 0.8]), "strength": (float, 1.0, 0.0, 1e5)},
+    # SPEC 1.3.1: the weather rules, applied after the layer stack (S15, GPU Pro 7).
+    "rules": {
+        "rain": (bool, False),
+        "horizon": (bool, False),
+        "cumulonimbus_top": (float, 2.6, 0.0, 8.0),
+        "horizon_start": (float, 15000.0, 0.0, 1e6),
+    },
     "camera": {
         "location": (list, [0.0, 0.0, 2.0]),
         "rotation": (list, [80.0, 0.0, 0.0]),
