@@ -54,6 +54,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bake", help="bake the cloud density to an OpenVDB file")
     common(p)
     p.add_argument("--voxel-size", type=float, help="voxel edge in metres (default: the scene's bake setting)")
+    p.add_argument("--camera-only", action="store_true", help="bake only what the scene camera sees")
     for name, what in (
         ("cycles", "render the baked clouds with Cycles"),
         ("compare", "render viewport and Cycles side by side, with metrics"),
@@ -63,6 +64,15 @@ def build_parser() -> argparse.ArgumentParser:
         size(p)
         p.add_argument("--samples", type=int, help="Cycles samples per pixel (default: the preset's)")
         p.add_argument("--voxel-size", type=float, help="voxel edge of the bake in metres")
+        p.add_argument("--bounces", type=int, help="Cycles volume bounces (default: the scene's)")
+        if name == "compare":
+            p.add_argument(
+                "--mode",
+                choices=("single", "full"),
+                default="full",
+                help="single: single scattering on both sides; full: every term (default)",
+            )
+            p.add_argument("--noise-estimate", action="store_true", help="render Cycles twice to measure its own noise")
     return parser
 
 
@@ -172,9 +182,9 @@ def _execute(args, in_blender: bool, log: Path) -> str:
         out = check_output_path(args.out, (".vdb",))
     else:
         out = check_output_path(args.out, IMAGE_SUFFIXES)
-    for name in ("width", "height", "samples"):
+    for name in ("width", "height", "samples", "bounces"):
         value = getattr(args, name, None)
-        if value is not None and value < 1:
+        if value is not None and value < (0 if name == "bounces" else 1):
             raise NubisError(f"--{name} must be a positive whole number, not {value}")
     voxel = getattr(args, "voxel_size", None)
     if voxel is not None and not voxel > 0:
@@ -200,7 +210,7 @@ def _execute(args, in_blender: bool, log: Path) -> str:
     if cmd == "bake":
         progress = _progress("baking")
         with _quiet(log):
-            result = pipeline.bake(scene, out, voxel, progress)
+            result = pipeline.bake(scene, out, voxel, progress, camera_only=args.camera_only)
         nx, ny, nz = result.plan.dims
         return (
             f"baked {label}: {nx}x{ny}x{nz} voxels of {result.plan.voxel_size:g} m, "
@@ -209,13 +219,15 @@ def _execute(args, in_blender: bool, log: Path) -> str:
     w, h = pipeline.resolution(scene, args.width, args.height)
     if cmd == "cycles":
         with _quiet(log):
-            rgba = pipeline.render_cycles(scene, w, h, args.samples, voxel_size=voxel)
+            rgba = pipeline.render_cycles(scene, w, h, args.samples, voxel_size=voxel, bounces=args.bounces)
             pipeline.save_render(scene, out, rgba)
         return f"rendered {label} with Cycles at {w}x{h} in {time.perf_counter() - start:.1f} s -> {out}"
     with _quiet(log):
-        m = pipeline.compare(scene, out, w, h, args.samples, voxel_size=voxel)
+        if args.bounces is not None:
+            scene.cycles.volume_bounces = args.bounces
+        m = pipeline.compare(scene, out, w, h, args.samples, args.mode, voxel, args.noise_estimate)
     return (
-        f"compared {label} at {w}x{h}: alpha RMSE {m['alpha_rmse']:.4f}, luminance error "
+        f"compared {label} ({args.mode}) at {w}x{h}: alpha RMSE {m['alpha_rmse']:.4f}, luminance error "
         f"{m['luminance_rel_error'] * 100:.1f}%, silhouette IoU {m['silhouette_iou']:.3f} "
         f"in {time.perf_counter() - start:.1f} s -> {out}"
     )

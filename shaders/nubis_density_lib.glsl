@@ -27,6 +27,9 @@ NubisFieldSample nubis_sample_field(vec2 xy)
   float dist = length(xy - P.draw.xy);
   float in_radius = clamp01((P.layer.w - dist) / max(P.draw.z, 1.0));
   f.inside = in_field * in_radius;
+  if (P.clip_box.z >= P.clip_box.x && (any(lessThan(xy, P.clip_box.xy)) || any(greaterThan(xy, P.clip_box.zw)))) {
+    f.inside = 0.0;
+  }
   return f;
 }
 
@@ -121,7 +124,8 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
   p_hf.xy += curl * (1.0 - h) * P.noise.w;
   vec3 hf_uvw = nubis_tile_uvw(p_hf / P.noise.y, vec3(textureSize(noise_hf, 0)));
   float hf_fbm = dot(textureLod(noise_hf, hf_uvw, 0.0).rgb, NUBIS_FBM_WEIGHTS);
-  /* GPU Pro 7: wispy (Worley) at the base, billowy (inverted) above the lowest 10 %. SPEC 7.1: a
+  /* GPU Pro 7: the stored (inverted) Worley fBm erodes the base into wisps, and flipped back it carves
+   * billows above the lowest 10 %. SPEC 7.1: a
    * rising bottom type keeps the wisps higher up the cloud, for ragged undersides (GDC22). */
   float billow = clamp01(h * mix(10.0, 2.0, clamp01(f.a.a)));
   float hf_modifier = mix(hf_fbm, 1.0 - hf_fbm, billow);

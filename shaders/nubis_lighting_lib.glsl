@@ -25,6 +25,46 @@ const vec3 NUBIS_CONE_KERNEL[6] = vec3[6](vec3(0.38051305, 0.92453449, -0.021113
                                           vec3(0.28128598, 0.42443639, -0.86065785),
                                           vec3(-0.16852403, 0.14748697, 0.97460106));
 
+/* Reference optical depth (without sigma): the full-detail density along `dir` until the ray leaves
+ * the cloud shell (or the draw radius ends the clouds). */
+float nubis_reference_depth(vec3 p, vec3 dir, int samples)
+{
+  float altitude = nubis_altitude(p, P.layer.x);
+  vec2 top = nubis_ray_sphere(p, dir, P.layer.x, P.shell.y);
+  vec2 bottom = nubis_ray_sphere(p, dir, P.layer.x, P.shell.x);
+  float len = max(top.y, 0.0);
+  if (altitude > P.shell.x && bottom.x <= bottom.y && bottom.x > 0.0) {
+    len = min(len, bottom.x); /* heading down out of the layer's floor */
+  }
+  len = min(len, 2.0 * P.layer.w);
+  /* Samples crowd near the point (t = len u^2): the nearby cloud decides most of the shadowing,
+   * while a horizontal ray may cross tens of kilometres of layer. */
+  float depth = 0.0;
+  float n = float(samples);
+  for (int i = 0; i < samples; i++) {
+    float u = (float(i) + 0.5) / n;
+    depth += nubis_density(p + dir * (len * u * u), false, 0.0).fine * (2.0 * len * u / n);
+  }
+  return depth;
+}
+
+/* Reference sky light: the world is a uniform sphere of radiance (as in the Cycles scene), so single
+ * scattering of it is the radiance times the transmittance averaged over all directions (the phase
+ * is near-isotropic at g = 0.2). Sixteen Fibonacci-sphere directions stand in for the sphere. */
+float nubis_reference_sky_visibility(vec3 p)
+{
+  const int count = 16;
+  float visibility = 0.0;
+  for (int i = 0; i < count; i++) {
+    float z = 1.0 - (2.0 * float(i) + 1.0) / float(count);
+    float r = sqrt(1.0 - z * z);
+    float phi = float(i) * 2.39996323; /* the golden angle */
+    vec3 dir = vec3(r * cos(phi), r * sin(phi), z);
+    visibility += exp(-nubis_reference_depth(p, dir, 24) * P.density.x);
+  }
+  return visibility / float(count);
+}
+
 /* Optical depth towards the sun. Mode 0: the real-time march of GPU Pro 7 / S15, five samples in a
  * widening cone plus one long-distance sample at three times the cone length, at the half-resolution
  * noise, switching to cheap samples once the view ray is 30 % opaque. Mode 1: a reference march of
@@ -48,13 +88,7 @@ float nubis_light_optical_depth(vec3 p, float view_alpha)
     tau += nubis_density(far_point, true, 1.0).coarse * step_len * 10.0;
   }
   else {
-    /* Reference: 64 midpoint samples up to where the ray leaves the cloud layer. */
-    vec2 hit = nubis_ray_sphere(p, sun, P.layer.x, P.shell.y);
-    float len = max(hit.y, 0.0);
-    float dt = len / 64.0;
-    for (int i = 0; i < 64; i++) {
-      tau += nubis_density(p + sun * (dt * (float(i) + 0.5)), false, 0.0).fine * dt;
-    }
+    tau = nubis_reference_depth(p, sun, 64);
   }
   return tau * P.density.x;
 }
@@ -83,7 +117,9 @@ vec3 nubis_in_scattering(vec3 p, vec3 view_dir, NubisDensity d, float view_alpha
   float powder_weight = P.scatter2.x * clamp01(0.5 - 0.5 * cos_angle);
   direct_energy *= mix(1.0, 2.0 * (1.0 - exp(-2.0 * tau)), powder_weight);
   vec3 direct = P.sun_rad.rgb * direct_energy;
-  /* SPEC 2.7: GDC22's ambient probability from the coarse density, growing with height (S15). */
-  float ambient_probability = sqrt(1.0 - clamp01(d.coarse)) * mix(P.ambient.w, 1.0, d.h);
+  /* SPEC 2.7: GDC22's ambient probability from the coarse density, growing with height (S15); the
+   * reference mode measures the sky's visibility instead. */
+  float ambient_probability = P.march.w < 0.5 ? sqrt(1.0 - clamp01(d.coarse)) * mix(P.ambient.w, 1.0, d.h) :
+                                                nubis_reference_sky_visibility(p);
   return direct + P.ambient.rgb * ambient_probability;
 }

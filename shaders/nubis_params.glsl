@@ -19,5 +19,6 @@ struct NubisParams {
   vec4 scatter2;   /* powder strength, fade distance (0 = off), -, - */
   vec4 cirrus;     /* altitude, coverage multiplier, 1 / texture period, optical depth at density 1 */
   vec4 cirrus2;    /* scroll offset x, y (metres), bake slab thickness, - */
+  vec4 clip_box;   /* x0, y0, x1, y1: no clouds outside (a comparison clips to the baked box); x1 < x0: off */
   vec4 options;    /* jitter (0/1), -, -, - */
 };

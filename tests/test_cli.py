@@ -34,7 +34,7 @@ def test_compare_writes_every_output(tmp_path):
         "compare", "--out", str(out), "--width", "48", "--height", "27", "--samples", "4", "--voxel-size", "300"
     )
     assert r.returncode == 0, r.stderr
-    assert _one_line(r.stdout).startswith("compared default at 48x27")
+    assert _one_line(r.stdout).startswith("compared default (full) at 48x27")
     names = {p.name for p in out.iterdir()}
     assert {
         "viewport.png",

@@ -77,6 +77,10 @@ def configure_render(scene, width: int, height: int, samples: int | None, bounce
     if bounces is not None:
         scene.cycles.volume_bounces = bounces
     scene.cycles.use_denoising = False
+    # A one-pixel box filter: each pixel is the mean over its own area, what a supersampled viewport
+    # render gives, so comparisons measure the clouds rather than the reconstruction filter.
+    scene.cycles.pixel_filter_type = "BOX"
+    scene.cycles.filter_width = 1.0
     scene.render.resolution_x, scene.render.resolution_y = width, height
     scene.render.resolution_percentage = 100
     scene.render.film_transparent = True

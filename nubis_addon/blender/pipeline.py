@@ -14,7 +14,7 @@ import bpy
 import numpy as np
 
 from ..core import imageio, metrics, vdbio
-from ..core.bakeplan import BakePlan, plan_bake
+from ..core.bakeplan import BakePlan, plan_bake, view_footprint
 from ..core.errors import NubisError
 from ..core.fsutil import atomic_path, check_output_dir, check_output_path
 from ..render import bake as gpu_bake
@@ -50,13 +50,40 @@ def resolution(scene, width: int | None, height: int | None) -> tuple[int, int]:
     return w, h
 
 
-def render_viewport(scene, width: int, height: int, light_mode: int = 0) -> np.ndarray:
-    """The viewport's clouds from the scene camera: premultiplied scene-linear RGBA, top row first."""
+# The two comparison modes of `compare` (issue: measured parity with Cycles).
+# single: one scattering event on both sides, the viewport's reference light march, no powder and no
+#         multiple-scattering octaves, against Cycles with one volume bounce.
+# full:   every viewport term against Cycles with the scene's volume bounces.
+COMPARE_MODES = ("single", "full")
+
+
+def render_viewport(
+    scene, width: int, height: int, light_mode: int = 0, mode: str = "", clip_box: tuple | None = None
+) -> np.ndarray:
+    """The viewport's clouds from the scene camera: premultiplied scene-linear RGBA, top row first.
+
+    `mode` "single" or "full" prepares the render for a comparison with Cycles; `clip_box` (x0, y0, x1,
+    y1) keeps only the clouds inside a bake's box, so both renderers light the same clouds."""
     state = scene_io.state_from_scene(scene)
+    state.clip_box = clip_box
     state.light_mode = light_mode
+    if mode == "single":
+        state.light_mode = 1
+        state.params.update(lighting_ms_octaves=1, lighting_powder=0.0)
+    if mode in COMPARE_MODES:
+        # The atmosphere fade has no counterpart in the Cycles scene.
+        state.params["lighting_fade_distance"] = 0.0
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
     clouds.update(state)
     return engine.render_offscreen(clouds, scene_io.camera_inv_view_proj(scene, width, height), width, height)
+
+
+def downsample(rgba: np.ndarray, factor: int) -> np.ndarray:
+    """Box-filter an image by an integer factor (premultiplied values average correctly)."""
+    if factor == 1:
+        return rgba
+    h, w, c = rgba.shape
+    return rgba.reshape(h // factor, factor, w // factor, factor, c).mean(axis=(1, 3))
 
 
 @dataclass
@@ -67,12 +94,25 @@ class BakeResult:
     seconds: float
 
 
-def bake(scene, path: str | os.PathLike, voxel_size: float | None = None, progress: Progress | None = None):
-    """Bake the viewport's density to an OpenVDB `density` grid in world space (atomic write)."""
+def bake(
+    scene,
+    path: str | os.PathLike,
+    voxel_size: float | None = None,
+    progress: Progress | None = None,
+    camera_only: bool = False,
+):
+    """Bake the viewport's density to an OpenVDB `density` grid in world space (atomic write).
+
+    `camera_only` bakes just the part of the sky the scene camera sees, which allows finer voxels."""
     path = check_output_path(path, (".vdb",))
     start = time.perf_counter()
     state = scene_io.state_from_scene(scene)
-    plan = plan_bake(state, voxel_size or scene.nubis.bake_voxel_size)
+    region = None
+    if camera_only:
+        w, h = resolution(scene, None, None)
+        inv = np.array(scene_io.camera_inv_view_proj(scene, w, h))
+        region = view_footprint(state, inv)
+    plan = plan_bake(state, voxel_size or scene.nubis.bake_voxel_size, region=region)
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
     clouds.update(state)
     density = gpu_bake.bake_density(clouds, plan, progress)
@@ -119,24 +159,70 @@ def compare(
     width: int,
     height: int,
     samples: int | None = None,
-    light_mode: int = 0,
-    bounces: int | None = None,
+    mode: str = "full",
     voxel_size: float | None = None,
+    noise_estimate: bool = False,
 ) -> dict:
-    """Viewport and Cycles renders of the same shot, their side-by-side, and metrics.json; the bake the
-    Cycles render used is kept as clouds.vdb."""
+    """Viewport and Cycles renders of the same shot, their side-by-side, a difference image and
+    metrics.json (computed on the scene-linear EXR values); the bake Cycles rendered is kept as
+    clouds.vdb. Only the part of the sky the camera sees is baked."""
+    if mode not in COMPARE_MODES:
+        raise NubisError(f"unknown comparison mode '{mode}': use single or full")
     out = check_output_dir(out_dir)
-    viewport = render_viewport(scene, width, height, light_mode)
-    baked = bake(scene, out / "clouds.vdb", voxel_size)
+    timings = {}
+    t = time.perf_counter()
+    baked = bake(scene, out / "clouds.vdb", voxel_size, camera_only=True)
+    timings["bake_s"] = time.perf_counter() - t
+    # The viewport keeps only the baked clouds: sky light from beyond the box would otherwise be
+    # shadowed by clouds Cycles never sees.
+    plan = baked.plan
+    half = plan.voxel_size / 2
+    clip = (
+        plan.origin[0] - half,
+        plan.origin[1] - half,
+        plan.origin[0] - half + plan.dims[0] * plan.voxel_size,
+        plan.origin[1] - half + plan.dims[1] * plan.voxel_size,
+    )
+    t = time.perf_counter()
+    # Cycles integrates each pixel's area (box filter below); the viewport samples the pixel centre.
+    # Supersampling the viewport makes both estimate the same pixel value.
+    ss = max(1, min(4, 1024 // max(width, height)))
+    viewport = downsample(render_viewport(scene, width * ss, height * ss, mode=mode, clip_box=clip), ss)
+    timings["viewport_s"] = time.perf_counter() - t
+    # Cycles counts bounces after the first scattering: 0 volume bounces is single scattering.
+    bounces = 0 if mode == "single" else None
+    t = time.perf_counter()
     cycles = render_cycles(scene, width, height, samples, vdb_path=str(baked.path), bounces=bounces)
+    timings["cycles_s"] = time.perf_counter() - t
     result = metrics.compare(viewport, cycles)
+    if mode == "full":
+        # The real-time cone march against the reference march, everything else equal.
+        reference = downsample(render_viewport(scene, width * ss, height * ss, 1, mode, clip), ss)
+        cone = metrics.compare(viewport, reference)
+        result["cone_march_vs_reference"] = {
+            k: cone[k] for k in ("alpha_rmse", "luminance_rel_error", "luminance_bias")
+        }
+    if noise_estimate:
+        # Cycles' own noise: two renders that differ only in seed differ by sqrt(2) x the noise.
+        scene.cycles.seed += 1
+        again = render_cycles(scene, width, height, samples, vdb_path=str(baked.path), bounces=bounces)
+        scene.cycles.seed -= 1
+        own = metrics.compare(again, cycles)
+        result["cycles_noise"] = {
+            "alpha_rmse": own["alpha_rmse"] / np.sqrt(2),
+            "luminance_rel_error": own["luminance_rel_error"] / np.sqrt(2),
+        }
     result.update(
+        mode=mode,
+        viewport_supersampling=ss,
         width=width,
         height=height,
-        samples=samples or scene.cycles.samples,
+        samples=scene.cycles.samples,
+        volume_bounces=scene.cycles.volume_bounces,
         preset=scene.nubis.preset,
         voxel_size=baked.plan.voxel_size,
-        volume_bounces=scene.cycles.volume_bounces,
+        bake_dims=list(baked.plan.dims),
+        seconds=timings,
     )
     save_render(scene, out / "viewport.exr", viewport)
     save_render(scene, out / "cycles.exr", cycles)

@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from .errors import NubisError
 from .state import CloudState
 
@@ -29,9 +31,57 @@ class BakePlan:
         return self.voxels * BYTES_PER_VOXEL
 
 
-def plan_bake(state: CloudState, voxel_size: float, memory_limit: int = DEFAULT_MEMORY_LIMIT) -> BakePlan:
-    """The box holding every cloud the viewport can draw: the field, clipped to the draw radius, and the
-    shell's altitudes, lowered by the planet's curvature at the box's far corners."""
+def view_footprint(state: CloudState, inv_view_proj: np.ndarray, samples: int = 33) -> tuple[float, ...]:
+    """XY bounds of the cloud layer a camera sees: rays through a grid over the image, cut by the
+    shell's spheres (and the cirrus sphere) within the draw radius. Baking only this box lets a
+    shot's bake use voxels several times finer than a bake of the whole sky."""
+    p = state.params
+    planet = p["layer_planet_radius"]
+    lo, hi = state.shell()
+    altitudes = [lo, hi] + ([p["cirrus_altitude"]] if state.has_cirrus() else [])
+    t = np.linspace(-1.0, 1.0, samples)
+    nx, ny = np.meshgrid(t, t)
+    ndc = np.stack([nx.ravel(), ny.ravel()], axis=1)
+    m = np.asarray(inv_view_proj, dtype=np.float64)
+
+    def unproject(z: float) -> np.ndarray:
+        h = np.c_[ndc, np.full(len(ndc), z), np.ones(len(ndc))] @ m.T
+        return h[:, :3] / h[:, 3:4]
+
+    origin = unproject(-1.0)
+    direction = unproject(1.0) - origin
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    centre = np.array([0.0, 0.0, -planet])
+    points = [origin[:, :2]]
+    oc = origin - centre
+    b = np.sum(oc * direction, axis=1)
+    for alt in altitudes:
+        c = np.sum(oc * oc, axis=1) - (planet + alt) ** 2
+        disc = b * b - c
+        ok = disc >= 0
+        for sign in (-1.0, 1.0):
+            dist = -b + sign * np.sqrt(np.where(ok, disc, 0.0))
+            hit = ok & (dist > 0)
+            points.append((origin + direction * dist[:, None])[hit][:, :2])
+    xy = np.concatenate(points)
+    # Beyond the draw radius there is nothing to bake: pull far hits back onto its circle.
+    draw = np.asarray(state.draw_center)
+    offset = xy - draw
+    dist = np.linalg.norm(offset, axis=1, keepdims=True)
+    radius = p["layer_draw_radius"]
+    xy = np.where(dist > radius, draw + offset / np.maximum(dist, 1e-9) * radius, xy)
+    return float(xy[:, 0].min()), float(xy[:, 0].max()), float(xy[:, 1].min()), float(xy[:, 1].max())
+
+
+def plan_bake(
+    state: CloudState,
+    voxel_size: float,
+    memory_limit: int = DEFAULT_MEMORY_LIMIT,
+    region: tuple[float, float, float, float] | None = None,
+) -> BakePlan:
+    """The box holding every cloud the viewport can draw: the field, clipped to the draw radius (and to
+    `region`, x0 x1 y0 y1, when given), and the shell's altitudes, lowered by the planet's curvature at
+    the box's far corners."""
     if not (math.isfinite(voxel_size) and voxel_size > 0):
         raise NubisError(f"the voxel size must be a positive number of metres, not {voxel_size!r}")
     p = state.params
@@ -42,7 +92,13 @@ def plan_bake(state: CloudState, voxel_size: float, memory_limit: int = DEFAULT_
     x1 = min(p["field_origin_x"] + half, cx + radius)
     y0 = max(p["field_origin_y"] - half, cy - radius)
     y1 = min(p["field_origin_y"] + half, cy + radius)
+    if region is not None:
+        margin = 2.0 * voxel_size
+        x0, x1 = max(x0, region[0] - margin), min(x1, region[1] + margin)
+        y0, y1 = max(y0, region[2] - margin), min(y1, region[3] + margin)
     if x1 <= x0 or y1 <= y0:
+        if region is not None:
+            raise NubisError("the camera sees none of the cloud field: aim it at the clouds or bake the whole sky")
         raise NubisError("the data field lies outside the draw radius around the camera: move the camera or the field")
     lo, hi = state.shell()
     if state.has_cirrus():

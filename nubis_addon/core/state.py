@@ -26,6 +26,7 @@ class CloudState:
     light_mode: int = 0  # 0 real-time cone march, 1 reference march
     jitter: bool = True
     cirrus_slab: float | None = None  # the bake's cirrus slab thickness, when wider than the setting
+    clip_box: tuple[float, float, float, float] | None = None  # x0, y0, x1, y1: clouds only inside
 
     def has_cirrus(self) -> bool:
         return self.field_c is not None and self.params["cirrus_coverage"] > 0 and float(self.field_c[..., 0].max()) > 0

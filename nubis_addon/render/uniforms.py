@@ -76,6 +76,7 @@ def param_vectors(state: CloudState) -> dict[str, tuple[float, float, float, flo
             state.cirrus_slab or p["cirrus_thickness"],
             0.0,
         ),
+        "clip_box": state.clip_box or (1.0, 1.0, -1.0, -1.0),
         "options": (1.0 if state.jitter else 0.0, 0.0, 0.0, 0.0),
     }
 

@@ -1,0 +1,96 @@
+"""Read the cloud density back from the GPU at arbitrary world points (for tests, never a product path).
+
+The probe stage (shaders/nubis_probe_frag.glsl) runs the shared `nubis_density` once per texel of a
+float texture of points, so tests can compare the exact shader the viewport and the bake use against an
+independent implementation.
+"""
+
+from __future__ import annotations
+
+import gpu
+import numpy as np
+
+from .engine import STAGES, CloudGPU, fullscreen_batch, read_pixels, shader
+
+# Registered here rather than in engine.py: the probe is a test instrument, and a stage only compiles
+# when someone asks for it, so the product never pays for it.
+STAGES.setdefault("probe", ((("VEC4", "probe_mode"),), (("FLOAT_2D", "probe_points"),)))
+
+MAX_WIDTH = 1024  # texels per row of the point texture; rows grow as needed
+_MODE_DENSITY = 0.0
+_MODE_REMAP = 1.0
+_MODE_NOISE = 2.0
+NOISE_TEXTURES = {"lf": 0.0, "hf": 1.0, "curl": 2.0}
+
+
+def probe_density(gpu_inputs: CloudGPU, points: np.ndarray) -> np.ndarray:
+    """(fine, coarse, height fraction) of the shader's density at `points` (N, 3) world metres: (N, 3) float32.
+
+    The points reach the GPU as float32; pass the same float32 values to anything compared with the result.
+    """
+    pts = np.asarray(points, dtype=np.float32)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ValueError(f"points must have shape (N, 3), not {pts.shape}")
+    texels = np.zeros((len(pts), 4), np.float32)
+    texels[:, :3] = pts
+    return _run(gpu_inputs, texels, (_MODE_DENSITY, 0.0, 0.0, 0.0))[:, :3]
+
+
+def probe_remap(gpu_inputs: CloudGPU, args: np.ndarray) -> np.ndarray:
+    """The shader's own `remap(value, old_min, old_max, new_min, new_max)` for each row of `args` (N, 5).
+
+    The first four arguments travel per texel; new_max is a push constant, so it must be the same for
+    every row.
+    """
+    a = np.asarray(args, dtype=np.float32)
+    if a.ndim != 2 or a.shape[1] != 5:
+        raise ValueError(f"args must have shape (N, 5), not {a.shape}")
+    if len(a) and np.any(a[:, 4] != a[0, 4]):
+        raise ValueError("probe_remap takes one new_max for all rows")
+    new_max = float(a[0, 4]) if len(a) else 0.0
+    return _run(gpu_inputs, np.ascontiguousarray(a[:, :4]), (_MODE_REMAP, new_max, 0.0, 0.0))[:, 0]
+
+
+def probe_noise(gpu_inputs: CloudGPU, which: str, coords: np.ndarray) -> np.ndarray:
+    """The GPU's filtered read (RGBA) of the padded noise texture `which` ("lf", "hf" or "curl") at
+    normalised texture coordinates `coords` (N, 3), or (N, 2) for the 2D curl texture: (N, 4) float32.
+
+    No tiling is applied: this observes the sampler itself (filtering precision, texel centres, edges).
+    """
+    if which not in NOISE_TEXTURES:
+        raise ValueError(f"which must be one of {sorted(NOISE_TEXTURES)}, not {which!r}")
+    c = np.asarray(coords, dtype=np.float32)
+    if c.ndim != 2 or c.shape[1] not in (2, 3):
+        raise ValueError(f"coords must have shape (N, 2) or (N, 3), not {c.shape}")
+    texels = np.zeros((len(c), 4), np.float32)
+    texels[:, : c.shape[1]] = c
+    return _run(gpu_inputs, texels, (_MODE_NOISE, NOISE_TEXTURES[which], 0.0, 0.0))
+
+
+def _run(gpu_inputs: CloudGPU, texels: np.ndarray, mode: tuple[float, float, float, float]) -> np.ndarray:
+    n = len(texels)
+    if n == 0:
+        return np.zeros((0, 4), np.float32)
+    width = min(n, MAX_WIDTH)
+    height = -(-n // width)
+    data = np.zeros((height * width, 4), np.float32)
+    data[:n] = texels
+    # Row 0 of the texture is the first `width` points and also the bottom framebuffer row, which
+    # read_pixels returns first: texel and pixel indices coincide.
+    buf = gpu.types.Buffer("FLOAT", data.size, data.ravel())
+    tex = gpu.types.GPUTexture((width, height), format="RGBA32F", data=buf)
+    sh = shader("probe")
+    offscreen = gpu.types.GPUOffScreen(width, height, format="RGBA32F")
+    try:
+        with offscreen.bind():
+            fb = gpu.state.active_framebuffer_get()
+            fb.clear(color=(0.0, 0.0, 0.0, 0.0))
+            gpu.state.blend_set("NONE")
+            gpu_inputs.bind(sh)
+            sh.uniform_sampler("probe_points", tex)
+            sh.uniform_float("probe_mode", mode)
+            fullscreen_batch("probe").draw(sh)
+            out = read_pixels(fb, width, height)
+    finally:
+        offscreen.free()
+    return out.reshape(-1, 4)[:n]
