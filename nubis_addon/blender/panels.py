@@ -95,6 +95,19 @@ def _section_panel(section: str, label: str):
     )
 
 
+class NUBIS_PT_light(NubisPanel, bpy.types.Panel):
+    bl_label = "Light"
+    bl_parent_id = "NUBIS_PT_main"
+
+    def draw(self, context):
+        s = context.scene.nubis
+        self.layout.label(text="The sun is the scene's first Sun lamp: rotate it to change the time of day")
+        self.layout.prop(s, "ambient_source", expand=True)
+        if s.ambient_source == "COLOR":
+            self.layout.prop(s, "ambient_color")
+        self.layout.prop(context.scene.cycles, "volume_bounces", text="Cycles Volume Bounces")
+
+
 class NUBIS_PT_bake(NubisPanel, bpy.types.Panel):
     bl_label = "Bake"
     bl_parent_id = "NUBIS_PT_main"
@@ -112,6 +125,7 @@ CLASSES = (
     _section_panel("noise", "Noise"),
     _section_panel("density", "Density"),
     _section_panel("wind", "Wind"),
+    NUBIS_PT_light,
     _section_panel("lighting", "Lighting"),
     _section_panel("march", "Ray March"),
     NUBIS_PT_bake,

@@ -130,6 +130,24 @@ def _settings_annotations() -> dict:
             description="Distance from the camera where the horizon rule begins (S15: 15 km)",
         ),
         active_layer=IntProperty(name="Active Layer", default=0),
+        ambient_source=EnumProperty(
+            name="Ambient",
+            items=(
+                ("WORLD", "World", "Sky light from the World's background colour and strength"),
+                ("COLOR", "Colour", "Sky light from an explicit colour"),
+            ),
+            default="WORLD",
+            update=_tag_redraw,
+        ),
+        ambient_color=FloatVectorProperty(
+            name="Ambient Colour",
+            subtype="COLOR",
+            size=3,
+            min=0.0,
+            soft_max=1.0,
+            default=(0.3, 0.45, 0.8),
+            update=_tag_redraw,
+        ),
         viewport_scale=IntProperty(
             name="Viewport Downscale",
             default=4,

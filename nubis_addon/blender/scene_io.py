@@ -249,7 +249,7 @@ def state_from_scene(scene, camera_location=None, fields: tuple | None = None) -
         field_c=fields[2],
         sun_direction=direction,
         sun_radiance=radiance,
-        ambient=world_ambient(scene),
+        ambient=world_ambient(scene) if settings.ambient_source == "WORLD" else tuple(settings.ambient_color),
         draw_center=(float(camera_location[0]), float(camera_location[1])),
         time=time,
     )
