@@ -10,5 +10,8 @@ void main()
   if (from_cirrus < 0.5 * P.cirrus2.z && P.density.x > 0.0) {
     density += nubis_cirrus_density(p.xy) * P.cirrus.w / (P.cirrus2.z * P.density.x);
   }
-  color = vec4(density, d.coarse, 0.0, 1.0);
+  /* The storm glow as an emission grid: what the march adds per unit length is sigma x density x
+   * glow, so the grid holds density x glow (its strongest channel) and Cycles multiplies by sigma. */
+  vec3 glow = nubis_storm_glow(p, d.fine) * d.fine;
+  color = vec4(density, max(glow.r, max(glow.g, glow.b)), 0.0, 1.0);
 }

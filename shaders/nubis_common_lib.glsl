@@ -17,10 +17,15 @@ float remap(float value, float old_min, float old_max, float new_min, float new_
   return new_min + (value - old_min) / span * (new_max - new_min);
 }
 
-/* Interleaved gradient noise (Jimenez 2014): a cheap per-pixel jitter that hides step banding. */
-float interleaved_gradient_noise(vec2 pixel)
+/* A per-pixel value in [0, 1) from an integer hash (PCG-style): white noise, so undersampled steps
+ * show as grain rather than the diagonal hatching of interleaved gradient noise. */
+float nubis_pixel_hash(vec2 pixel)
 {
-  return fract(52.9829189 * fract(dot(pixel, vec2(0.06711056, 0.00583715))));
+  uvec2 q = uvec2(ivec2(pixel));
+  uint h = q.x * 747796405u + q.y * 2891336453u;
+  h = ((h >> ((h >> 28u) + 4u)) ^ h) * 277803737u;
+  h = (h >> 22u) ^ h;
+  return float(h >> 8u) / 16777216.0;
 }
 
 /* Ray against a sphere centred on the planet, for rays starting near sea level.

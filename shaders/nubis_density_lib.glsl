@@ -57,6 +57,79 @@ float nubis_height_fraction(float altitude, vec4 field_b_sample)
   return (altitude - lo) / max(hi - lo, 1.0);
 }
 
+/* ---- superstorm vortex (SPEC 1.9.5, GDC22; sine/cosine rotation after Matthew D. Roach) ---------- */
+
+vec2 nubis_rotate_about(vec2 xy, vec2 centre, float angle)
+{
+  vec2 d = xy - centre;
+  float s = sin(angle), c = cos(angle);
+  return centre + vec2(c * d.x - s * d.y, s * d.x + c * d.y); /* counter-clockwise for angle > 0 */
+}
+
+/* Angle of ring `ring` (0 = innermost of 6) at ring coordinate u = 6 * dist / radius: speeds fall
+ * ring by ring from the centre, each ring has its own phase (skew), and rings outside faster ones are
+ * twisted with the radius for the spiral tendrils of a boundary layer. */
+float nubis_ring_angle(int ring, float u, float spin)
+{
+  float speed = spin * (1.0 - float(ring) / 6.0);
+  float skew = float(ring) * 1.913;
+  float twist = ring > 0 ? P.storm_info.y * (float(ring) + 1.0 - u) : 0.0;
+  return P.wind2.z * speed + skew + twist;
+}
+
+/* Detail-noise sample position after every storm's vortex; `second` and `weight` return the
+ * position in the neighbouring ring where two rings overlap (weight 0: one sample suffices). */
+vec2 nubis_vortex(vec2 xy, out vec2 second, out float weight)
+{
+  second = xy;
+  weight = 0.0;
+  int count = min(int(P.storm_info.x), NUBIS_MAX_STORMS);
+  for (int i = 0; i < count; i++) {
+    vec4 shape = P.storm_shape[i];
+    float dist = distance(xy, shape.xy);
+    if (shape.w <= 0.0 || dist >= shape.z) {
+      continue;
+    }
+    float u = 6.0 * dist / shape.z;
+    /* The rotation dies out over the outer rim so the storm's edge has no seam, and grows in with
+     * the lifecycle blend (GDC22: the storm transitions seamlessly from cloud). */
+    float fade = (1.0 - smoothstep(5.0, 6.0, u)) * smoothstep(0.0, 0.25, shape.w);
+    float spin = P.storm_light[i].x;
+    const float overlap = 0.3; /* in ring widths */
+    float boundary = floor(u + 0.5);
+    float e = u - boundary;
+    int ring = int(floor(u));
+    if (P.options.y > 0.5) {
+      /* PS4 quality (GDC22): one sample, the ring boundary jittered instead of blended. */
+      float jitter = fract(sin(dot(xy, vec2(12.9898, 78.233))) * 43758.5453) - 0.5;
+      ring = clamp(int(floor(u + jitter * overlap)), 0, 5);
+      xy = nubis_rotate_about(xy, shape.xy, nubis_ring_angle(ring, u, spin) * fade);
+      second = xy;
+    }
+    else if (abs(e) < 0.5 * overlap && boundary >= 1.0 && boundary <= 5.0) {
+      int inner = int(boundary) - 1;
+      weight = smoothstep(-0.5 * overlap, 0.5 * overlap, e);
+      second = nubis_rotate_about(xy, shape.xy, nubis_ring_angle(inner + 1, u, spin) * fade);
+      xy = nubis_rotate_about(xy, shape.xy, nubis_ring_angle(inner, u, spin) * fade);
+    }
+    else {
+      xy = nubis_rotate_about(xy, shape.xy, nubis_ring_angle(ring, u, spin) * fade);
+      second = xy;
+    }
+  }
+  return xy;
+}
+
+/* Detail fBm at a (wind-moved) position, with the curl twist at the base. */
+float nubis_detail_fbm(vec3 p_hf, float h)
+{
+  vec2 curl_uv = nubis_tile_uv(p_hf.xy / P.noise.z, vec2(textureSize(noise_curl, 0)));
+  vec2 curl = textureLod(noise_curl, curl_uv, 0.0).xy * 2.0 - 1.0;
+  p_hf.xy += curl * (1.0 - h) * P.noise.w;
+  vec3 hf_uvw = nubis_tile_uvw(p_hf / P.noise.y, vec3(textureSize(noise_hf, 0)));
+  return dot(textureLod(noise_hf, hf_uvw, 0.0).rgb, NUBIS_FBM_WEIGHTS);
+}
+
 struct NubisDensity {
   float fine;   /* the full sample, detail erosion included */
   float coarse; /* the cheap sample: never below `fine` (SPEC 1.6.4) */
@@ -84,11 +157,30 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
   d.h = clamp01(h);
   d.precipitation = f.a.g;
   float coverage = clamp01(f.a.r * P.density.y) * f.inside;
-  if (h <= 0.0 || h >= 1.0 || coverage <= 0.0) {
-    return d;
+  float profile = (h > 0.0 && h < 1.0) ? nubis_vertical_profile(h, f.a.b, f.a.a) : 0.0;
+  /* SPEC 1.9.6 (GDC22): where storm coverage is non-zero, the flipped vertical profile joins the
+   * normal one to spread the top into an anvil. We place the flipped lookup in a band under the
+   * shell's top (the storm's tropopause), so the anvil is flat and reaches across the whole stencil,
+   * with the storm coverage as its coverage. max() leaves storm-free clouds exactly as they were. */
+  float storm = clamp01(f.b.r) * f.inside;
+  float band = 0.22 * (P.shell.y - P.layer.y);
+  float anvil_h = (altitude - (P.shell.y - band)) / band;
+  if (P.storm_info.x > 0.0 && anvil_h > 0.0 && anvil_h < 1.0) {
+    /* The anvil "flattens out and spreads in the wind direction" (GDC22): its storm coverage is read
+     * upwind, further the higher the sample, so the top streams downwind of the column. */
+    vec2 upwind = p.xy - P.wind.xy * (P.storm_info.w * anvil_h);
+    float anvil_storm = clamp01(nubis_sample_field(upwind).b.r) * f.inside;
+    if (anvil_storm > 0.0) {
+      storm = anvil_storm;
+      float anvil = nubis_vertical_profile(1.0 - anvil_h, 0.3, 0.0) * storm;
+      if (anvil > profile) {
+        profile = anvil;
+        coverage = max(coverage, 0.85 * storm);
+        h = max(h, 0.9); /* billowy detail on the anvil, not the wisps of a cloud base */
+      }
+    }
   }
-  float profile = nubis_vertical_profile(h, f.a.b, f.a.a);
-  if (profile <= 0.0) {
+  if (profile <= 0.0 || coverage <= 0.0) {
     return d;
   }
 
@@ -97,7 +189,8 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
    * downwind and rise; the coverage/type field itself never moves (GDC22, SPEC 1.3.1). */
   vec3 wind_dir = vec3(P.wind.xy, 0.0);
   vec3 drift = (wind_dir + vec3(0.0, 0.0, P.wind2.y)) * P.wind.z;
-  vec3 skewed = p - h * wind_dir * P.wind2.x;
+  /* The anvil also leans downwind (GDC22: noises rotated and skewed for a wind-swept look). */
+  vec3 skewed = p - h * wind_dir * (P.wind2.x + storm * h * 4.0 * P.wind2.x);
   vec3 p_lf = skewed - drift;
 
   vec3 lf_uvw = p_lf / P.noise.x;
@@ -117,13 +210,16 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
     return d;
   }
 
-  /* SPEC 1.6.2, GPU Pro 7: animated curl noise twists the detail at the base, fading to none at the top. */
+  /* SPEC 1.6.2, GPU Pro 7: animated curl noise twists the detail at the base, fading to none at the top.
+   * Inside a superstorm the detail turns with the vortex; two rings overlap -> two samples (GDC22). */
   vec3 p_hf = skewed - drift * P.wind.w;
-  vec2 curl_uv = nubis_tile_uv(p_hf.xy / P.noise.z, vec2(textureSize(noise_curl, 0)));
-  vec2 curl = textureLod(noise_curl, curl_uv, 0.0).xy * 2.0 - 1.0;
-  p_hf.xy += curl * (1.0 - h) * P.noise.w;
-  vec3 hf_uvw = nubis_tile_uvw(p_hf / P.noise.y, vec3(textureSize(noise_hf, 0)));
-  float hf_fbm = dot(textureLod(noise_hf, hf_uvw, 0.0).rgb, NUBIS_FBM_WEIGHTS);
+  vec2 second;
+  float ring_weight;
+  p_hf.xy = nubis_vortex(p_hf.xy, second, ring_weight);
+  float hf_fbm = nubis_detail_fbm(p_hf, h);
+  if (ring_weight > 0.0) {
+    hf_fbm = mix(hf_fbm, nubis_detail_fbm(vec3(second, p_hf.z), h), ring_weight);
+  }
   /* GPU Pro 7: the stored (inverted) Worley fBm erodes the base into wisps, and flipped back it carves
    * billows above the lowest 10 %. SPEC 7.1: a
    * rising bottom type keeps the wisps higher up the cloud, for ragged undersides (GDC22). */
@@ -144,6 +240,8 @@ float nubis_cirrus_density(vec2 xy)
   vec4 c = textureLod(field_c, clamp(uv, 0.0, 1.0), 0.0);
   vec2 edge = min(uv, 1.0 - uv) * P.field.z;
   float inside = clamp01(min(edge.x, edge.y) / max(P.draw.z, 1.0));
+  /* Like the volume, the cirrus ends softly at the draw radius instead of at the field's edge. */
+  inside *= clamp01((P.layer.w - distance(xy, P.draw.xy)) / max(P.draw.z, 1.0));
   float coverage = clamp01(c.r * P.cirrus.y) * inside;
   if (coverage <= 0.0) {
     return 0.0;

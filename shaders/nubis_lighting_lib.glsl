@@ -17,6 +17,62 @@ float nubis_phase(float cos_angle, float eccentricity_scale)
              P.phase.z);
 }
 
+/* ---- superstorm lighting (SPEC 2.10, GDC22) -------------------------------------------------------- */
+
+/* SPEC 2.10.1: light samples near a storm's centre count as denser, so the storm reads darker and
+ * thicker. GDC22's printed min() never exceeds 1 (SPEC 6 Q13); we keep its pow(., 0.5) falloff and
+ * scale towards the storm's darkening factor. */
+float nubis_storm_darkening(vec3 q)
+{
+  float scale = 1.0;
+  int count = min(int(P.storm_info.x), NUBIS_MAX_STORMS);
+  for (int i = 0; i < count; i++) {
+    vec4 shape = P.storm_shape[i];
+    float proximity = clamp01(1.0 - distance(q.xy, shape.xy) / shape.z);
+    scale += (P.storm_light[i].y - 1.0) * sqrt(proximity) * shape.w;
+  }
+  return scale;
+}
+
+/* SPEC 2.10.2: a cylindrical field, fading with height, that blends the ambient to the storm's own
+ * (ground bounce under a low, dark mesocyclone). GDC22's printed blend is <= 0 (SPEC 6 Q14); this is
+ * the described intent: 1 at the storm's foot and centre, 0 at its radius or top. */
+float nubis_storm_ambient(vec3 p, float h)
+{
+  float factor = 1.0;
+  int count = min(int(P.storm_info.x), NUBIS_MAX_STORMS);
+  for (int i = 0; i < count; i++) {
+    vec4 shape = P.storm_shape[i];
+    float blend = clamp01(1.0 - distance(p.xy, shape.xy) / shape.z) * clamp01(1.0 - h) * shape.w;
+    factor = mix(factor, P.storm_light[i].w, blend);
+  }
+  return factor;
+}
+
+/* SPEC 2.10.3: the internal glow without a second light march: a powered linear distance to the
+ * light, a height gradient below it, and a pseudo-attenuation from the local fine density. The same
+ * term with a moving position and an animated intensity is the intra-cloud lightning (SPEC 2.10.4).
+ * Returns radiance per unit scattering. */
+vec3 nubis_storm_glow(vec3 p, float fine_density)
+{
+  vec3 glow = vec3(0.0);
+  int count = min(int(P.storm_info.x), NUBIS_MAX_STORMS);
+  float thickness = P.layer.z - P.layer.y;
+  for (int i = 0; i < count; i++) {
+    vec4 shape = P.storm_shape[i];
+    vec3 energy = P.storm_glow[i].rgb * P.storm_light[i].z + vec3(0.85, 0.9, 1.0) * P.storm_glow[i].w;
+    if (shape.w <= 0.0 || max(energy.r, max(energy.g, energy.b)) <= 0.0) {
+      continue;
+    }
+    vec3 centre = vec3(shape.xy, P.layer.y + P.storm_info.z * thickness);
+    float potential = pow(clamp01(1.0 - distance(p, centre) / shape.z), 12.0);
+    float below = clamp01((centre.z - nubis_altitude(p, P.layer.x) + thickness) / (2.0 * thickness));
+    float pseudo_attenuation = 1.0 - clamp01(fine_density * 5.0);
+    glow += energy * potential * below * pseudo_attenuation * shape.w;
+  }
+  return glow;
+}
+
 /* GPU Pro 7: six offsets in [-1, 1]^3 that widen the light march into a cone (SPEC 2.8). */
 const vec3 NUBIS_CONE_KERNEL[6] = vec3[6](vec3(0.38051305, 0.92453449, -0.02111345),
                                           vec3(-0.50625799, -0.03590792, -0.86163418),
@@ -43,7 +99,8 @@ float nubis_reference_depth(vec3 p, vec3 dir, int samples)
   float n = float(samples);
   for (int i = 0; i < samples; i++) {
     float u = (float(i) + 0.5) / n;
-    depth += nubis_density(p + dir * (len * u * u), false, 0.0).fine * (2.0 * len * u / n);
+    vec3 q = p + dir * (len * u * u);
+    depth += nubis_density(q, false, 0.0).fine * (2.0 * len * u / n) * nubis_storm_darkening(q);
   }
   return depth;
 }
@@ -80,12 +137,12 @@ float nubis_light_optical_depth(vec3 p, float view_alpha)
       float t = step_len * (float(i) + 0.5);
       vec3 q = p + sun * t + NUBIS_CONE_KERNEL[i] * (step_len * float(i) * 0.5);
       NubisDensity s = nubis_density(q, cheap, 1.0);
-      tau += (cheap ? s.coarse : s.fine) * step_len;
+      tau += (cheap ? s.coarse : s.fine) * step_len * nubis_storm_darkening(q);
     }
     /* The long sample catches shadows of distant clouds (GPU Pro 7 fig 4.36). It stands for the
      * stretch between the cone's end and itself, so it is weighted by that length. */
     vec3 far_point = p + sun * (step_len * 15.0);
-    tau += nubis_density(far_point, true, 1.0).coarse * step_len * 10.0;
+    tau += nubis_density(far_point, true, 1.0).coarse * step_len * 10.0 * nubis_storm_darkening(far_point);
   }
   else {
     tau = nubis_reference_depth(p, sun, 64);
@@ -121,5 +178,6 @@ vec3 nubis_in_scattering(vec3 p, vec3 view_dir, NubisDensity d, float view_alpha
    * reference mode measures the sky's visibility instead. */
   float ambient_probability = P.march.w < 0.5 ? sqrt(1.0 - clamp01(d.coarse)) * mix(P.ambient.w, 1.0, d.h) :
                                                 nubis_reference_sky_visibility(p);
-  return direct + P.ambient.rgb * ambient_probability;
+  ambient_probability *= nubis_storm_ambient(p, d.h);
+  return direct + P.ambient.rgb * ambient_probability + nubis_storm_glow(p, d.fine);
 }

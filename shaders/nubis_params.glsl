@@ -1,6 +1,8 @@
 /* The uniform block shared by every Nubis shader. Python packs it by parsing this struct
  * (render/uniforms.py), so a field added here must also be filled there. Only vec4 members:
  * std140 then needs no padding rules. Units are metres, seconds and radiance. */
+#define NUBIS_MAX_STORMS 4
+
 struct NubisParams {
   vec4 layer;      /* planet radius, layer bottom altitude, layer top altitude, draw radius */
   vec4 shell;      /* lowest and highest altitude any cloud can reach (the field's min/max heights), -, - */
@@ -19,6 +21,10 @@ struct NubisParams {
   vec4 scatter2;   /* powder strength, fade distance (0 = off), -, - */
   vec4 cirrus;     /* altitude, coverage multiplier, 1 / texture period, optical depth at density 1 */
   vec4 cirrus2;    /* scroll offset x, y (metres), bake slab thickness, - */
+  vec4 storm_info;          /* number of storms (<= NUBIS_MAX_STORMS), ring twist, glow height, anvil shift */
+  vec4 storm_shape[4];      /* per storm: centre x, y, radius, blend factor */
+  vec4 storm_light[4];      /* per storm: spin (rad/s at the centre), darkening, glow intensity, ambient boost */
+  vec4 storm_glow[4];       /* per storm: glow colour rgb, flash intensity */
   vec4 clip_box;   /* x0, y0, x1, y1: no clouds outside (a comparison clips to the baked box); x1 < x0: off */
-  vec4 options;    /* jitter (0/1), -, -, - */
+  vec4 options;    /* jitter (0/1), jittered storm rings (0/1), accumulation pass, - */
 };

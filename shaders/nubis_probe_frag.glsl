@@ -4,10 +4,23 @@
  *   0: vec4(fine density, coarse density, height fraction, 0) at the world point t.xyz;
  *   1: vec4(remap(t.x, t.y, t.z, t.w, probe_mode.y), 0, 0, 0): the shared helper (SPEC 1.2) as compiled;
  *   2: the raw filtered noise at normalised coordinates t.xyz, from noise_lf (probe_mode.y = 0),
- *      noise_hf (1) or noise_curl (2, t.xy), so a test can see how this GPU filters 8-bit textures. */
+ *      noise_hf (1) or noise_curl (2, t.xy), so a test can see how this GPU filters 8-bit textures;
+ *   3: vec4(vortex-moved xy, the second ring's xy) for the world xy t.xy (SPEC 1.9.5);
+ *   4: vec4(storm glow rgb, 0) at the world point t.xyz for a fine density t.w (SPEC 2.10.3). */
 void main()
 {
   vec4 t = texelFetch(probe_points, ivec2(gl_FragCoord.xy), 0);
+  if (probe_mode.x > 3.5) {
+    color = vec4(nubis_storm_glow(t.xyz, t.w), 0.0);
+    return;
+  }
+  if (probe_mode.x > 2.5) {
+    vec2 second;
+    float weight;
+    vec2 moved = nubis_vortex(t.xy, second, weight);
+    color = vec4(moved, second);
+    return;
+  }
   if (probe_mode.x > 1.5) {
     if (probe_mode.y > 1.5) {
       color = textureLod(noise_curl, t.xy, 0.0);

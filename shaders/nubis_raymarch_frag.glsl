@@ -79,7 +79,9 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel)
   float k = clamp01((seg - thickness) / max(P.layer.w - thickness, 1.0));
   int steps = int(mix(P.march.x, P.march.y, k));
   float dt = seg / float(steps);
-  float jitter = P.options.x > 0.5 ? interleaved_gradient_noise(pixel) : 0.5;
+  /* Per-pixel start offset, hiding step banding as fine grain; each accumulation pass (options.z)
+   * shifts it by the golden ratio so N passes cover the step evenly. */
+  float jitter = P.options.x > 0.5 ? fract(nubis_pixel_hash(pixel) + 0.61803399 * P.options.z) : 0.5;
 
   vec3 radiance = vec3(0.0);
   float transmittance = 1.0;

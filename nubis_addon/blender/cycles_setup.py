@@ -10,7 +10,7 @@ VOLUME_NAME = "Nubis Clouds VDB"
 MATERIAL_NAME = "Nubis Cloud Volume"
 
 
-def build_material(settings) -> bpy.types.Material:
+def build_material(settings, with_glow: bool = False) -> bpy.types.Material:
     """Extinction = density x sigma (the viewport's own); albedo 1; the viewport's two phase lobes
     as a mix of two Volume Scatter closures, which share one extinction and mix their phases."""
     mat = bpy.data.materials.get(MATERIAL_NAME) or bpy.data.materials.new(MATERIAL_NAME)
@@ -38,7 +38,26 @@ def build_material(settings) -> bpy.types.Material:
     nt.links.new(lobes[1].outputs[0], mix.inputs[2])
     out = nt.nodes.new("ShaderNodeOutputMaterial")
     nt.links.new(attr.outputs["Fac"], scale.inputs[0])
-    nt.links.new(mix.outputs[0], out.inputs["Volume"])
+    volume_out = mix.outputs[0]
+    if with_glow:
+        # The `glow` grid holds density x glow; the march emits sigma x that per metre, in the storm's colour.
+        glow_attr = nt.nodes.new("ShaderNodeAttribute")
+        glow_attr.attribute_name = "glow"
+        glow_attr.attribute_type = "GEOMETRY"
+        glow_scale = nt.nodes.new("ShaderNodeMath")
+        glow_scale.operation = "MULTIPLY"
+        glow_scale.inputs[1].default_value = settings.density_sigma
+        emission = nt.nodes.new("ShaderNodeEmission")
+        colour = tuple(settings.storms[0].glow_color) if len(settings.storms) else (1.0, 0.08, 0.03)
+        peak = max(colour) or 1.0
+        emission.inputs["Color"].default_value = (*(c / peak for c in colour), 1.0)
+        nt.links.new(glow_attr.outputs["Fac"], glow_scale.inputs[0])
+        nt.links.new(glow_scale.outputs[0], emission.inputs["Strength"])
+        add = nt.nodes.new("ShaderNodeAddShader")
+        nt.links.new(mix.outputs[0], add.inputs[0])
+        nt.links.new(emission.outputs[0], add.inputs[1])
+        volume_out = add.outputs[0]
+    nt.links.new(volume_out, out.inputs["Volume"])
     for i, node in enumerate((attr, scale, lobes[0], lobes[1], mix, out)):
         node.location = (i * 220, 0 if node is not lobes[1] else -250)
     return mat
@@ -54,7 +73,7 @@ def import_volume(scene, vdb_path: str) -> bpy.types.Object:
         raise NubisError(f"the VDB '{vdb_path}' has no 'density' grid: bake it again with Nubis")
     obj = bpy.data.objects.new(VOLUME_NAME, vol)
     scene.collection.objects.link(obj)
-    vol.materials.append(build_material(scene.nubis))
+    vol.materials.append(build_material(scene.nubis, "glow" in [g.name for g in vol.grids]))
     # The grids carry their world transform; the object must stay at the identity.
     obj.matrix_world.identity()
     return obj

@@ -173,6 +173,104 @@ class NUBIS_OT_apply_weather_rules(NeedsCloudscape, NubisOperator, bpy.types.Ope
         return f"Weather rules applied: {', '.join(rules) or 'none'}"
 
 
+class NUBIS_OT_storm_add(NeedsCloudscape, NubisOperator, bpy.types.Operator):
+    """Add a superstorm stencil at the 3D cursor, positioned by a new Empty"""
+
+    bl_idname = "nubis.storm_add"
+    bl_label = "Add Superstorm"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def run(self, context):
+        from ..core.state import MAX_STORMS
+
+        s = context.scene.nubis
+        if len(s.storms) >= MAX_STORMS:
+            raise NubisError(f"a scene holds at most {MAX_STORMS} superstorms: remove one first")
+        cursor = context.scene.cursor.location
+        scene_io.add_storm(context.scene, {"name": "Superstorm", "x": cursor.x, "y": cursor.y})
+        s.active_storm = len(s.storms) - 1
+        scene_io.generate_fields(context.scene)
+        return "Superstorm added: move its Empty to place it"
+
+
+class NUBIS_OT_storm_remove(NeedsCloudscape, NubisOperator, bpy.types.Operator):
+    """Remove the active superstorm and its Empty"""
+
+    bl_idname = "nubis.storm_remove"
+    bl_label = "Remove Superstorm"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def run(self, context):
+        s = context.scene.nubis
+        if not s.storms:
+            raise NubisError("there is no superstorm to remove")
+        storm = s.storms[s.active_storm]
+        if storm.empty is not None:
+            bpy.data.objects.remove(storm.empty)
+        s.storms.remove(s.active_storm)
+        s.active_storm = max(0, min(s.active_storm, len(s.storms) - 1))
+        scene_io.generate_fields(context.scene)
+        return None
+
+
+def _active_storm(context):
+    s = context.scene.nubis
+    if not s.storms:
+        raise NubisError("add a superstorm first (Add Superstorm)")
+    return s.storms[min(s.active_storm, len(s.storms) - 1)]
+
+
+class NUBIS_OT_storm_lifecycle(NeedsCloudscape, NubisOperator, bpy.types.Operator):
+    """Keyframe the active storm's blend: ramp in, hold, ramp out from the current frame (GDC22)"""
+
+    bl_idname = "nubis.storm_lifecycle"
+    bl_label = "Keyframe Storm Lifecycle"
+    bl_options = {"REGISTER", "UNDO"}
+
+    ramp_in: FloatProperty(name="Ramp In (s)", default=120.0, min=0.0)
+    hold: FloatProperty(name="Hold (s)", default=180.0, min=0.0)
+    ramp_out: FloatProperty(name="Ramp Out (s)", default=120.0, min=0.0)
+
+    def run(self, context):
+        from ..core import storms
+
+        scene = context.scene
+        storm = _active_storm(context)
+        fps = scene.render.fps / scene.render.fps_base
+        keys = storms.lifecycle_keys(scene.frame_current, fps, self.ramp_in, self.hold, self.ramp_out)
+        for frame, blend in keys:
+            storm.blend = blend
+            storm.keyframe_insert("blend", frame=frame)
+        return f"Lifecycle keyed over frames {keys[0][0]}-{keys[-1][0]}"
+
+
+class NUBIS_OT_lightning_sequence(NeedsCloudscape, NubisOperator, bpy.types.Operator):
+    """Keyframe a lightning sequence on the active storm: intra-cloud flashes of rising intensity, then
+    one or two ground discharges (GDC22 after Uman)"""
+
+    bl_idname = "nubis.lightning_sequence"
+    bl_label = "Add Lightning"
+    bl_options = {"REGISTER", "UNDO"}
+
+    flashes: IntProperty(name="Intra-cloud Flashes", default=4, min=1, max=20)
+    discharges: IntProperty(name="Ground Discharges", default=2, min=0, max=2)
+    peak: FloatProperty(name="Peak Intensity", default=20.0, min=0.0)
+    seed: IntProperty(name="Seed", default=0, min=0)
+
+    def run(self, context):
+        from ..core import storms
+
+        scene = context.scene
+        storm = _active_storm(context)
+        fps = scene.render.fps / scene.render.fps_base
+        keys = storms.lightning_keys(scene.frame_current, fps, self.flashes, self.discharges, self.peak, self.seed)
+        for frame, value in keys:
+            storm.flash = value
+            storm.keyframe_insert("flash", frame=frame)
+        storm.flash = 0.0
+        return f"{self.flashes} flashes and {self.discharges} discharges keyed from frame {keys[0][0]}"
+
+
 class NUBIS_OT_render_image(NeedsCloudscape, NubisOperator, bpy.types.Operator):
     """Render the clouds from the scene camera into the image 'Nubis Render'"""
 
@@ -252,6 +350,10 @@ CLASSES = (
     NUBIS_OT_layer_move,
     NUBIS_OT_layer_duplicate,
     NUBIS_OT_apply_weather_rules,
+    NUBIS_OT_storm_add,
+    NUBIS_OT_storm_remove,
+    NUBIS_OT_storm_lifecycle,
+    NUBIS_OT_lightning_sequence,
     NUBIS_OT_render_image,
     NUBIS_OT_bake_vdb,
     NUBIS_OT_bake_frames,

@@ -108,6 +108,46 @@ class NUBIS_PT_light(NubisPanel, bpy.types.Panel):
         self.layout.prop(context.scene.cycles, "volume_bounces", text="Cycles Volume Bounces")
 
 
+class NUBIS_PT_storms(NubisPanel, bpy.types.Panel):
+    bl_label = "Superstorms"
+    bl_parent_id = "NUBIS_PT_main"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout = self.layout
+        s = context.scene.nubis
+        row = layout.row()
+        row.template_list("UI_UL_list", "nubis_storms", s, "storms", s, "active_storm", rows=2)
+        col = row.column(align=True)
+        col.operator("nubis.storm_add", icon="ADD", text="")
+        col.operator("nubis.storm_remove", icon="REMOVE", text="")
+        if s.storms and 0 <= s.active_storm < len(s.storms):
+            storm = s.storms[s.active_storm]
+            box = layout.box()
+            for key in (
+                "empty",
+                "radius",
+                "coverage",
+                "blend",
+                "height",
+                "base",
+                "bottom_type",
+                "seed",
+                "spin",
+                "darkening",
+                "ambient_boost",
+                "glow",
+                "glow_color",
+                "flash",
+                "anvil_offset",
+            ):
+                box.prop(storm, key)
+            layout.operator("nubis.storm_lifecycle", icon="KEYFRAME")
+            layout.operator("nubis.lightning_sequence", icon="LIGHT_SUN")
+        layout.prop(s, "storm_twist")
+        layout.prop(s, "storm_jittered_rings")
+
+
 class NUBIS_PT_bake(NubisPanel, bpy.types.Panel):
     bl_label = "Bake"
     bl_parent_id = "NUBIS_PT_main"
@@ -125,6 +165,7 @@ CLASSES = (
     _section_panel("noise", "Noise"),
     _section_panel("density", "Density"),
     _section_panel("wind", "Wind"),
+    NUBIS_PT_storms,
     NUBIS_PT_light,
     _section_panel("lighting", "Lighting"),
     _section_panel("march", "Ray March"),

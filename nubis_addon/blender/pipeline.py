@@ -58,7 +58,13 @@ COMPARE_MODES = ("single", "full")
 
 
 def render_viewport(
-    scene, width: int, height: int, light_mode: int = 0, mode: str = "", clip_box: tuple | None = None
+    scene,
+    width: int,
+    height: int,
+    light_mode: int = 0,
+    mode: str = "",
+    clip_box: tuple | None = None,
+    passes: int = 1,
 ) -> np.ndarray:
     """The viewport's clouds from the scene camera: premultiplied scene-linear RGBA, top row first.
 
@@ -74,8 +80,16 @@ def render_viewport(
         # The atmosphere fade has no counterpart in the Cycles scene.
         state.params["lighting_fade_distance"] = 0.0
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
-    clouds.update(state)
-    return engine.render_offscreen(clouds, scene_io.camera_inv_view_proj(scene, width, height), width, height)
+    inv = scene_io.camera_inv_view_proj(scene, width, height)
+    # Offline, several passes with shifted jitter replace the viewport's grain with a converged image.
+    passes = max(1, passes)
+    total = None
+    for i in range(passes):
+        state.jitter_pass = i
+        clouds.update(state)
+        frame = engine.render_offscreen(clouds, inv, width, height)
+        total = frame if total is None else total + frame
+    return total / passes
 
 
 def downsample(rgba: np.ndarray, factor: int) -> np.ndarray:
@@ -115,15 +129,18 @@ def bake(
     plan = plan_bake(state, voxel_size or scene.nubis.bake_voxel_size, region=region)
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
     clouds.update(state)
-    density = gpu_bake.bake_density(clouds, plan, progress)
+    density, glow = gpu_bake.bake_density(clouds, plan, progress)
     active = int(np.count_nonzero(density > vdbio.DEFAULT_TOLERANCE))
+    grids = {"density": density}
+    if float(glow.max()) > vdbio.DEFAULT_TOLERANCE:
+        grids["glow"] = glow  # the storms' glow and lightning, for Cycles' emission
     meta = {
         "nubis_sigma": float(scene.nubis.density_sigma),
         "nubis_voxel_size": float(plan.voxel_size),
         "nubis_time": float(state.time),
         "nubis_preset": scene.nubis.preset,
     }
-    vdbio.write_vdb(path, {"density": density}, plan.voxel_size, plan.origin, meta)
+    vdbio.write_vdb(path, grids, plan.voxel_size, plan.origin, meta)
     return BakeResult(path, plan, active, time.perf_counter() - start)
 
 

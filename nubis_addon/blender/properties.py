@@ -15,7 +15,7 @@ from bpy.props import (
 )
 
 from ..core.params import PARAMS, Param
-from ..core.presets import LAYER_SCHEMA
+from ..core.presets import LAYER_SCHEMA, STORM_SCHEMA
 
 
 def _tag_redraw(_self, context) -> None:
@@ -82,6 +82,81 @@ NubisFieldLayer = type(
 )
 
 
+_STORM_UNITS = {"x": "LENGTH", "y": "LENGTH", "radius": "LENGTH", "anvil_offset": "LENGTH"}
+_STORM_HELP = {
+    "blend": "Lifecycle blend factor: animate it for the storm to form and dissipate (GDC22)",
+    "height": "Top of the storm at its centre, in layer thicknesses",
+    "base": "Height of the storm's flat foot, in layer thicknesses (negative lowers it)",
+    "bottom_type": "Raggedness of the underside",
+    "spin": "Vortex rotation at the centre in radians per second; outer rings turn slower",
+    "darkening": "Optical-depth scale of the light reaching the storm's centre",
+    "glow": "Intensity of the internal glow",
+    "ambient_boost": "Ambient light under the storm relative to the other clouds",
+    "anvil_offset": "How far downwind the cirrus anvil sits",
+}
+
+
+def _storm_annotations() -> dict:
+    ann = {
+        "empty": PointerProperty(
+            type=bpy.types.Object,
+            name="Position",
+            update=_storm_changed,
+            description="An Empty whose location is the storm's centre; move it in the viewport",
+        ),
+        "flash": FloatProperty(
+            name="Flash",
+            default=0.0,
+            min=0.0,
+            soft_max=50.0,
+            update=_tag_redraw,
+            description="Lightning flash intensity; keyframed by Add Lightning",
+        ),
+    }
+    for key, spec in STORM_SCHEMA.items():
+        typ, default = spec[0], spec[1]
+        label = key.replace("_", " ").title()
+        desc = _STORM_HELP.get(key, "")
+        if key in ("x", "y"):
+            continue  # the Empty holds the position
+        if typ is str:
+            ann[key] = StringProperty(name=label, default=default)
+        elif typ is int:
+            ann[key] = IntProperty(name=label, default=default, min=spec[2], max=spec[3], update=_storm_changed)
+        elif typ is float:
+            update = _tag_redraw if key in ("spin", "darkening", "glow", "ambient_boost") else _storm_changed
+            ann[key] = FloatProperty(
+                name=label,
+                default=default,
+                min=spec[2],
+                max=spec[3],
+                description=desc,
+                unit=_STORM_UNITS.get(key, "NONE"),
+                update=update,
+            )
+        elif typ is list:
+            ann[key] = FloatVectorProperty(
+                name=label, size=3, default=default, subtype="COLOR", min=0.0, update=_tag_redraw
+            )
+    return ann
+
+
+def _storm_changed(_self, context) -> None:
+    from . import scene_io
+
+    scene = getattr(context, "scene", None)
+    if scene is not None and getattr(scene, "nubis", None) is not None and scene.nubis.field_a is not None:
+        scene_io.generate_fields(scene)
+    _tag_redraw(_self, context)
+
+
+NubisStorm = type(
+    "NubisStorm",
+    (bpy.types.PropertyGroup,),
+    {"__annotations__": _storm_annotations(), "__doc__": "A superstorm stencil"},
+)
+
+
 def _settings_annotations() -> dict:
     ann = {p.key: _prop_for(p) for p in PARAMS}
     ann.update(
@@ -105,6 +180,8 @@ def _settings_annotations() -> dict:
             type=bpy.types.Image, name="Cirrus Field", update=_tag_redraw, description="Cirrus coverage and type"
         ),
         layers=CollectionProperty(type=NubisFieldLayer),
+        storms=CollectionProperty(type=NubisStorm),
+        active_storm=IntProperty(name="Active Storm", default=0),
         rule_rain=BoolProperty(
             name="Rain Rule",
             default=False,
@@ -166,7 +243,7 @@ NubisSceneSettings = type(
     {"__annotations__": _settings_annotations(), "__doc__": "Nubis cloudscape settings of a scene"},
 )
 
-CLASSES = (NubisFieldLayer, NubisSceneSettings)
+CLASSES = (NubisFieldLayer, NubisStorm, NubisSceneSettings)
 
 
 def register() -> None:

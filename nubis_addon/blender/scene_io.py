@@ -10,9 +10,10 @@ import numpy as np
 from mathutils import Euler, Vector
 
 from ..core import fields as fieldgen
+from ..core import storms as stormgen
 from ..core.errors import NubisError
 from ..core.presets import Preset
-from ..core.state import CloudState, sun_vector
+from ..core.state import MAX_STORMS, CloudState, StormLight, sun_vector, wind_vector
 from .properties import layer_from_dict, layer_to_dict, params_from_scene
 
 FIELD_IMAGES = {
@@ -96,8 +97,99 @@ def generate_fields(scene) -> None:
         fieldgen.apply_rain_rule(result, settings.rule_cumulonimbus_top)
     if settings.rule_horizon:
         fieldgen.apply_horizon_rule(result, params, _camera_xy(scene), settings.rule_horizon_start)
+    # SPEC 1.9.1: superstorm stencils override the field inside their radius, after everything else.
+    storms = storm_stencils(settings, params)
+    if storms:
+        stormgen.apply_storms(result, params, storms)
     for which, data in result.items():
         write_field_image(settings, which, data)
+
+
+# ---- superstorms ------------------------------------------------------------------------------------
+
+
+def storm_centre(storm) -> tuple[float, float]:
+    if storm.empty is None:
+        return (0.0, 0.0)
+    t = evaluated_matrix(storm.empty).translation
+    return (float(t.x), float(t.y))
+
+
+def storm_stencils(settings, params) -> list:
+    wx, wy = wind_vector(params["wind_direction"])
+    out = []
+    for s in list(settings.storms)[:MAX_STORMS]:
+        x, y = storm_centre(s)
+        out.append(
+            stormgen.Storm(
+                x=x,
+                y=y,
+                radius=s.radius,
+                coverage=s.coverage,
+                blend=s.blend,
+                height=s.height,
+                base=s.base,
+                bottom_type=s.bottom_type,
+                seed=s.seed,
+                anvil_offset=s.anvil_offset,
+                wind_x=wx,
+                wind_y=wy,
+            )
+        )
+    return out
+
+
+def storm_lights(settings) -> tuple[StormLight, ...]:
+    return tuple(
+        StormLight(
+            *storm_centre(s),
+            s.radius,
+            s.blend,
+            s.spin,
+            s.darkening,
+            s.glow,
+            s.ambient_boost,
+            tuple(s.glow_color),
+            s.flash,
+        )
+        for s in list(settings.storms)[:MAX_STORMS]
+    )
+
+
+def add_storm(scene, data: dict):
+    """A storm entry and the Empty that positions it."""
+    empty = bpy.data.objects.new(data.get("name", "Superstorm"), None)
+    empty.empty_display_type = "CIRCLE"
+    empty.empty_display_size = data.get("radius", 12000.0)
+    empty.location = (data.get("x", 0.0), data.get("y", 0.0), scene.nubis.layer_bottom)
+    scene.collection.objects.link(empty)
+    storm = scene.nubis.storms.add()
+    for key, value in data.items():
+        if key not in ("x", "y"):
+            setattr(storm, key, value)
+    storm.empty = empty
+    return storm
+
+
+def storms_animated(settings) -> bool:
+    for s in settings.storms:
+        if s.empty is not None and s.empty.animation_data and s.empty.animation_data.action:
+            return True
+    anim = settings.id_data.animation_data
+    return bool(anim and anim.action and any("storms" in fc.data_path for fc in _fcurves(anim.action)))
+
+
+def _fcurves(action):
+    curves = getattr(action, "fcurves", None)
+    if curves is not None:
+        return list(curves)
+    # Blender 5.0 keeps F-curves in layered actions.
+    out = []
+    for layer in getattr(action, "layers", ()):
+        for strip in layer.strips:
+            for bag in getattr(strip, "channelbags", ()):
+                out.extend(bag.fcurves)
+    return out
 
 
 def _camera_xy(scene) -> tuple[float, float]:
@@ -132,7 +224,13 @@ def apply_preset(scene, preset: Preset) -> None:
     _setup_sun(scene, preset.extra["sun"])
     _setup_world(scene, preset.extra["world"])
     _setup_camera(scene, preset.extra["camera"])
-    generate_fields(scene)  # after the camera: the horizon rule is centred on it
+    for storm in list(settings.storms):
+        if storm.empty is not None:
+            bpy.data.objects.remove(storm.empty)
+    settings.storms.clear()
+    for data in preset.storms:
+        add_storm(scene, data)
+    generate_fields(scene)  # after the camera and storms: the rules and stencils are placed by them
     r = preset.extra["render"]
     scene.render.resolution_x, scene.render.resolution_y = r["width"], r["height"]
     scene.render.resolution_percentage = 100
@@ -252,6 +350,7 @@ def state_from_scene(scene, camera_location=None, fields: tuple | None = None) -
         ambient=world_ambient(scene) if settings.ambient_source == "WORLD" else tuple(settings.ambient_color),
         draw_center=(float(camera_location[0]), float(camera_location[1])),
         time=time,
+        storms=storm_lights(settings),
     )
 
 

@@ -29,6 +29,19 @@ _pending_images: set[str] = set()
 
 
 @bpy.app.handlers.persistent
+def on_frame_change(scene, _depsgraph=None) -> None:
+    """Animated storms (lifecycle blend, a moving Empty) change the field: re-composite on frame changes."""
+    settings = getattr(scene, "nubis", None)
+    if settings is None or settings.field_a is None or not settings.storms:
+        return
+    if scene_io.storms_animated(settings):
+        try:
+            scene_io.generate_fields(scene)
+        except NubisError as err:
+            _last_error[:] = [str(err)]
+
+
+@bpy.app.handlers.persistent
 def on_depsgraph_update(scene, depsgraph) -> None:
     """Painting an image layer in the image editor re-composites the field. Strokes arrive as image
     updates; a short timer gathers them so a fast brush does not re-composite on every dab."""
@@ -158,6 +171,8 @@ def register() -> None:
         bpy.app.handlers.load_post.append(mark_dirty)
     if on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post:
         bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
+    if on_frame_change not in bpy.app.handlers.frame_change_post:
+        bpy.app.handlers.frame_change_post.append(on_frame_change)
 
 
 def unregister() -> None:
@@ -169,6 +184,8 @@ def unregister() -> None:
         bpy.app.handlers.load_post.remove(mark_dirty)
     if on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
         bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
+    if on_frame_change in bpy.app.handlers.frame_change_post:
+        bpy.app.handlers.frame_change_post.remove(on_frame_change)
     if _offscreen["buffer"] is not None:
         _offscreen["buffer"].free()
     _offscreen.update(size=None, buffer=None)

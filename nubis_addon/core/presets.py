@@ -88,6 +88,27 @@ EXTRA_SCHEMA: dict[str, dict[str, tuple]] = {
 }
 
 
+# A superstorm stencil (SPEC 1.9.1): where it is, how big and strong, and how it is lit.
+STORM_SCHEMA: dict[str, tuple] = {
+    "name": (str, "Superstorm"),
+    "x": (float, 0.0, -1e7, 1e7),
+    "y": (float, 0.0, -1e7, 1e7),
+    "radius": (float, 12000.0, 100.0, 1e6),
+    "coverage": (float, 1.0, 0.0, 1.0),
+    "blend": (float, 1.0, 0.0, 1.0),
+    "height": (float, 3.0, 0.1, 8.0),
+    "base": (float, -0.1, -1.0, 1.0),
+    "bottom_type": (float, 0.85, 0.0, 1.0),
+    "seed": (int, 0, 0, 2**31 - 1),
+    "spin": (float, 0.02, -10.0, 10.0),
+    "darkening": (float, 3.0, 1.0, 50.0),
+    "glow": (float, 0.0, 0.0, 1e4),
+    "glow_color": (list, [1.0, 0.08, 0.03]),
+    "ambient_boost": (float, 1.5, 0.0, 20.0),
+    "anvil_offset": (float, 12000.0, -1e6, 1e6),
+}
+
+
 @dataclass
 class Preset:
     name: str
@@ -96,6 +117,7 @@ class Preset:
     extra: dict[str, dict[str, Any]]
     layers: list[dict[str, Any]] = field(default_factory=list)
     description: str = ""
+    storms: list[dict[str, Any]] = field(default_factory=list)
 
 
 def preset_dir() -> Path:
@@ -143,7 +165,11 @@ def parse_preset(data: dict[str, Any], path: Path | None = None) -> Preset:
     }
     sections = {p.section for p in PARAMS}
     layers: list[dict[str, Any]] = []
+    storms: list[dict[str, Any]] = []
     for sec, table in data.items():
+        if sec == "storms":
+            storms = _parse_storms(table, where)
+            continue
         if not isinstance(table, dict):
             raise NubisError(f"{where}: '{sec}' must be a table like [{sec}], not a single value")
         if sec not in sections and sec not in EXTRA_SCHEMA:
@@ -173,7 +199,25 @@ def parse_preset(data: dict[str, Any], path: Path | None = None) -> Preset:
         _check_vector(extra[sec][key], n, f"{where}: {sec}.{key}")
     _check_masks(layers, where)
     meta = extra.pop("preset")
-    return Preset(meta["name"], path, params, extra, layers, meta["description"])
+    return Preset(meta["name"], path, params, extra, layers, meta["description"], storms)
+
+
+def _parse_storms(value: Any, where: str) -> list[dict[str, Any]]:
+    if not isinstance(value, list):
+        raise NubisError(f"{where}: storms must be written as [[storms]] tables")
+    storms = []
+    for i, raw in enumerate(value):
+        here = f"{where}: storms[{i}]"
+        if not isinstance(raw, dict):
+            raise NubisError(f"{here} must be a table")
+        storm = {k: (list(spec[1]) if isinstance(spec[1], list) else spec[1]) for k, spec in STORM_SCHEMA.items()}
+        for key, val in raw.items():
+            if key not in STORM_SCHEMA:
+                raise NubisError(f"{here}: unknown key '{key}'; keys are {', '.join(STORM_SCHEMA)}")
+            storm[key] = _check_value(STORM_SCHEMA[key], val, f"{here}.{key}")
+        _check_vector(storm["glow_color"], 3, f"{here}.glow_color")
+        storms.append(storm)
+    return storms
 
 
 def _check_param(p, value: Any, where: str) -> Any:

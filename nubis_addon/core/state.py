@@ -12,6 +12,26 @@ import numpy as np
 from .params import defaults
 
 
+@dataclass(frozen=True)
+class StormLight:
+    """What the renderer needs of a superstorm beyond the field: its centre and radius for the vortex
+    and the storm lighting (SPEC 1.9.5, 2.10), and the lifecycle blend."""
+
+    x: float
+    y: float
+    radius: float
+    blend: float = 1.0
+    spin: float = 0.02  # radians per second at the centre
+    darkening: float = 3.0  # optical-depth scale of the light march at the centre
+    glow: float = 0.0  # internal glow intensity
+    ambient_boost: float = 1.5  # ambient under the storm relative to the clouds'
+    glow_color: tuple[float, float, float] = (1.0, 0.08, 0.03)
+    flash: float = 0.0  # lightning: intensity added to the glow this frame
+
+
+MAX_STORMS = 4
+
+
 @dataclass
 class CloudState:
     params: dict[str, Any] = field(default_factory=defaults)
@@ -25,8 +45,10 @@ class CloudState:
     time: float = 0.0  # seconds of simulated wind
     light_mode: int = 0  # 0 real-time cone march, 1 reference march
     jitter: bool = True
+    jitter_pass: int = 0  # which accumulation pass: shifts the per-pixel jitter
     cirrus_slab: float | None = None  # the bake's cirrus slab thickness, when wider than the setting
     clip_box: tuple[float, float, float, float] | None = None  # x0, y0, x1, y1: clouds only inside
+    storms: tuple[StormLight, ...] = ()
 
     def has_cirrus(self) -> bool:
         return self.field_c is not None and self.params["cirrus_coverage"] > 0 and float(self.field_c[..., 0].max()) > 0

@@ -11,10 +11,13 @@ from ..core.bakeplan import BakePlan
 from .engine import CloudGPU, fullscreen_batch, read_pixels, shader
 
 
-def bake_density(gpu_inputs: CloudGPU, plan: BakePlan, progress: Callable[[float], None] | None = None) -> np.ndarray:
-    """Fine density at every voxel centre, shape (z, y, x)."""
+def bake_density(
+    gpu_inputs: CloudGPU, plan: BakePlan, progress: Callable[[float], None] | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Fine density and storm glow emission at every voxel centre, each shaped (z, y, x)."""
     nx, ny, nz = plan.dims
     vol = np.empty((nz, ny, nx), np.float32)
+    glow = np.empty((nz, ny, nx), np.float32)
     sh = shader("bake")
     batch = fullscreen_batch("bake")
     offscreen = gpu.types.GPUOffScreen(nx, ny, format="RGBA32F")
@@ -27,9 +30,11 @@ def bake_density(gpu_inputs: CloudGPU, plan: BakePlan, progress: Callable[[float
                 sh.uniform_float("bake_origin", (*plan.origin, float(k)))
                 sh.uniform_float("bake_voxel", (plan.voxel_size, 0.0, 0.0, 0.0))
                 batch.draw(sh)
-                vol[k] = read_pixels(fb, nx, ny)[..., 0]
+                px = read_pixels(fb, nx, ny)
+                vol[k] = px[..., 0]
+                glow[k] = px[..., 1]
                 if progress:
                     progress((k + 1) / nz)
     finally:
         offscreen.free()
-    return vol
+    return vol, glow

@@ -49,6 +49,7 @@ def _create_info(
 
 # Each stage: its push constants and any samplers beyond the cloud inputs. Fragment source is
 # shaders/nubis_<stage>_frag.glsl, compiled after the cloud libraries.
+# The bake reads the lighting library too, for the glow grid.
 STAGES: dict[str, tuple[tuple[tuple[str, str], ...], tuple[tuple[str, str], ...]]] = {
     "raymarch": ((("MAT4", "inv_view_proj"),), ()),
     "bake": ((("VEC4", "bake_origin"), ("VEC4", "bake_voxel")), ()),

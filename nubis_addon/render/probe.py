@@ -20,6 +20,8 @@ MAX_WIDTH = 1024  # texels per row of the point texture; rows grow as needed
 _MODE_DENSITY = 0.0
 _MODE_REMAP = 1.0
 _MODE_NOISE = 2.0
+_MODE_VORTEX = 3.0
+_MODE_GLOW = 4.0
 NOISE_TEXTURES = {"lf": 0.0, "hf": 1.0, "curl": 2.0}
 
 
@@ -65,6 +67,24 @@ def probe_noise(gpu_inputs: CloudGPU, which: str, coords: np.ndarray) -> np.ndar
     texels = np.zeros((len(c), 4), np.float32)
     texels[:, : c.shape[1]] = c
     return _run(gpu_inputs, texels, (_MODE_NOISE, NOISE_TEXTURES[which], 0.0, 0.0))
+
+
+def probe_vortex(gpu_inputs: CloudGPU, xy: np.ndarray) -> np.ndarray:
+    """Where the superstorm vortex moves the detail-noise sample at world `xy` (N, 2): (N, 4) holding the
+    moved xy and the neighbouring ring's xy (equal outside ring overlaps)."""
+    p = np.asarray(xy, dtype=np.float32)
+    texels = np.zeros((len(p), 4), np.float32)
+    texels[:, :2] = p
+    return _run(gpu_inputs, texels, (_MODE_VORTEX, 0.0, 0.0, 0.0))
+
+
+def probe_glow(gpu_inputs: CloudGPU, points: np.ndarray, fine_density: float = 0.0) -> np.ndarray:
+    """The storms' glow radiance (rgb) at world `points` (N, 3) for a given fine density: (N, 3)."""
+    p = np.asarray(points, dtype=np.float32)
+    texels = np.zeros((len(p), 4), np.float32)
+    texels[:, :3] = p
+    texels[:, 3] = fine_density
+    return _run(gpu_inputs, texels, (_MODE_GLOW, 0.0, 0.0, 0.0))[:, :3]
 
 
 def _run(gpu_inputs: CloudGPU, texels: np.ndarray, mode: tuple[float, float, float, float]) -> np.ndarray:

@@ -21,11 +21,11 @@ def struct_fields() -> tuple[str, ...]:
     if body is None:
         raise RuntimeError("nubis_params.glsl no longer declares struct NubisParams")
     text = re.sub(r"/\*.*?\*/", "", body.group(1), flags=re.S)
-    members = re.findall(r"(\w+)\s+(\w+)\s*;", text)
-    bad = [name for typ, name in members if typ != "vec4"]
+    members = re.findall(r"(\w+)\s+(\w+)\s*(?:\[(\d+)\])?\s*;", text)
+    bad = [name for typ, name, _n in members if typ != "vec4"]
     if bad:
-        raise RuntimeError(f"NubisParams members must be vec4, not: {bad}")
-    return tuple(name for _typ, name in members)
+        raise RuntimeError(f"NubisParams members must be vec4 or vec4 arrays, not: {bad}")
+    return tuple((name, int(n) if n else 0) for _typ, name, n in members)
 
 
 def param_vectors(state: CloudState) -> dict[str, tuple[float, float, float, float]]:
@@ -76,22 +76,41 @@ def param_vectors(state: CloudState) -> dict[str, tuple[float, float, float, flo
             state.cirrus_slab or p["cirrus_thickness"],
             0.0,
         ),
+        "storm_info": (float(len(state.storms)), p["storm_twist"], p["storm_glow_height"], p["storm_anvil_shift"]),
+        "storm_shape": [(s.x, s.y, s.radius, s.blend) for s in state.storms],
+        "storm_light": [(s.spin, s.darkening, s.glow, s.ambient_boost) for s in state.storms],
+        "storm_glow": [(*s.glow_color, s.flash) for s in state.storms],
         "clip_box": state.clip_box or (1.0, 1.0, -1.0, -1.0),
-        "options": (1.0 if state.jitter else 0.0, 0.0, 0.0, 0.0),
+        "options": (
+            1.0 if state.jitter else 0.0,
+            1.0 if p["storm_jittered_rings"] else 0.0,
+            float(state.jitter_pass),
+            0.0,
+        ),
     }
 
 
 def pack(state: CloudState) -> np.ndarray:
+    """The block as float32 rows of four (std140 lays vec4 members and vec4 arrays out densely)."""
     vectors = param_vectors(state)
-    names = struct_fields()
-    missing = set(names) - set(vectors)
-    extra = set(vectors) - set(names)
+    fields = struct_fields()
+    names = {n for n, _count in fields}
+    missing, extra = names - set(vectors), set(vectors) - names
     if missing or extra:
         raise RuntimeError(f"NubisParams and param_vectors disagree: missing {missing}, unknown {extra}")
-    data = np.array([vectors[n] for n in names], dtype=np.float32)
+    rows = []
+    for name, count in fields:
+        value = vectors[name]
+        if count:
+            if len(value) > count:
+                raise ValueError(f"{name} holds at most {count} entries, got {len(value)}")
+            value = list(value) + [(0.0, 0.0, 0.0, 0.0)] * (count - len(value))
+            rows.extend(value)
+        else:
+            rows.append(value)
+    data = np.array(rows, dtype=np.float32)
     if not np.all(np.isfinite(data)):
-        bad = [n for n, v in zip(names, data, strict=True) if not np.all(np.isfinite(v))]
-        raise ValueError(f"non-finite cloud settings in {bad}")
+        raise ValueError("non-finite cloud settings: check the scene's Nubis values for NaN or infinity")
     return data
 
 

@@ -1,0 +1,313 @@
+"""Superstorm stencils of the Nubis Data Field generator (SPEC 1.9, GDC22): rasterise each storm's
+mesocyclone into the tropospheric field images ("a", "b") and its anvil into the cirrus image.
+
+A storm is defined by "Position, Radius and blend factor" (GDC22, SPEC 1.9.1); the blend factor is
+animated over the storm's lifecycle (SPEC 1.9.8, :func:`lifecycle_keys`). Pure numpy: no bpy, no gpu.
+The renderer's share of the storm (vortex rotation, flipped profile, darkening, glow) lives in the
+shaders and reads the storm coverage channel written here (SPEC 1.9.6, 2.10).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import astuple, dataclass
+from typing import Any
+
+import numpy as np
+
+from .fields import fbm, pixel_centres
+
+# Width of the stencil's outer fade, as a fraction of the radius: the modelling is fully on inside
+# (1 - EDGE_WIDTH) x radius and fades out with zero slope at the radius. [IMPL]
+EDGE_WIDTH = 0.4
+ANVIL_EDGE_WIDTH = 0.3
+# [IMPL] Shape constants of the mesocyclone, in fractions of the radius (not given by the sources).
+COLUMN_RADIUS = (0.18, 0.42)  # coverage column: fully covered inside .18, gone by .42 (noisy radius)
+TOWER_RADIUS = (0.12, 0.5)  # the raised max height spreads a little wider than the coverage column
+FOOT_RADIUS = (0.55, 0.95)  # the flat, spread-out foot (the sombrero's brim)
+ANVIL_COVERAGE = 0.95
+ANVIL_TYPE = (0.75, 0.35)  # billowy above the storm, wispy at the downwind tail (0 cirrostratus, 1 cirrocumulus)
+
+
+@dataclass
+class Storm:
+    """One superstorm stencil (SPEC 1.9.1). Heights are fractions of the layer thickness above the
+    layer bottom, like the field's min/max height channels (SPEC 1.9.4)."""
+
+    x: float  # world centre, metres
+    y: float
+    radius: float  # metres
+    coverage: float = 1.0  # peak cloud coverage at the centre
+    blend: float = 1.0  # lifecycle blend factor (GDC22 animates it: 0 = no storm)
+    height: float = 3.2  # max height at the centre: 3.2 raises a 1.5-4 km layer's top to ~9.5 km
+    base: float = -0.15  # min height at the foot: < 0 lowers the flat foot below the layer bottom
+    bottom_type: float = 0.85  # ragged, wispy underside (SPEC 1.3.3)
+    seed: int = 0
+    anvil_offset: float | None = None  # metres downwind of the centre; None = 1.0 x radius
+    wind_x: float = 1.0  # wind direction (normalised here) that carries the anvil
+    wind_y: float = 0.0
+    anvil_size: float = 1.6  # anvil radius / storm radius
+    twist: float = 2.2  # radians the noises are twisted about the centre (SPEC 1.9.2 vortex tendrils)
+
+    def wind(self) -> tuple[float, float]:
+        n = math.hypot(self.wind_x, self.wind_y)
+        return (self.wind_x / n, self.wind_y / n) if n > 0 else (0.0, 0.0)
+
+    def anvil_centre(self) -> tuple[float, float]:
+        offset = self.radius if self.anvil_offset is None else self.anvil_offset
+        wx, wy = self.wind()
+        return self.x + wx * offset, self.y + wy * offset
+
+    def anvil_radius(self) -> float:
+        return self.anvil_size * self.radius
+
+    def reach(self) -> float:
+        """Farthest distance from the centre that any image is touched (the anvil's, in the cirrus)."""
+        ax, ay = self.anvil_centre()
+        return max(self.radius, math.hypot(ax - self.x, ay - self.y) + self.anvil_radius())
+
+
+# ---- tiny pure helpers ---------------------------------------------------------------------------
+
+
+def _smoothstep(e0: float, e1: float, x: np.ndarray) -> np.ndarray:
+    t = np.clip((x - e0) / (e1 - e0), 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def _smootherstep(t: np.ndarray) -> np.ndarray:
+    t = np.clip(t, 0.0, 1.0)
+    return t * t * t * (t * (t * 6.0 - 15.0) + 10.0)
+
+
+def storm_weight(dist: np.ndarray, radius: float, edge: float = EDGE_WIDTH) -> np.ndarray:
+    """The stencil's radial weight: 1 inside (1 - edge) x radius, a C2 fade to exactly 0 at the radius
+    and beyond, so the storm meets the surrounding sky without a seam (GDC22: "seamless")."""
+    return _smootherstep((1.0 - np.asarray(dist, np.float64) / radius) / edge)
+
+
+def _window(params: Mapping[str, Any], cx: float, cy: float, half: float) -> tuple[slice, slice] | None:
+    """Rows and columns of the field pixels whose centres may lie within `half` of (cx, cy)."""
+    res, size = params["field_resolution"], params["field_size"]
+
+    def span(c: float, origin: float) -> slice | None:
+        lo = math.floor(((c - half - origin) / size + 0.5) * res - 0.5)
+        hi = math.ceil(((c + half - origin) / size + 0.5) * res - 0.5) + 1
+        lo, hi = max(lo, 0), min(hi, res)
+        return slice(lo, hi) if hi > lo else None
+
+    cols, rows = span(cx, params["field_origin_x"]), span(cy, params["field_origin_y"])
+    return None if rows is None or cols is None else (rows, cols)
+
+
+def _inside(
+    params: Mapping[str, Any], xs: np.ndarray, ys: np.ndarray, cx: float, cy: float, radius: float
+) -> tuple[tuple[slice, slice], np.ndarray] | None:
+    """The window around a circle and the mask of its pixels strictly inside the circle: only those are
+    evaluated (the noises are the expensive part) and only those can change."""
+    win = _window(params, cx, cy, radius)
+    if win is None:
+        return None
+    inside = np.hypot(xs[win] - cx, ys[win] - cy) < radius
+    return (win, inside) if inside.any() else None
+
+
+# ---- the mesocyclone (SPEC 1.9.2, 1.9.4) ------------------------------------------------------
+
+
+def _mesocyclone(storm: Storm, xs: np.ndarray, ys: np.ndarray) -> dict[str, np.ndarray]:
+    """Weight and target values of one storm over a window of pixel centres (storm-local noise, so
+    moving a storm moves its shape with it; deterministic for its seed)."""
+    lx, ly = (xs - storm.x) / storm.radius, (ys - storm.y) / storm.radius
+    r = np.hypot(lx, ly)
+    s = int(storm.seed) * 64  # each noise below gets its own 8 seeds (fbm uses seed + octave)
+    # SPEC 1.9.2, GDC22: "We twisted these noises around the center of the mesocyclone to produce the
+    # characteristic vortex tendrils": the twist grows towards the centre, where the vortex is fastest.
+    phi = storm.twist * (1.0 - np.minimum(r, 1.0)) ** 2
+    c, sn = np.cos(phi), np.sin(phi)
+    tx, ty = c * lx - sn * ly, sn * lx + c * ly
+    # Distorted noises (SPEC 1.9.4): a low-frequency warp bends the tendril and relief noises.
+    wx = fbm("perlin", tx * 2.5 + 11.3, ty * 2.5 - 4.7, 2, s) - 0.5
+    wy = fbm("perlin", tx * 2.5 - 7.9, ty * 2.5 + 3.1, 2, s + 8) - 0.5
+    edge = fbm("perlin", tx * 2.2 + 5.5, ty * 2.2 + 1.7, 3, s + 16) - 0.5
+    tendril = fbm("perlin", (tx + 0.5 * wx) * 4.0, (ty + 0.5 * wy) * 4.0, 3, s + 24)
+    billow = fbm("worley", tx * 3.5 + 0.37, ty * 3.5 + 0.61, 2, s + 32)
+    relief = fbm("perlin", (tx + 0.6 * wy) * 3.5 - 2.3, (ty + 0.6 * wx) * 3.5 + 8.1, 3, s + 40)
+    # SPEC 1.9.2, GDC22: "Several noises were composited and blended to their maximum values at the
+    # center to produce the characteristic cylindrical foot of the mesocyclone" (the "sombrero").
+    comp = np.clip((0.55 * tendril + 0.45 * billow - 0.4) / 0.3, 0.0, 1.0)
+    rc = r + 0.22 * edge  # noisy, twisted radius: a round column with ragged edges, not a disc
+    column = 1.0 - _smoothstep(*COLUMN_RADIUS, rc)
+    tower = 1.0 - _smoothstep(*TOWER_RADIUS, rc)
+    foot = 1.0 - _smoothstep(*FOOT_RADIUS, r + 0.3 * edge)
+    brim = foot * (0.45 + 0.55 * comp)  # the spread-out foot: mostly covered, torn into tendrils
+    coverage = storm.coverage * (brim + (1.0 - brim) * column)
+    # "increase cloud coverage and type radially toward a point": cumulonimbus (1) at the centre.
+    top_type = (0.55 + 0.35 * comp) * (1.0 - column) + column
+    # SPEC 1.3.3 / 1.9.2: a raised bottom type relaxes the bottom profile into ragged, wispy shapes.
+    bottom_type = storm.bottom_type * (0.8 + 0.2 * np.maximum(comp, column))
+    # SPEC 1.9.4: variable heights. The tower reaches `height` with a slightly domed top; the brim
+    # rises a little above the layer where its noise is dense.
+    dome = storm.height * (1.0 - 0.1 * np.clip(rc / TOWER_RADIUS[1], 0.0, 1.0) ** 2)
+    brim_top = 1.0 + 0.3 * comp * foot
+    max_height = brim_top + (dome - brim_top) * tower
+    # SPEC 1.9.4, GDC22: "a set of distorted noises and radial gradients to use as signals for a height
+    # adjustment to give the underside more definition"; "the bottom of a mesocyclone flattens out, [but]
+    # the underside is anything but flat": small relief at the foot growing outwards, and a slight
+    # lowering (wall cloud) under the column.
+    gradient = _smoothstep(0.3, 1.0, r)
+    min_height = storm.base + (0.06 + 0.4 * gradient) * (relief - 0.5) * 2.0 - 0.05 * column
+    return {
+        "weight": storm_weight(r * storm.radius, storm.radius) * float(np.clip(storm.blend, 0.0, 1.0)),
+        "coverage": coverage,
+        "type": top_type,
+        "bottom_type": bottom_type,
+        "max_height": max_height,
+        "min_height": min_height,
+    }
+
+
+def _anvil(storm: Storm, xs: np.ndarray, ys: np.ndarray) -> dict[str, np.ndarray]:
+    """SPEC 1.9.7, GDC22: "We used the superstorm position, radius and wind vector to create a cirrus cloud
+    formation above the superstorm mesocyclone and offset in the wind direction." [IMPL] An ellipse that
+    fans out downwind, inside the circle of `anvil_radius` around `anvil_centre`, streaked along the wind."""
+    ax, ay = storm.anvil_centre()
+    ra = storm.anvil_radius()
+    wx, wy = storm.wind()
+    if wx == 0.0 and wy == 0.0:
+        wx = 1.0
+    dx, dy = (xs - ax) / ra, (ys - ay) / ra
+    along, across = dx * wx + dy * wy, -dx * wy + dy * wx
+    spread = 0.55 + 0.35 * np.clip(0.5 + 0.5 * along, 0.0, 1.0)  # <= 1: stays inside the anvil circle
+    re = np.hypot(along, across / spread)
+    s = int(storm.seed) * 64
+    edge = fbm("perlin", along * 1.5 + 3.3, across * 4.0 - 1.9, 3, s + 48) - 0.5
+    streak = fbm("perlin", along * 2.0 - 6.1, across * 6.0 + 2.7, 3, s + 56)
+    shape = 1.0 - _smoothstep(0.6, 1.0, re + 0.35 * edge)
+    blend = float(np.clip(storm.blend, 0.0, 1.0))
+    return {
+        "weight": _smootherstep((1.0 - re) / ANVIL_EDGE_WIDTH) * blend,
+        "coverage": ANVIL_COVERAGE * shape * (0.75 + 0.25 * streak),
+        "type": ANVIL_TYPE[0] + (ANVIL_TYPE[1] - ANVIL_TYPE[0]) * np.clip(0.5 + 0.5 * along, 0.0, 1.0),
+        "shape": shape,
+    }
+
+
+# ---- rasterising the stencils -----------------------------------------------------------------
+
+
+def _order_key(storm: Storm) -> tuple:
+    return tuple(storm.radius if v is None else v for v in astuple(storm))
+
+
+def apply_storms(fields: dict[str, np.ndarray], params: Mapping[str, Any], storms: Sequence[Storm]) -> None:
+    """Rasterise the storms into the field images in place (SPEC 1.9.1, 1.3.5 "Apply stencils").
+
+    "Using a position, radius and coverage, stencils would only affect the region that they occupied"
+    (GDC22): in "a" and "b" a storm changes only pixels whose centres lie strictly inside its radius, and it
+    fades to nothing at the radius. The anvil (SPEC 1.9.7) is offset downwind and larger than the storm,
+    so it necessarily reaches outside the radius -- but only in the "cirrus" image, up to
+    ``storm.reach()`` from the centre. A storm with blend 0 changes nothing; pixels no storm touches keep
+    their exact bits.
+
+    Channels: coverage, top type, bottom type, max height and storm coverage are only ever raised (each
+    storm's result is computed from the original fields and the storms are max-combined); min height and
+    cirrus type move towards each storm's target by its weight, averaged by weight where storms overlap.
+    Both are independent of the order of ``storms``. Precipitation and the density multiplier are left
+    alone (the sources give HFW no precipitation channel, SPEC 1.3.3). Min height may go below 0 (under
+    the layer bottom) down to the ground, so call this after :func:`fields.clamp_fields`, which would clip it.
+    """
+    a, b, ci = fields["a"], fields["b"], fields["cirrus"]
+    # Canonical order, so that the weighted sums below round identically for any input order.
+    active = sorted((s for s in storms if s.blend > 0.0 and s.radius > 0.0), key=_order_key)
+    if not active:
+        return
+    xs_all, ys_all = pixel_centres(params)
+    thickness = params.get("layer_top", 4000.0) - params.get("layer_bottom", 1500.0)
+    ground = -params.get("layer_bottom", 1500.0) / thickness if thickness > 0 else -np.inf
+
+    raised = {"coverage": (a, 0), "type": (a, 2), "bottom_type": (a, 3), "max_height": (b, 2), "storm": (b, 0)}
+    orig = {k: img[..., i].astype(np.float64) for k, (img, i) in raised.items()}
+    out = {k: v.copy() for k, v in orig.items()}
+    min_orig = b[..., 1].astype(np.float64)
+    num, den = np.zeros_like(min_orig), np.zeros_like(min_orig)
+    cov_orig, ctype_orig = ci[..., 0].astype(np.float64), ci[..., 1].astype(np.float64)
+    cov_out = cov_orig.copy()
+    c_num, c_den, c_touch = np.zeros_like(cov_orig), np.zeros_like(cov_orig), np.zeros(cov_orig.shape, bool)
+
+    for storm in active:
+        sel = _inside(params, xs_all, ys_all, storm.x, storm.y, storm.radius)
+        if sel is not None:
+            win, inside = sel
+            m = _mesocyclone(storm, xs_all[win][inside], ys_all[win][inside])
+            wgt = m["weight"]
+            targets = dict(m, storm=wgt)  # SPEC 1.3.3: storm coverage = the stencil's weight x blend
+            for key in raised:
+                o = orig[key][win][inside]
+                cand = o + (np.maximum(o, targets[key]) - o) * (1.0 if key == "storm" else wgt)
+                out[key][win][inside] = np.maximum(out[key][win][inside], cand)
+            num[win][inside] += wgt * (m["min_height"] - min_orig[win][inside])
+            den[win][inside] += wgt
+        sel = _inside(params, xs_all, ys_all, *storm.anvil_centre(), storm.anvil_radius())
+        if sel is not None:
+            win, inside = sel
+            m = _anvil(storm, xs_all[win][inside], ys_all[win][inside])
+            wgt = m["weight"]
+            o = cov_orig[win][inside]
+            cov_out[win][inside] = np.maximum(cov_out[win][inside], o + (np.maximum(o, m["coverage"]) - o) * wgt)
+            tw = wgt * m["shape"]
+            c_num[win][inside] += tw * (m["type"] - ctype_orig[win][inside])
+            c_den[win][inside] += tw
+            c_touch[win][inside] |= wgt > 0.0
+
+    touched = den > 0.0
+    for key, (img, i) in raised.items():
+        hi = 1.0 if key != "max_height" else np.inf
+        img[..., i][touched] = np.clip(out[key][touched], 0.0, hi)
+    min_new = np.maximum(min_orig + num / np.maximum(den, 1.0), ground)
+    b[..., 1][touched] = min_new[touched]
+    # Keep the layer at least 1 % thick where we touched it (as fields.clamp_fields does).
+    thin = touched & (b[..., 2] < b[..., 1] + 0.01)
+    b[..., 2][thin] = b[..., 1][thin] + 0.01
+    ci[..., 0][c_touch] = np.clip(cov_out[c_touch], 0.0, 1.0)
+    ctype_new = ctype_orig + c_num / np.maximum(c_den, 1.0)
+    ci[..., 1][c_touch] = np.clip(ctype_new[c_touch], 0.0, 1.0)
+
+
+# ---- lifecycle (SPEC 1.9.8) -------------------------------------------------------------------
+
+
+def lifecycle_keys(
+    start_frame: int, fps: float, ramp_in_s: float = 120.0, hold_s: float = 180.0, ramp_out_s: float = 120.0
+) -> list[tuple[int, float]]:
+    """(frame, blend) keyframes of a storm's life, SPEC 1.9.8, GDC22: the system "begins to load a
+    superstorm there over a period of 2 minutes. The Storm persists for a few minutes [...] And then it
+    dissipates over 2 minutes". The hold ("a few minutes") defaults to 3 [IMPL]."""
+    t1 = start_frame + round(ramp_in_s * fps)
+    t2 = t1 + round(hold_s * fps)
+    t3 = t2 + round(ramp_out_s * fps)
+    return [(int(start_frame), 0.0), (int(t1), 1.0), (int(t2), 1.0), (int(t3), 0.0)]
+
+
+def lightning_keys(
+    start_frame: int, fps: float, flashes: int = 4, discharges: int = 2, peak: float = 20.0, seed: int = 0
+) -> list[tuple[int, float]]:
+    """(frame, intensity) keyframes of a lightning sequence, SPEC 2.10.4 (GDC22 after Uman, *Lightning*):
+    "several intra-cloud effects while increasing the intensity of the flashes each time. Then it would
+    fire off 1 to 2 Ground discharge effects". Each flash lasts a handful of frames (GDC22: 4-8) and
+    flickers with a re-stroke; the pauses between flashes (0.4-1.5 s) are our choice, seeded."""
+    rng = np.random.default_rng(seed)
+    keys: list[tuple[int, float]] = []
+    frame = int(start_frame)
+    total = flashes + discharges
+    for i in range(total):
+        ground = i >= flashes
+        strength = peak if ground else peak * (0.25 + 0.6 * i / max(flashes - 1, 1))
+        keys += [(frame - 1, 0.0), (frame, strength), (frame + 1, 0.35 * strength)]
+        # A ground discharge restrikes more and lasts longer (several return strokes).
+        keys += [(frame + 2, 0.8 * strength), (frame + 3, 0.2 * strength)] if ground else []
+        end = frame + (6 if ground else 3)
+        keys.append((end, 0.0))
+        frame = end + 1 + int(round(fps * rng.uniform(0.4, 1.5)))
+    return keys
