@@ -213,12 +213,14 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
   /* SPEC 1.6.2, GPU Pro 7: animated curl noise twists the detail at the base, fading to none at the top.
    * Inside a superstorm the detail turns with the vortex; two rings overlap -> two samples (GDC22). */
   vec3 p_hf = skewed - drift * P.wind.w;
+  /* The rings are decided by where the sample is, not by where the wind has carried its noise, so
+   * nothing outside a storm's radius ever turns. */
   vec2 second;
   float ring_weight;
-  p_hf.xy = nubis_vortex(p_hf.xy, second, ring_weight);
-  float hf_fbm = nubis_detail_fbm(p_hf, h);
+  vec2 turned = nubis_vortex(p.xy, second, ring_weight);
+  float hf_fbm = nubis_detail_fbm(vec3(p_hf.xy + (turned - p.xy), p_hf.z), h);
   if (ring_weight > 0.0) {
-    hf_fbm = mix(hf_fbm, nubis_detail_fbm(vec3(second, p_hf.z), h), ring_weight);
+    hf_fbm = mix(hf_fbm, nubis_detail_fbm(vec3(p_hf.xy + (second - p.xy), p_hf.z), h), ring_weight);
   }
   /* GPU Pro 7: the stored (inverted) Worley fBm erodes the base into wisps, and flipped back it carves
    * billows above the lowest 10 %. SPEC 7.1: a

@@ -117,6 +117,9 @@ def storm_centre(storm) -> tuple[float, float]:
 
 def storm_stencils(settings, params) -> list:
     wx, wy = wind_vector(params["wind_direction"])
+    # The renderer filters the field bilinearly; keeping the stencil 1.5 texels inside the radius means
+    # no filtered sample outside the radius ever sees a storm-modified texel.
+    margin = 1.5 * params["field_size"] / params["field_resolution"]
     out = []
     for s in list(settings.storms)[:MAX_STORMS]:
         x, y = storm_centre(s)
@@ -124,7 +127,7 @@ def storm_stencils(settings, params) -> list:
             stormgen.Storm(
                 x=x,
                 y=y,
-                radius=s.radius,
+                radius=max(s.radius - margin, 0.5 * s.radius),
                 coverage=s.coverage,
                 blend=s.blend,
                 height=s.height,

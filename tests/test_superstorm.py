@@ -1,0 +1,109 @@
+"""Superstorms on the GPU: stencils stay inside their radius, the vortex slows outward, lightning
+keyframes light the storm on their frame, and the baked glow grid stays inside the storm."""
+
+import math
+
+import numpy as np
+import pytest
+
+
+@pytest.fixture
+def storm_scene(make_scene):
+    scene = make_scene("superstorm")
+    storm = scene.nubis.storms[0]
+    return scene, storm
+
+
+def _gpu(scene):
+    from nubis_addon.blender import runtime, scene_io
+
+    state = scene_io.state_from_scene(scene)
+    clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
+    clouds.update(state)
+    return clouds, state
+
+
+def test_outside_every_stencil_the_density_is_the_storm_free_density(storm_scene, blender):
+    from nubis_addon.blender import scene_io
+    from nubis_addon.render.probe import probe_density
+
+    scene, storm = storm_scene
+    scene.nubis.layers[0].remap = (0.3, 0.7, 0.0, 0.5)  # denser fair-weather clouds around the storm
+    blender.ops.nubis.generate_field()
+    cx, cy = scene_io.storm_centre(storm)
+    rng = np.random.default_rng(3)
+    n = 6000
+    angle = rng.uniform(0, 2 * math.pi, n)
+    dist = rng.uniform(storm.radius * 1.001, storm.radius * 2.5, n)
+    pts = np.stack([cx + dist * np.cos(angle), cy + dist * np.sin(angle), rng.uniform(1500, 4000, n)], axis=1)
+    inside = np.stack(
+        [cx + 0.3 * storm.radius * np.cos(angle), cy + 0.3 * storm.radius * np.sin(angle), rng.uniform(1500, 4000, n)],
+        axis=1,
+    )
+    clouds, _ = _gpu(scene)
+    with_storm = probe_density(clouds, pts)
+    with_storm_inside = probe_density(clouds, inside)
+    blender.ops.nubis.storm_remove()
+    assert len(scene.nubis.storms) == 0
+    clouds, _ = _gpu(scene)
+    without = probe_density(clouds, pts)
+    without_inside = probe_density(clouds, inside)
+    assert (without[:, 0] > 0).mean() > 0.05  # the comparison covers real clouds
+    np.testing.assert_array_equal(with_storm[:, :2], without[:, :2])
+    assert with_storm_inside[:, 0].sum() > 2 * without_inside[:, 0].sum()  # and the storm did change its inside
+
+
+def test_vortex_turns_faster_near_the_centre(storm_scene):
+    from nubis_addon.blender import scene_io
+    from nubis_addon.render.probe import probe_vortex
+
+    scene, storm = storm_scene
+    cx, cy = scene_io.storm_centre(storm)
+    # Points in the middle of rings 0..4 (away from the blended overlaps), on a line out of the centre.
+    fractions = (np.arange(5) + 0.5) / 6.0
+    xy = np.stack([cx + fractions * storm.radius, np.full(5, cy)], axis=1)
+    turned = []
+    for seconds in (0.0, 10.0):
+        scene.nubis.wind_time_offset = seconds
+        clouds, state = _gpu(scene)
+        moved = probe_vortex(clouds, xy)[:, :2]
+        turned.append(np.arctan2(moved[:, 1] - cy, moved[:, 0] - cx))
+    speed = np.angle(np.exp(1j * (turned[1] - turned[0]))) / 10.0  # radians per second, unwrapped
+    assert speed[0] == pytest.approx(storm.spin, rel=0.05)  # the inner ring spins at the storm's spin
+    assert np.all(np.diff(speed) < 0), speed  # each ring outward turns slower
+    assert speed[-1] > 0
+
+
+def test_lightning_keyframe_lights_its_frame_only(storm_scene, blender):
+    from nubis_addon.blender import pipeline
+
+    scene, storm = storm_scene
+    scene.camera.location = (0.0, 3000.0, 2.0)
+    scene.camera.rotation_euler = (math.radians(150), 0.0, 0.0)
+    scene.frame_set(100)
+    assert blender.ops.nubis.lightning_sequence(flashes=1, discharges=0, peak=400.0) == {"FINISHED"}
+    scene.frame_set(100)
+    assert storm.flash == pytest.approx(400.0 * 0.25)
+    lit = pipeline.render_viewport(scene, 48, 27)
+    scene.frame_set(90)
+    assert storm.flash == 0.0
+    dark = pipeline.render_viewport(scene, 48, 27)
+    luminance = np.array([0.2126, 0.7152, 0.0722])
+    assert (lit[..., :3] @ luminance).mean() > 1.3 * (dark[..., :3] @ luminance).mean()
+
+
+def test_baked_glow_grid_stays_inside_the_storm(storm_scene, tmp_path):
+    from nubis_addon.blender import pipeline, scene_io
+    from nubis_addon.core import vdbio
+
+    scene, storm = storm_scene
+    result = pipeline.bake(scene, tmp_path / "storm.vdb", voxel_size=500.0)
+    info = vdbio.read_grid_info(result.path)
+    assert set(info) == {"density", "glow"}
+    glow, lo = vdbio.read_grid_array(result.path, "glow")
+    z, y, x = np.nonzero(glow > 0)
+    assert len(x) > 10
+    cx, cy = scene_io.storm_centre(storm)
+    wx = result.plan.origin[0] + (x + lo[0]) * 500.0
+    wy = result.plan.origin[1] + (y + lo[1]) * 500.0
+    assert np.hypot(wx - cx, wy - cy).max() <= storm.radius
