@@ -83,6 +83,7 @@ vec2 nubis_vortex(vec2 xy, out vec2 second, out float weight)
 {
   second = xy;
   weight = 0.0;
+#if NUBIS_STORMS
   int count = min(int(P.storm_info.x), NUBIS_MAX_STORMS);
   for (int i = 0; i < count; i++) {
     vec4 shape = P.storm_shape[i];
@@ -117,6 +118,7 @@ vec2 nubis_vortex(vec2 xy, out vec2 second, out float weight)
       second = xy;
     }
   }
+#endif
   return xy;
 }
 
@@ -163,6 +165,7 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
    * shell's top (the storm's tropopause), so the anvil is flat and reaches across the whole stencil,
    * with the storm coverage as its coverage. max() leaves storm-free clouds exactly as they were. */
   float storm = clamp01(f.b.r) * f.inside;
+#if NUBIS_STORMS
   float band = 0.22 * (P.shell.y - P.layer.y);
   float anvil_h = (altitude - (P.shell.y - band)) / band;
   if (P.storm_info.x > 0.0 && anvil_h > 0.0 && anvil_h < 1.0) {
@@ -180,6 +183,7 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
       }
     }
   }
+#endif
   if (profile <= 0.0 || coverage <= 0.0) {
     return d;
   }

@@ -25,12 +25,14 @@ float nubis_phase(float cos_angle, float eccentricity_scale)
 float nubis_storm_darkening(vec3 q)
 {
   float scale = 1.0;
+#if NUBIS_STORMS
   int count = min(int(P.storm_info.x), NUBIS_MAX_STORMS);
   for (int i = 0; i < count; i++) {
     vec4 shape = P.storm_shape[i];
     float proximity = clamp01(1.0 - distance(q.xy, shape.xy) / shape.z);
     scale += (P.storm_light[i].y - 1.0) * sqrt(proximity) * shape.w;
   }
+#endif
   return scale;
 }
 
@@ -40,12 +42,14 @@ float nubis_storm_darkening(vec3 q)
 float nubis_storm_ambient(vec3 p, float h)
 {
   float factor = 1.0;
+#if NUBIS_STORMS
   int count = min(int(P.storm_info.x), NUBIS_MAX_STORMS);
   for (int i = 0; i < count; i++) {
     vec4 shape = P.storm_shape[i];
     float blend = clamp01(1.0 - distance(p.xy, shape.xy) / shape.z) * clamp01(1.0 - h) * shape.w;
     factor = mix(factor, P.storm_light[i].w, blend);
   }
+#endif
   return factor;
 }
 
@@ -56,6 +60,7 @@ float nubis_storm_ambient(vec3 p, float h)
 vec3 nubis_storm_glow(vec3 p, float fine_density)
 {
   vec3 glow = vec3(0.0);
+#if NUBIS_STORMS
   int count = min(int(P.storm_info.x), NUBIS_MAX_STORMS);
   float thickness = P.layer.z - P.layer.y;
   for (int i = 0; i < count; i++) {
@@ -70,6 +75,7 @@ vec3 nubis_storm_glow(vec3 p, float fine_density)
     float pseudo_attenuation = 1.0 - clamp01(fine_density * 5.0);
     glow += energy * potential * below * pseudo_attenuation * shape.w;
   }
+#endif
   return glow;
 }
 
@@ -176,8 +182,13 @@ vec3 nubis_in_scattering(vec3 p, vec3 view_dir, NubisDensity d, float view_alpha
   vec3 direct = P.sun_rad.rgb * direct_energy;
   /* SPEC 2.7: GDC22's ambient probability from the coarse density, growing with height (S15); the
    * reference mode measures the sky's visibility instead. */
-  float ambient_probability = P.march.w < 0.5 ? sqrt(1.0 - clamp01(d.coarse)) * mix(P.ambient.w, 1.0, d.h) :
-                                                nubis_reference_sky_visibility(p);
+  float ambient_probability;
+  if (P.march.w < 0.5) {
+    ambient_probability = sqrt(1.0 - clamp01(d.coarse)) * mix(P.ambient.w, 1.0, d.h);
+  }
+  else {
+    ambient_probability = nubis_reference_sky_visibility(p);
+  }
   ambient_probability *= nubis_storm_ambient(p, d.h);
   return direct + P.ambient.rgb * ambient_probability + nubis_storm_glow(p, d.fine);
 }

@@ -18,8 +18,8 @@ def bake_density(
     nx, ny, nz = plan.dims
     vol = np.empty((nz, ny, nx), np.float32)
     glow = np.empty((nz, ny, nx), np.float32)
-    sh = shader("bake")
-    batch = fullscreen_batch("bake")
+    sh = shader("bake", gpu_inputs.storms)
+    batch = fullscreen_batch("bake", gpu_inputs.storms)
     offscreen = gpu.types.GPUOffScreen(nx, ny, format="RGBA32F")
     try:
         with offscreen.bind():

@@ -28,11 +28,17 @@ _batches: dict[str, gpu.types.GPUBatch] = {}
 
 
 def _create_info(
-    stage: str, push_constants: tuple[tuple[str, str], ...], extra_samplers: tuple[tuple[str, str], ...] = ()
+    stage: str,
+    push_constants: tuple[tuple[str, str], ...],
+    extra_samplers: tuple[tuple[str, str], ...] = (),
+    storms: bool = False,
 ) -> GPUShaderCreateInfo:
     iface = GPUStageInterfaceInfo(f"nubis_{stage}_iface")
     iface.smooth("VEC2", "uv")
     info = GPUShaderCreateInfo()
+    # Two permutations: the superstorm terms cost a software rasterizer ~40 % even with no storm in the
+    # scene, so skies without storms compile them out.
+    info.define("NUBIS_STORMS", "1" if storms else "0")
     info.typedef_source(read_shader("nubis_params.glsl"))
     info.uniform_buf(0, "NubisParams", "P")
     for slot, (kind, name) in enumerate(CLOUD_SAMPLERS + extra_samplers):
@@ -56,17 +62,19 @@ STAGES: dict[str, tuple[tuple[tuple[str, str], ...], tuple[tuple[str, str], ...]
 }
 
 
-def shader(stage: str) -> gpu.types.GPUShader:
-    if stage not in _shaders:
+def shader(stage: str, storms: bool = False) -> gpu.types.GPUShader:
+    key = f"{stage}:{int(storms)}"
+    if key not in _shaders:
         push_constants, extra_samplers = STAGES[stage]
-        _shaders[stage] = gpu.shader.create_from_info(_create_info(stage, push_constants, extra_samplers))
-    return _shaders[stage]
+        _shaders[key] = gpu.shader.create_from_info(_create_info(stage, push_constants, extra_samplers, storms))
+    return _shaders[key]
 
 
-def fullscreen_batch(stage: str) -> gpu.types.GPUBatch:
-    if stage not in _batches:
-        _batches[stage] = batch_for_shader(shader(stage), "TRIS", {"pos": ((-1, -1), (3, -1), (-1, 3))})
-    return _batches[stage]
+def fullscreen_batch(stage: str, storms: bool = False) -> gpu.types.GPUBatch:
+    key = f"{stage}:{int(storms)}"
+    if key not in _batches:
+        _batches[key] = batch_for_shader(shader(stage, storms), "TRIS", {"pos": ((-1, -1), (3, -1), (-1, 3))})
+    return _batches[key]
 
 
 class CloudGPU:
@@ -76,6 +84,7 @@ class CloudGPU:
         self.noise = NoiseTextures(noise_set)
         self._field_keys: tuple = ()
         self.field_a = self.field_b = self.field_c = None
+        self.storms = False
         self.ubo = None
 
     def update(self, state: CloudState) -> None:
@@ -85,6 +94,7 @@ class CloudGPU:
             self.field_a, self.field_b, self.field_c = (field_texture(a) for a in arrays)
             self._field_keys = key
         self.ubo = gpu.types.GPUUniformBuf(uniforms.pack(state).tobytes())
+        self.storms = bool(state.storms)
 
     def bind(self, sh: gpu.types.GPUShader) -> None:
         sh.bind()
@@ -113,10 +123,10 @@ def _version(arr: np.ndarray | None) -> int:
 
 def draw_clouds(gpu_inputs: CloudGPU, inv_view_proj) -> None:
     """Draw the clouds into the bound framebuffer (premultiplied radiance, alpha)."""
-    sh = shader("raymarch")
+    sh = shader("raymarch", gpu_inputs.storms)
     gpu_inputs.bind(sh)
     sh.uniform_float("inv_view_proj", inv_view_proj)
-    fullscreen_batch("raymarch").draw(sh)
+    fullscreen_batch("raymarch", gpu_inputs.storms).draw(sh)
 
 
 def render_offscreen(gpu_inputs: CloudGPU, inv_view_proj, width: int, height: int, tile: int = 256) -> np.ndarray:

@@ -99,7 +99,7 @@ def _run(gpu_inputs: CloudGPU, texels: np.ndarray, mode: tuple[float, float, flo
     # read_pixels returns first: texel and pixel indices coincide.
     buf = gpu.types.Buffer("FLOAT", data.size, data.ravel())
     tex = gpu.types.GPUTexture((width, height), format="RGBA32F", data=buf)
-    sh = shader("probe")
+    sh = shader("probe", gpu_inputs.storms)
     offscreen = gpu.types.GPUOffScreen(width, height, format="RGBA32F")
     try:
         with offscreen.bind():
@@ -109,7 +109,7 @@ def _run(gpu_inputs: CloudGPU, texels: np.ndarray, mode: tuple[float, float, flo
             gpu_inputs.bind(sh)
             sh.uniform_sampler("probe_points", tex)
             sh.uniform_float("probe_mode", mode)
-            fullscreen_batch("probe").draw(sh)
+            fullscreen_batch("probe", gpu_inputs.storms).draw(sh)
             out = read_pixels(fb, width, height)
     finally:
         offscreen.free()
