@@ -54,26 +54,50 @@ float nubis_storm_ambient(vec3 p, float h)
 }
 
 /* SPEC 2.10.3: the internal glow without a second light march: a powered linear distance to the
- * light, a height gradient below it, and a pseudo-attenuation from the local fine density. The same
- * term with a moving position and an animated intensity is the intra-cloud lightning (SPEC 2.10.4).
- * Returns radiance per unit scattering. */
+ * light, a height gradient below it, and a pseudo-attenuation from the local fine density.
+ * `centre` is the light, `radius` its reach. Returns the unitless energy factor. */
+float nubis_glow_energy(vec3 p, vec3 centre, float radius, float fine_density, float thickness)
+{
+  float potential = pow(clamp01(1.0 - distance(p, centre) / radius), 12.0);
+  float below = clamp01((centre.z - nubis_altitude(p, P.layer.x) + thickness) / (2.0 * thickness));
+  float pseudo_attenuation = 1.0 - clamp01(fine_density * 5.0);
+  return potential * below * pseudo_attenuation;
+}
+
+/* The storms' light per unit scattering: the constant red glow at the storm's centre, and lightning
+ * (SPEC 2.10.4, GDC22): an intra-cloud flash is the same glow at the flash's own position with its
+ * animated intensity; a ground discharge adds the external flash that lights the underside around the
+ * strike. */
 vec3 nubis_storm_glow(vec3 p, float fine_density)
 {
   vec3 glow = vec3(0.0);
 #if NUBIS_STORMS
   int count = min(int(P.storm_info.x), NUBIS_MAX_STORMS);
   float thickness = P.layer.z - P.layer.y;
+  const vec3 flash_colour = vec3(0.85, 0.9, 1.0);
   for (int i = 0; i < count; i++) {
     vec4 shape = P.storm_shape[i];
-    vec3 energy = P.storm_glow[i].rgb * P.storm_light[i].z + vec3(0.85, 0.9, 1.0) * P.storm_glow[i].w;
-    if (shape.w <= 0.0 || max(energy.r, max(energy.g, energy.b)) <= 0.0) {
+    if (shape.w <= 0.0) {
       continue;
     }
-    vec3 centre = vec3(shape.xy, P.layer.y + P.storm_info.z * thickness);
-    float potential = pow(clamp01(1.0 - distance(p, centre) / shape.z), 12.0);
-    float below = clamp01((centre.z - nubis_altitude(p, P.layer.x) + thickness) / (2.0 * thickness));
-    float pseudo_attenuation = 1.0 - clamp01(fine_density * 5.0);
-    glow += energy * potential * below * pseudo_attenuation * shape.w;
+    float height = P.layer.y + P.storm_info.z * thickness;
+    float intensity = P.storm_light[i].z;
+    if (intensity > 0.0) {
+      float e = nubis_glow_energy(p, vec3(shape.xy, height), shape.z, fine_density, thickness);
+      glow += P.storm_glow[i].rgb * intensity * e * shape.w;
+    }
+    float flash = P.storm_glow[i].w;
+    if (flash > 0.0) {
+      vec4 where = P.storm_flash[i]; /* offset x, y from the centre; 1 for a ground discharge */
+      vec3 at = vec3(shape.xy + where.xy, height);
+      glow += flash_colour * flash * nubis_glow_energy(p, at, 0.6 * shape.z, fine_density, thickness) * shape.w;
+      if (where.z > 0.5) {
+        /* The external flash: highlights on the underside features near the strike. */
+        float h = clamp01((nubis_altitude(p, P.layer.x) - P.layer.y) / thickness);
+        float near = pow(clamp01(1.0 - distance(p.xy, at.xy) / (0.5 * shape.z)), 4.0);
+        glow += flash_colour * flash * 0.05 * near * (1.0 - h) * (1.0 - h) * shape.w;
+      }
+    }
   }
 #endif
   return glow;

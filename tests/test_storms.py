@@ -1,5 +1,7 @@
 """core/storms.py: superstorm stencils rasterised into the data fields (SPEC 1.9, GDC22). No Blender."""
 
+import math
+
 import numpy as np
 import pytest
 
@@ -219,3 +221,19 @@ def test_lifecycle_keys():
     assert keys[3] == (10 + 420 * 24, 0.0)  # dissipates over 2 minutes
     frames = [k[0] for k in lifecycle_keys(0, 30.0, 60.0, 0.0, 30.0)]
     assert frames == [0, 1800, 1800, 2700]
+
+
+def test_lightning_sequence_rises_then_discharges():
+    from nubis_addon.core.storms import lightning_keys
+
+    keys = lightning_keys(100, 24.0, flashes=4, discharges=2, peak=50.0, seed=3)
+    peaks = [k for k in keys if k["flash"] > 0 and keys[keys.index(k) - 1]["flash"] == 0]
+    assert [k["ground"] for k in peaks] == [0, 0, 0, 0, 1, 1]  # intra-cloud first, then ground
+    ic = [k["flash"] for k in peaks[:4]]
+    assert ic == sorted(ic) and ic[0] < ic[-1] < 50.0  # each intra-cloud flash brighter than the last
+    assert all(k["flash"] == 50.0 for k in peaks[4:])
+    assert len({(round(k["x"], 6), round(k["y"], 6)) for k in peaks}) == 6  # every flash somewhere new
+    assert all(math.hypot(k["x"], k["y"]) <= 0.5 for k in keys)
+    frames = [k["frame"] for k in keys]
+    assert frames == sorted(frames) and frames[0] == 99
+    assert keys == lightning_keys(100, 24.0, flashes=4, discharges=2, peak=50.0, seed=3)

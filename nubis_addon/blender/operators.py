@@ -264,11 +264,19 @@ class NUBIS_OT_lightning_sequence(NeedsCloudscape, NubisOperator, bpy.types.Oper
         storm = _active_storm(context)
         fps = scene.render.fps / scene.render.fps_base
         keys = storms.lightning_keys(scene.frame_current, fps, self.flashes, self.discharges, self.peak, self.seed)
-        for frame, value in keys:
-            storm.flash = value
-            storm.keyframe_insert("flash", frame=frame)
+        for key in keys:
+            storm.flash = key["flash"]
+            storm.flash_x, storm.flash_y = key["x"] * storm.radius, key["y"] * storm.radius
+            storm.flash_ground = key["ground"]
+            for prop in ("flash", "flash_x", "flash_y", "flash_ground"):
+                storm.keyframe_insert(prop, frame=int(key["frame"]))
+        # Positions jump from flash to flash; only the intensity is interpolated.
+        for fc in scene_io.fcurves(scene):
+            if fc.data_path.endswith(("flash_x", "flash_y", "flash_ground")):
+                for point in fc.keyframe_points:
+                    point.interpolation = "CONSTANT"
         storm.flash = 0.0
-        return f"{self.flashes} flashes and {self.discharges} discharges keyed from frame {keys[0][0]}"
+        return f"{self.flashes} flashes and {self.discharges} discharges keyed from frame {int(keys[0]['frame'])}"
 
 
 class NUBIS_OT_render_image(NeedsCloudscape, NubisOperator, bpy.types.Operator):

@@ -108,9 +108,31 @@ def _storm_annotations() -> dict:
             name="Flash",
             default=0.0,
             min=0.0,
-            soft_max=50.0,
+            soft_max=500.0,
             update=_tag_redraw,
             description="Lightning flash intensity; keyframed by Add Lightning",
+        ),
+        "flash_x": FloatProperty(
+            name="Flash X",
+            default=0.0,
+            unit="LENGTH",
+            update=_tag_redraw,
+            description="Where the flash is, relative to the storm centre",
+        ),
+        "flash_y": FloatProperty(
+            name="Flash Y",
+            default=0.0,
+            unit="LENGTH",
+            update=_tag_redraw,
+            description="Where the flash is, relative to the storm centre",
+        ),
+        "flash_ground": FloatProperty(
+            name="Ground Discharge",
+            default=0.0,
+            min=0.0,
+            max=1.0,
+            update=_tag_redraw,
+            description="1 while the flash is a ground discharge (adds the external flash)",
         ),
     }
     for key, spec in STORM_SCHEMA.items():

@@ -154,6 +154,9 @@ def storm_lights(settings) -> tuple[StormLight, ...]:
             s.ambient_boost,
             tuple(s.glow_color),
             s.flash,
+            s.flash_x,
+            s.flash_y,
+            s.flash_ground,
         )
         for s in list(settings.storms)[:MAX_STORMS]
     )
@@ -180,6 +183,11 @@ def storms_animated(settings) -> bool:
             return True
     anim = settings.id_data.animation_data
     return bool(anim and anim.action and any("storms" in fc.data_path for fc in _fcurves(anim.action)))
+
+
+def fcurves(scene) -> list:
+    anim = scene.animation_data
+    return _fcurves(anim.action) if anim and anim.action else []
 
 
 def _fcurves(action):

@@ -26,7 +26,10 @@ class StormLight:
     glow: float = 0.0  # internal glow intensity
     ambient_boost: float = 1.5  # ambient under the storm relative to the clouds'
     glow_color: tuple[float, float, float] = (1.0, 0.08, 0.03)
-    flash: float = 0.0  # lightning: intensity added to the glow this frame
+    flash: float = 0.0  # lightning: intensity of this frame's flash
+    flash_x: float = 0.0  # the flash's offset from the storm centre (m)
+    flash_y: float = 0.0
+    flash_ground: float = 0.0  # 1 for a ground discharge (adds the external flash)
 
 
 MAX_STORMS = 4

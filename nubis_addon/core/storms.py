@@ -292,22 +292,25 @@ def lifecycle_keys(
 
 def lightning_keys(
     start_frame: int, fps: float, flashes: int = 4, discharges: int = 2, peak: float = 20.0, seed: int = 0
-) -> list[tuple[int, float]]:
-    """(frame, intensity) keyframes of a lightning sequence, SPEC 2.10.4 (GDC22 after Uman, *Lightning*):
-    "several intra-cloud effects while increasing the intensity of the flashes each time. Then it would
-    fire off 1 to 2 Ground discharge effects". Each flash lasts a handful of frames (GDC22: 4-8) and
-    flickers with a re-stroke; the pauses between flashes (0.4-1.5 s) are our choice, seeded."""
+) -> list[dict[str, float]]:
+    """Keyframes of a lightning sequence, SPEC 2.10.4 (GDC22 after Uman, *Lightning*): "several intra-cloud
+    effects while increasing the intensity of the flashes each time. Then it would fire off 1 to 2 Ground
+    discharge effects". Each key: frame, flash intensity, the flash position as a fraction of the storm
+    radius (x, y; GDC22 feeds "a variable position for each flash") and ground (1 for a discharge).
+    Each flash lasts a handful of frames (GDC22: 4-8) and flickers with a re-stroke; the pauses between
+    flashes (0.4-1.5 s) and positions are our choice, seeded."""
     rng = np.random.default_rng(seed)
-    keys: list[tuple[int, float]] = []
+    keys: list[dict[str, float]] = []
     frame = int(start_frame)
-    total = flashes + discharges
-    for i in range(total):
+    for i in range(flashes + discharges):
         ground = i >= flashes
         strength = peak if ground else peak * (0.25 + 0.6 * i / max(flashes - 1, 1))
-        keys += [(frame - 1, 0.0), (frame, strength), (frame + 1, 0.35 * strength)]
+        angle = rng.uniform(0.0, 2.0 * np.pi)
+        reach = rng.uniform(0.2, 0.5) if ground else rng.uniform(0.0, 0.35)
+        x, y, g = reach * np.cos(angle), reach * np.sin(angle), 1.0 if ground else 0.0
+        pulse = [(-1, 0.0), (0, 1.0), (1, 0.35)]
         # A ground discharge restrikes more and lasts longer (several return strokes).
-        keys += [(frame + 2, 0.8 * strength), (frame + 3, 0.2 * strength)] if ground else []
-        end = frame + (6 if ground else 3)
-        keys.append((end, 0.0))
-        frame = end + 1 + int(round(fps * rng.uniform(0.4, 1.5)))
+        pulse += [(2, 0.8), (3, 0.2), (6, 0.0)] if ground else [(3, 0.0)]
+        keys += [{"frame": frame + df, "flash": strength * v, "x": x, "y": y, "ground": g} for df, v in pulse]
+        frame += pulse[-1][0] + 1 + int(round(fps * rng.uniform(0.4, 1.5)))
     return keys

@@ -80,6 +80,7 @@ def param_vectors(state: CloudState) -> dict[str, tuple[float, float, float, flo
         "storm_shape": [(s.x, s.y, s.radius, s.blend) for s in state.storms],
         "storm_light": [(s.spin, s.darkening, s.glow, s.ambient_boost) for s in state.storms],
         "storm_glow": [(*s.glow_color, s.flash) for s in state.storms],
+        "storm_flash": [(s.flash_x, s.flash_y, s.flash_ground, 0.0) for s in state.storms],
         "clip_box": state.clip_box or (1.0, 1.0, -1.0, -1.0),
         "options": (
             1.0 if state.jitter else 0.0,
