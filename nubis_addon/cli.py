@@ -51,6 +51,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("render", help="render the viewport's clouds from the scene camera (PNG or EXR)")
     common(p)
     size(p)
+    p.add_argument("--passes", type=int, default=1, help="average N jittered passes for a grain-free image")
+    p.add_argument("--motion", help="also write motion vectors (dx, dy pixels per frame, distance, alpha) to an EXR")
     p = sub.add_parser("bake", help="bake the cloud density to an OpenVDB file")
     common(p)
     p.add_argument("--voxel-size", type=float, help="voxel edge in metres (default: the scene's bake setting)")
@@ -182,10 +184,12 @@ def _execute(args, in_blender: bool, log: Path) -> str:
         out = check_output_path(args.out, (".vdb",))
     else:
         out = check_output_path(args.out, IMAGE_SUFFIXES)
-    for name in ("width", "height", "samples", "bounces"):
+    for name in ("width", "height", "samples", "bounces", "passes"):
         value = getattr(args, name, None)
         if value is not None and value < (0 if name == "bounces" else 1):
             raise NubisError(f"--{name} must be a positive whole number, not {value}")
+    if getattr(args, "motion", None):
+        check_output_path(args.motion, (".exr",))
     voxel = getattr(args, "voxel_size", None)
     if voxel is not None and not voxel > 0:
         raise NubisError(f"--voxel-size must be a positive number of metres, not {voxel}")
@@ -203,8 +207,12 @@ def _execute(args, in_blender: bool, log: Path) -> str:
     if cmd == "render":
         w, h = pipeline.resolution(scene, args.width, args.height)
         with _quiet(log):
-            rgba = pipeline.render_viewport(scene, w, h)
+            rgba = pipeline.render_viewport(scene, w, h, passes=args.passes)
             pipeline.save_render(scene, out, rgba)
+            if args.motion:
+                from .core.imageio import write_image
+
+                write_image(args.motion, pipeline.render_motion(scene, w, h))
         cover = float((rgba[..., 3] > 0.05).mean()) * 100
         return f"rendered {label} at {w}x{h} ({cover:.0f}% cloud cover) in {time.perf_counter() - start:.1f} s -> {out}"
     if cmd == "bake":

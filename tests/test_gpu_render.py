@@ -66,3 +66,27 @@ def test_viewport_draw_uses_the_render_code(make_scene):
     assert viewport.last_error() == ""
     # The viewport buffer is half float; everything else is the same shader.
     np.testing.assert_allclose(got, expected, atol=2e-3)
+
+
+def test_motion_vectors_follow_the_wind(make_scene):
+    """GDC22's scroll motion vectors: a cloud seen from above moves downwind by speed x timestep."""
+    from gpu_helpers import split_coverage_scene
+
+    from nubis_addon.blender import pipeline
+
+    speed = 400.0
+    scene = split_coverage_scene(make_scene, wind_speed=speed, wind_upward_bias=0.0, wind_direction=0.0)
+    w = h = 64
+    m = pipeline.render_motion(scene, w, h)
+    cloudy = m[..., 3] > 0.5
+    assert cloudy.mean() > 0.2
+    dt = 1.0 / (scene.render.fps / scene.render.fps_base)
+    # A 90 degree square frustum looking straight down: a metre at height difference z spans w / (2 z)
+    # pixels, and +X is to the right. z is the ray distance times the cosine to the view axis.
+    rows, cols = np.mgrid[0:h, 0:w]
+    ndc_x, ndc_y = (cols + 0.5) / w * 2 - 1, 1 - (rows + 0.5) / h * 2
+    z = (m[..., 2] / np.sqrt(1 + ndc_x**2 + ndc_y**2))[cloudy]
+    expected = speed * dt * w / (2.0 * z)
+    np.testing.assert_allclose(m[..., 0][cloudy], expected, rtol=0.01)
+    assert np.abs(m[..., 1][cloudy]).max() < 0.01 * expected.max()
+    assert np.all(m[m[..., 3] == 0] == 0.0)

@@ -100,6 +100,17 @@ def downsample(rgba: np.ndarray, factor: int) -> np.ndarray:
     return rgba.reshape(h // factor, factor, w // factor, factor, c).mean(axis=(1, 3))
 
 
+def render_motion(scene, width: int, height: int) -> np.ndarray:
+    """Motion vectors of the scene camera's view for one frame step: dx, dy (pixels), cloud distance, alpha."""
+    state = scene_io.state_from_scene(scene)
+    fps = scene.render.fps / scene.render.fps_base
+    state.motion_dt = scene.nubis.wind_time_scale / fps
+    clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
+    clouds.update(state)
+    inv = scene_io.camera_inv_view_proj(scene, width, height)
+    return engine.render_motion(clouds, inv, inv.inverted(), width, height)
+
+
 @dataclass
 class BakeResult:
     path: Path

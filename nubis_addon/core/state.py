@@ -52,6 +52,7 @@ class CloudState:
     cirrus_slab: float | None = None  # the bake's cirrus slab thickness, when wider than the setting
     clip_box: tuple[float, float, float, float] | None = None  # x0, y0, x1, y1: clouds only inside
     storms: tuple[StormLight, ...] = ()
+    motion_dt: float = 1.0 / 24.0  # seconds per frame, for motion vectors
 
     def has_cirrus(self) -> bool:
         return self.field_c is not None and self.params["cirrus_coverage"] > 0 and float(self.field_c[..., 0].max()) > 0

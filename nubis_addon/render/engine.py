@@ -41,6 +41,8 @@ def _create_info(
     info.define("NUBIS_STORMS", "1" if storms else "0")
     info.typedef_source(read_shader("nubis_params.glsl"))
     info.uniform_buf(0, "NubisParams", "P")
+    if stage == "motion":
+        info.uniform_buf(1, "NubisMotionCameras", "C")
     for slot, (kind, name) in enumerate(CLOUD_SAMPLERS + extra_samplers):
         info.sampler(slot, kind, name)
     for kind, name in push_constants:
@@ -59,6 +61,7 @@ def _create_info(
 STAGES: dict[str, tuple[tuple[tuple[str, str], ...], tuple[tuple[str, str], ...]]] = {
     "raymarch": ((("MAT4", "inv_view_proj"),), ()),
     "bake": ((("VEC4", "bake_origin"), ("VEC4", "bake_voxel")), ()),
+    "motion": ((("MAT4", "inv_view_proj"),), ()),
 }
 
 
@@ -127,6 +130,32 @@ def draw_clouds(gpu_inputs: CloudGPU, inv_view_proj) -> None:
     gpu_inputs.bind(sh)
     sh.uniform_float("inv_view_proj", inv_view_proj)
     fullscreen_batch("raymarch", gpu_inputs.storms).draw(sh)
+
+
+def render_motion(gpu_inputs: CloudGPU, inv_view_proj, prev_view_proj, width: int, height: int) -> np.ndarray:
+    """Per-pixel motion vectors (dx, dy in pixels per timestep), cloud distance and alpha, top row first.
+    `prev_view_proj` is the camera one timestep earlier (the same matrix for a still camera)."""
+    sh = shader("motion", gpu_inputs.storms)
+    offscreen = gpu.types.GPUOffScreen(width, height, format="RGBA32F")
+    try:
+        with offscreen.bind():
+            fb = gpu.state.active_framebuffer_get()
+            fb.clear(color=(0.0, 0.0, 0.0, 0.0))
+            gpu.state.blend_set("NONE")
+            gpu_inputs.bind(sh)
+            sh.uniform_float("inv_view_proj", inv_view_proj)
+            # mathutils matrices are row-major; GLSL reads columns.
+            cams = np.array([np.array(inv_view_proj.inverted()).T, np.array(prev_view_proj).T], np.float32)
+            cameras = gpu.types.GPUUniformBuf(cams.tobytes())
+            sh.uniform_block("C", cameras)
+            fullscreen_batch("motion", gpu_inputs.storms).draw(sh)
+            px = read_pixels(fb, width, height)
+    finally:
+        offscreen.free()
+    # Rows run top-down in the result, so a motion up the screen becomes negative y, as in image space.
+    out = px[::-1].copy()
+    out[..., 1] *= -1.0
+    return out
 
 
 def render_offscreen(gpu_inputs: CloudGPU, inv_view_proj, width: int, height: int, tile: int = 256) -> np.ndarray:

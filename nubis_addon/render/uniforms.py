@@ -17,7 +17,7 @@ from .sources import read_shader
 @cache
 def struct_fields() -> tuple[str, ...]:
     src = read_shader("nubis_params.glsl")
-    body = re.search(r"struct\s+NubisParams\s*{(.*?)}", src, re.S)
+    body = re.search(r"struct\s+NubisParams\s*{(.*?)};", src, re.S)
     if body is None:
         raise RuntimeError("nubis_params.glsl no longer declares struct NubisParams")
     text = re.sub(r"/\*.*?\*/", "", body.group(1), flags=re.S)
@@ -81,6 +81,7 @@ def param_vectors(state: CloudState) -> dict[str, tuple[float, float, float, flo
         "storm_light": [(s.spin, s.darkening, s.glow, s.ambient_boost) for s in state.storms],
         "storm_glow": [(*s.glow_color, s.flash) for s in state.storms],
         "storm_flash": [(s.flash_x, s.flash_y, s.flash_ground, 0.0) for s in state.storms],
+        "motion": (state.motion_dt, p["wind_speed"] * p["wind_time_scale"], 0.0, 0.0),
         "clip_box": state.clip_box or (1.0, 1.0, -1.0, -1.0),
         "options": (
             1.0 if state.jitter else 0.0,
