@@ -10,6 +10,18 @@ VOLUME_NAME = "Nubis Clouds VDB"
 MATERIAL_NAME = "Nubis Cloud Volume"
 
 
+def _grid_times(nt, grid: str, factor: float):
+    """An Attribute node reading a VDB grid, times a factor: (attribute node, multiply node)."""
+    attr = nt.nodes.new("ShaderNodeAttribute")
+    attr.attribute_name = grid
+    attr.attribute_type = "GEOMETRY"
+    scale = nt.nodes.new("ShaderNodeMath")
+    scale.operation = "MULTIPLY"
+    scale.inputs[1].default_value = factor
+    nt.links.new(attr.outputs["Fac"], scale.inputs[0])
+    return attr, scale
+
+
 def build_material(settings, with_glow: bool = False) -> bpy.types.Material:
     """Extinction = density x sigma (the viewport's own); albedo 1; the viewport's two phase lobes
     as a mix of two Volume Scatter closures, which share one extinction and mix their phases."""
@@ -18,12 +30,7 @@ def build_material(settings, with_glow: bool = False) -> bpy.types.Material:
         mat.use_nodes = True
     nt = mat.node_tree
     nt.nodes.clear()
-    attr = nt.nodes.new("ShaderNodeAttribute")
-    attr.attribute_name = "density"
-    attr.attribute_type = "GEOMETRY"
-    scale = nt.nodes.new("ShaderNodeMath")
-    scale.operation = "MULTIPLY"
-    scale.inputs[1].default_value = settings.density_sigma
+    attr, scale = _grid_times(nt, "density", settings.density_sigma)
     lobes = []
     for g in (settings.lighting_phase_g0, settings.lighting_phase_g1):
         node = nt.nodes.new("ShaderNodeVolumeScatter")
@@ -37,21 +44,14 @@ def build_material(settings, with_glow: bool = False) -> bpy.types.Material:
     nt.links.new(lobes[0].outputs[0], mix.inputs[1])
     nt.links.new(lobes[1].outputs[0], mix.inputs[2])
     out = nt.nodes.new("ShaderNodeOutputMaterial")
-    nt.links.new(attr.outputs["Fac"], scale.inputs[0])
     volume_out = mix.outputs[0]
     if with_glow:
         # The `glow` grid holds density x glow; the march emits sigma x that per metre, in the storm's colour.
-        glow_attr = nt.nodes.new("ShaderNodeAttribute")
-        glow_attr.attribute_name = "glow"
-        glow_attr.attribute_type = "GEOMETRY"
-        glow_scale = nt.nodes.new("ShaderNodeMath")
-        glow_scale.operation = "MULTIPLY"
-        glow_scale.inputs[1].default_value = settings.density_sigma
+        _glow_attr, glow_scale = _grid_times(nt, "glow", settings.density_sigma)
         emission = nt.nodes.new("ShaderNodeEmission")
         colour = tuple(settings.storms[0].glow_color) if len(settings.storms) else (1.0, 0.08, 0.03)
         peak = max(colour) or 1.0
         emission.inputs["Color"].default_value = (*(c / peak for c in colour), 1.0)
-        nt.links.new(glow_attr.outputs["Fac"], glow_scale.inputs[0])
         nt.links.new(glow_scale.outputs[0], emission.inputs["Strength"])
         add = nt.nodes.new("ShaderNodeAddShader")
         nt.links.new(mix.outputs[0], add.inputs[0])

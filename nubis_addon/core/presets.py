@@ -203,21 +203,28 @@ def parse_preset(data: dict[str, Any], path: Path | None = None) -> Preset:
 
 
 def _parse_storms(value: Any, where: str) -> list[dict[str, Any]]:
+    storms = _parse_tables(value, where, "storms", STORM_SCHEMA)
+    for i, storm in enumerate(storms):
+        _check_vector(storm["glow_color"], 3, f"{where}: storms[{i}].glow_color")
+    return storms
+
+
+def _parse_tables(value: Any, where: str, name: str, schema: dict[str, tuple]) -> list[dict[str, Any]]:
+    """An array of tables ([[name]]), each filled from the schema's defaults and checked key by key."""
     if not isinstance(value, list):
-        raise NubisError(f"{where}: storms must be written as [[storms]] tables")
-    storms = []
+        raise NubisError(f"{where}: {name} must be written as [[{name}]] tables")
+    tables = []
     for i, raw in enumerate(value):
-        here = f"{where}: storms[{i}]"
+        here = f"{where}: {name}[{i}]"
         if not isinstance(raw, dict):
             raise NubisError(f"{here} must be a table")
-        storm = {k: (list(spec[1]) if isinstance(spec[1], list) else spec[1]) for k, spec in STORM_SCHEMA.items()}
+        table = {k: (list(spec[1]) if isinstance(spec[1], list) else spec[1]) for k, spec in schema.items()}
         for key, val in raw.items():
-            if key not in STORM_SCHEMA:
-                raise NubisError(f"{here}: unknown key '{key}'; keys are {', '.join(STORM_SCHEMA)}")
-            storm[key] = _check_value(STORM_SCHEMA[key], val, f"{here}.{key}")
-        _check_vector(storm["glow_color"], 3, f"{here}.glow_color")
-        storms.append(storm)
-    return storms
+            if key not in schema:
+                raise NubisError(f"{here}: unknown key '{key}'; keys are {', '.join(schema)}")
+            table[key] = _check_value(schema[key], val, f"{here}.{key}")
+        tables.append(table)
+    return tables
 
 
 def _check_param(p, value: Any, where: str) -> Any:
@@ -265,18 +272,9 @@ def _check_vector(value: list, n: int, where: str) -> None:
 
 
 def _parse_layers(value: Any, where: str) -> list[dict[str, Any]]:
-    if not isinstance(value, list):
-        raise NubisError(f"{where}: field.layers must be written as [[field.layers]] tables")
-    layers = []
-    for i, raw in enumerate(value):
+    layers = _parse_tables(value, where, "field.layers", LAYER_SCHEMA)
+    for i, layer in enumerate(layers):
         here = f"{where}: field.layers[{i}]"
-        if not isinstance(raw, dict):
-            raise NubisError(f"{here} must be a table")
-        layer = {k: (list(spec[1]) if isinstance(spec[1], list) else spec[1]) for k, spec in LAYER_SCHEMA.items()}
-        for key, val in raw.items():
-            if key not in LAYER_SCHEMA:
-                raise NubisError(f"{here}: unknown key '{key}'; keys are {', '.join(LAYER_SCHEMA)}")
-            layer[key] = _check_value(LAYER_SCHEMA[key], val, f"{here}.{key}")
         _check_vector(layer["remap"], 4, f"{here}.remap")
         _check_vector(layer["center"], 2, f"{here}.center")
         if layer["remap"][0] == layer["remap"][1]:
@@ -284,7 +282,6 @@ def _parse_layers(value: Any, where: str) -> list[dict[str, Any]]:
         if layer["kind"] == "image" and not layer["image"]:
             raise NubisError(f"{here}.image: an image layer needs the name or path of an image")
         layer["name"] = layer["name"] or f"Layer {i + 1}"
-        layers.append(layer)
     return layers
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import gpu
 import numpy as np
 from gpu.types import GPUShaderCreateInfo, GPUStageInterfaceInfo
@@ -126,32 +128,51 @@ def _version(arr: np.ndarray | None) -> int:
 
 def draw_clouds(gpu_inputs: CloudGPU, inv_view_proj) -> None:
     """Draw the clouds into the bound framebuffer (premultiplied radiance, alpha)."""
-    sh = shader("raymarch", gpu_inputs.storms)
-    gpu_inputs.bind(sh)
-    sh.uniform_float("inv_view_proj", inv_view_proj)
-    fullscreen_batch("raymarch", gpu_inputs.storms).draw(sh)
+    draw_stage("raymarch", gpu_inputs, {"inv_view_proj": inv_view_proj})
 
 
-def render_motion(gpu_inputs: CloudGPU, inv_view_proj, prev_view_proj, width: int, height: int) -> np.ndarray:
-    """Per-pixel motion vectors (dx, dy in pixels per timestep), cloud distance and alpha, top row first.
-    `prev_view_proj` is the camera one timestep earlier (the same matrix for a still camera)."""
-    sh = shader("motion", gpu_inputs.storms)
+def draw_offscreen(width: int, height: int, draw: Callable[[], None]) -> np.ndarray:
+    """Run `draw` into a cleared float offscreen of this size; its pixels, bottom row first."""
     offscreen = gpu.types.GPUOffScreen(width, height, format="RGBA32F")
     try:
         with offscreen.bind():
             fb = gpu.state.active_framebuffer_get()
             fb.clear(color=(0.0, 0.0, 0.0, 0.0))
             gpu.state.blend_set("NONE")
-            gpu_inputs.bind(sh)
-            sh.uniform_float("inv_view_proj", inv_view_proj)
-            # mathutils matrices are row-major; GLSL reads columns.
-            cams = np.array([np.array(inv_view_proj.inverted()).T, np.array(prev_view_proj).T], np.float32)
-            cameras = gpu.types.GPUUniformBuf(cams.tobytes())
-            sh.uniform_block("C", cameras)
-            fullscreen_batch("motion", gpu_inputs.storms).draw(sh)
-            px = read_pixels(fb, width, height)
+            draw()
+            return read_pixels(fb, width, height)
     finally:
         offscreen.free()
+
+
+def draw_stage(
+    stage: str,
+    gpu_inputs: CloudGPU,
+    uniforms: dict | None = None,
+    blocks: dict | None = None,
+    samplers: dict | None = None,
+) -> None:
+    """One full-screen draw of a cloud stage with the cloud inputs bound plus the stage's own."""
+    sh = shader(stage, gpu_inputs.storms)
+    gpu_inputs.bind(sh)
+    for name, value in (uniforms or {}).items():
+        sh.uniform_float(name, value)
+    for name, value in (blocks or {}).items():
+        sh.uniform_block(name, value)
+    for name, value in (samplers or {}).items():
+        sh.uniform_sampler(name, value)
+    fullscreen_batch(stage, gpu_inputs.storms).draw(sh)
+
+
+def render_motion(gpu_inputs: CloudGPU, inv_view_proj, prev_view_proj, width: int, height: int) -> np.ndarray:
+    """Per-pixel motion vectors (dx, dy in pixels per timestep), cloud distance and alpha, top row first.
+    `prev_view_proj` is the camera one timestep earlier (the same matrix for a still camera)."""
+    # mathutils matrices are row-major; GLSL reads columns.
+    cams = np.array([np.array(inv_view_proj.inverted()).T, np.array(prev_view_proj).T], np.float32)
+    cameras = gpu.types.GPUUniformBuf(cams.tobytes())
+    px = draw_offscreen(
+        width, height, lambda: draw_stage("motion", gpu_inputs, {"inv_view_proj": inv_view_proj}, {"C": cameras})
+    )
     # Rows run top-down in the result, so a motion up the screen becomes negative y, as in image space.
     out = px[::-1].copy()
     out[..., 1] *= -1.0
@@ -163,25 +184,16 @@ def render_offscreen(gpu_inputs: CloudGPU, inv_view_proj, width: int, height: in
 
     The frame is drawn in tiles so that one huge draw call never stalls a software rasterizer.
     """
-    out = np.zeros((height, width, 4), np.float32)
-    offscreen = gpu.types.GPUOffScreen(width, height, format="RGBA32F")
-    try:
-        with offscreen.bind():
-            fb = gpu.state.active_framebuffer_get()
-            fb.clear(color=(0.0, 0.0, 0.0, 0.0))
-            gpu.state.blend_set("NONE")
-            for y in range(0, height, tile):
-                for x in range(0, width, tile):
-                    w, h = min(tile, width - x), min(tile, height - y)
-                    gpu.state.scissor_test_set(True)
-                    gpu.state.scissor_set(x, y, w, h)
-                    draw_clouds(gpu_inputs, inv_view_proj)
-            gpu.state.scissor_test_set(False)
-            px = read_pixels(fb, width, height)
-    finally:
-        offscreen.free()
-    out[:] = px[::-1]
-    return out
+
+    def tiles() -> None:
+        for y in range(0, height, tile):
+            for x in range(0, width, tile):
+                gpu.state.scissor_test_set(True)
+                gpu.state.scissor_set(x, y, min(tile, width - x), min(tile, height - y))
+                draw_clouds(gpu_inputs, inv_view_proj)
+        gpu.state.scissor_test_set(False)
+
+    return draw_offscreen(width, height, tiles)[::-1].copy()
 
 
 def read_pixels(fb, width: int, height: int) -> np.ndarray:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import gpu
 import numpy as np
 
-from .engine import STAGES, CloudGPU, fullscreen_batch, read_pixels, shader
+from .engine import STAGES, CloudGPU, draw_offscreen, draw_stage
 
 # Registered here rather than in engine.py: the probe is a test instrument, and a stage only compiles
 # when someone asks for it, so the product never pays for it.
@@ -99,18 +99,9 @@ def _run(gpu_inputs: CloudGPU, texels: np.ndarray, mode: tuple[float, float, flo
     # read_pixels returns first: texel and pixel indices coincide.
     buf = gpu.types.Buffer("FLOAT", data.size, data.ravel())
     tex = gpu.types.GPUTexture((width, height), format="RGBA32F", data=buf)
-    sh = shader("probe", gpu_inputs.storms)
-    offscreen = gpu.types.GPUOffScreen(width, height, format="RGBA32F")
-    try:
-        with offscreen.bind():
-            fb = gpu.state.active_framebuffer_get()
-            fb.clear(color=(0.0, 0.0, 0.0, 0.0))
-            gpu.state.blend_set("NONE")
-            gpu_inputs.bind(sh)
-            sh.uniform_sampler("probe_points", tex)
-            sh.uniform_float("probe_mode", mode)
-            fullscreen_batch("probe", gpu_inputs.storms).draw(sh)
-            out = read_pixels(fb, width, height)
-    finally:
-        offscreen.free()
+    out = draw_offscreen(
+        width,
+        height,
+        lambda: draw_stage("probe", gpu_inputs, {"probe_mode": mode}, samplers={"probe_points": tex}),
+    )
     return out.reshape(-1, 4)[:n]
