@@ -24,27 +24,39 @@ def _grid_times(nt, grid: str, factor: float):
 
 def build_material(settings, with_glow: bool = False) -> bpy.types.Material:
     """Extinction = density x sigma (the viewport's own); albedo 1; the viewport's two phase lobes
-    as a mix of two Volume Scatter closures, which share one extinction and mix their phases."""
+    as a mix of two Volume Scatter closures, which share one extinction and mix their phases (or
+    Cycles' Mie phase as an option); the storms' glow grid as emission."""
     mat = bpy.data.materials.get(MATERIAL_NAME) or bpy.data.materials.new(MATERIAL_NAME)
     if mat.node_tree is None:  # materials made before 5.0 may lack a node tree
         mat.use_nodes = True
     nt = mat.node_tree
     nt.nodes.clear()
     attr, scale = _grid_times(nt, "density", settings.density_sigma)
-    lobes = []
-    for g in (settings.lighting_phase_g0, settings.lighting_phase_g1):
-        node = nt.nodes.new("ShaderNodeVolumeScatter")
-        node.phase = "HENYEY_GREENSTEIN"
-        node.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
-        node.inputs["Anisotropy"].default_value = g
-        nt.links.new(scale.outputs[0], node.inputs["Density"])
-        lobes.append(node)
-    mix = nt.nodes.new("ShaderNodeMixShader")
-    mix.inputs["Fac"].default_value = settings.lighting_phase_mix
-    nt.links.new(lobes[0].outputs[0], mix.inputs[1])
-    nt.links.new(lobes[1].outputs[0], mix.inputs[2])
+    if settings.lighting_cycles_mie:
+        # Cycles' Mie phase for water droplets: physically richer than the viewport's lobes, so the
+        # comparison then measures the phase model too.
+        mie = nt.nodes.new("ShaderNodeVolumeScatter")
+        mie.phase = "MIE"
+        mie.inputs["Diameter"].default_value = settings.lighting_droplet_size
+        nt.links.new(scale.outputs[0], mie.inputs["Density"])
+        scatter = mie.outputs[0]
+        lobes = [mie, mie]
+    else:
+        lobes = []
+        for g in (settings.lighting_phase_g0, settings.lighting_phase_g1):
+            node = nt.nodes.new("ShaderNodeVolumeScatter")
+            node.phase = "HENYEY_GREENSTEIN"
+            node.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+            node.inputs["Anisotropy"].default_value = g
+            nt.links.new(scale.outputs[0], node.inputs["Density"])
+            lobes.append(node)
+        mix = nt.nodes.new("ShaderNodeMixShader")
+        mix.inputs["Fac"].default_value = settings.lighting_phase_mix
+        nt.links.new(lobes[0].outputs[0], mix.inputs[1])
+        nt.links.new(lobes[1].outputs[0], mix.inputs[2])
+        scatter = mix.outputs[0]
     out = nt.nodes.new("ShaderNodeOutputMaterial")
-    volume_out = mix.outputs[0]
+    volume_out = scatter
     if with_glow:
         # The `glow` grid holds density x glow; the march emits sigma x that per metre, in the storm's colour.
         _glow_attr, glow_scale = _grid_times(nt, "glow", settings.density_sigma)
@@ -54,12 +66,12 @@ def build_material(settings, with_glow: bool = False) -> bpy.types.Material:
         emission.inputs["Color"].default_value = (*(c / peak for c in colour), 1.0)
         nt.links.new(glow_scale.outputs[0], emission.inputs["Strength"])
         add = nt.nodes.new("ShaderNodeAddShader")
-        nt.links.new(mix.outputs[0], add.inputs[0])
+        nt.links.new(scatter, add.inputs[0])
         nt.links.new(emission.outputs[0], add.inputs[1])
         volume_out = add.outputs[0]
     nt.links.new(volume_out, out.inputs["Volume"])
-    for i, node in enumerate((attr, scale, lobes[0], lobes[1], mix, out)):
-        node.location = (i * 220, 0 if node is not lobes[1] else -250)
+    for i, node in enumerate(nt.nodes):
+        node.location = (i * 220, -250 * (i % 2))
     return mat
 
 

@@ -126,6 +126,14 @@ PARAMS: tuple[Param, ...] = (
     P("lighting", "phase_mix", "float", 0.2, 0.0, 1.0, "Weight of the silver-lining lobe"),
     P("lighting", "ambient", "float", 1.0, 0.0, 10.0, "Strength of the sky's ambient light"),
     P("lighting", "ambient_bottom", "float", 0.5, 0.0, 1.0, "Ambient at the cloud base relative to the top (S15)"),
+    P(
+        "lighting",
+        "cycles_mie",
+        "bool",
+        False,
+        description="Cycles uses its Mie phase for water droplets instead of the viewport's two HG lobes",
+    ),
+    P("lighting", "droplet_size", "float", 20.0, 5.0, 50.0, "Droplet diameter for Cycles' Mie phase (micrometres)"),
     P("lighting", "rain_absorption", "float", 3.0, 1.0, 20.0, "Extra light absorption of raining clouds (GPU Pro 7)"),
     # Not from the Guerrilla sources: Wrenninge's multiple-scattering octaves (SPEC 2.9, an extension).
     P("lighting", "ms_octaves", "int", 3, 1, 8, "Multiple-scattering octaves (1 = single scattering; not in Nubis)"),
