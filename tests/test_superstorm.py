@@ -112,3 +112,25 @@ def test_baked_glow_grid_stays_inside_the_storm(storm_scene, tmp_path):
     wx = result.plan.origin[0] + (x + lo[0]) * 500.0
     wy = result.plan.origin[1] + (y + lo[1]) * 500.0
     assert np.hypot(wx - cx, wy - cy).max() <= storm.radius
+
+
+def test_motion_vectors_turn_with_the_vortex(make_scene):
+    """GDC22's storm motion vectors: seen from above, clouds inside the storm move counter-clockwise
+    (the vortex's sense) and clouds beyond it only scroll."""
+    from nubis_addon.blender import pipeline, scene_io
+
+    scene = make_scene("superstorm", wind_speed=0.0)
+    storm = scene.nubis.storms[0]
+    storm.spin = 0.5
+    cx, cy = scene_io.storm_centre(storm)
+    scene.camera.location = (cx, cy, 20000.0)
+    scene.camera.rotation_euler = (0.0, 0.0, 0.0)
+    m = pipeline.render_motion(scene, 64, 64)
+    cloudy = m[..., 3] > 0.3
+    rows, cols = np.mgrid[0:64, 0:64]
+    right, left = cloudy & (cols > 40), cloudy & (cols < 24)
+    assert right.sum() > 20 and left.sum() > 20
+    # Image rows run downwards: moving towards +Y in the world (up the screen) is a negative dy.
+    assert m[..., 1][right].mean() < 0 < m[..., 1][left].mean()
+    top, bottom = cloudy & (rows < 24), cloudy & (rows > 40)
+    assert m[..., 0][top].mean() < 0 < m[..., 0][bottom].mean()
