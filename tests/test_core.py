@@ -149,3 +149,22 @@ def test_image_round_trip(tmp_path: Path):
     with pytest.raises(NubisError, match="NaN"):
         imageio.write_image(tmp_path / "b.exr", px * np.nan)
     assert not (tmp_path / "b.exr").exists()
+
+
+def test_uniform_block_matches_the_glsl_struct():
+    from nubis_addon.core.state import StormLight
+    from nubis_addon.render import uniforms
+
+    fields = uniforms.struct_fields()
+    rows = sum(count or 1 for _name, count in fields)
+    state = CloudState(storms=(StormLight(1.0, 2.0, 3000.0),))
+    data = uniforms.pack(state)
+    assert data.shape == (rows, 4) and data.dtype == np.float32
+    names = [name for name, _count in fields]
+    start = sum(count or 1 for name, count in fields[: names.index("storm_shape")])
+    assert tuple(data[start]) == (1.0, 2.0, 3000.0, 1.0)  # first storm, then zero padding
+    assert not data[start + 1].any()
+    bad = CloudState()
+    bad.params = dict(bad.params, density_sigma=float("nan"))
+    with pytest.raises(ValueError, match="non-finite"):
+        uniforms.pack(bad)

@@ -15,7 +15,8 @@ from .sources import read_shader
 
 
 @cache
-def struct_fields() -> tuple[str, ...]:
+def struct_fields() -> tuple[tuple[str, int], ...]:
+    """(name, array length or 0) of each NubisParams member, in order."""
     src = read_shader("nubis_params.glsl")
     body = re.search(r"struct\s+NubisParams\s*{(.*?)};", src, re.S)
     if body is None:
