@@ -166,5 +166,5 @@ def test_uniform_block_matches_the_glsl_struct():
     assert not data[start + 1].any()
     bad = CloudState()
     bad.params = dict(bad.params, density_sigma=float("nan"))
-    with pytest.raises(ValueError, match="non-finite"):
+    with pytest.raises(NubisError, match="non-finite"):
         uniforms.pack(bad)

@@ -10,6 +10,7 @@ from functools import cache
 
 import numpy as np
 
+from ..core.errors import NubisError
 from ..core.state import CloudState, wind_vector
 from .sources import read_shader
 
@@ -113,7 +114,7 @@ def pack(state: CloudState) -> np.ndarray:
             rows.append(value)
     data = np.array(rows, dtype=np.float32)
     if not np.all(np.isfinite(data)):
-        raise ValueError("non-finite cloud settings: check the scene's Nubis values for NaN or infinity")
+        raise NubisError("non-finite cloud settings: check the scene's Nubis values for NaN or infinity")
     return data
 
 
