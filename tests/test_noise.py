@@ -19,10 +19,17 @@ def full_set() -> noise.NoiseSet:
     return noise.generate_noise_set(0)
 
 
+SEAM_LIMIT = 1.1
+
+
 def seam_ratio(a: np.ndarray, axis: int) -> float:
-    """Mean |difference| across the wrap seam over the mean |difference| between interior neighbours."""
+    """Mean |difference| across the wrap seam over the largest mean |difference| between any pair of
+    interior neighbour planes. The seam lies on every octave's lattice line, like only a few interior
+    planes do, so a seamless texture lands near 1; SEAM_LIMIT allows for the sampling spread of those
+    few planes."""
     a = a.astype(np.float32)
-    interior = float(np.abs(np.diff(a, axis=axis)).mean())
+    other = tuple(ax for ax in range(a.ndim) if ax != axis)
+    interior = float(np.abs(np.diff(a, axis=axis)).mean(axis=other).max())
     seam = float(np.abs(np.take(a, 0, axis=axis) - np.take(a, -1, axis=axis)).mean())
     return seam / interior
 
@@ -101,7 +108,7 @@ def test_3d_textures_tile_in_every_axis(full_set: noise.NoiseSet, name: str) -> 
     for c in range(a.shape[-1]):
         for axis in range(3):
             r = seam_ratio(a[..., c], axis)
-            assert r <= 1.5, f"{name} channel {c} axis {axis}: seam ratio {r:.2f}"
+            assert r <= SEAM_LIMIT, f"{name} channel {c} axis {axis}: seam ratio {r:.2f}"
 
 
 @pytest.mark.parametrize("name", ["curl", "cirrus"])
@@ -110,7 +117,7 @@ def test_2d_textures_tile_in_every_axis(full_set: noise.NoiseSet, name: str) -> 
     for c in range(a.shape[-1]):
         for axis in range(2):
             r = seam_ratio(a[..., c], axis)
-            assert r <= 1.5, f"{name} channel {c} axis {axis}: seam ratio {r:.2f}"
+            assert r <= SEAM_LIMIT, f"{name} channel {c} axis {axis}: seam ratio {r:.2f}"
 
 
 @pytest.mark.parametrize("cells", [2, 4, 8])
@@ -119,17 +126,17 @@ def test_helpers_tile(cells: int) -> None:
     # interior-vs-seam comparison needs at least two cells.)
     for vol in (noise.tiling_perlin_3d(16, cells, 1), noise.tiling_worley_3d(16, cells, 1)):
         for axis in range(3):
-            assert seam_ratio(vol, axis) <= 1.5
+            assert seam_ratio(vol, axis) <= SEAM_LIMIT
     for img in (noise.tiling_perlin_2d(32, cells, 1), noise.tiling_worley_2d(32, cells, 1)):
         for axis in range(2):
-            assert seam_ratio(img, axis) <= 1.5
+            assert seam_ratio(img, axis) <= SEAM_LIMIT
 
 
 def test_warped_perlin_still_tiles() -> None:
     warp = (0.1 * noise.perlin_fbm_2d(64, 2, 2, 5, signed=True), 0.1 * noise.perlin_fbm_2d(64, 2, 2, 6, signed=True))
     img = noise.tiling_perlin_2d(64, (8, 3), 1, warp=warp)
     for axis in range(2):
-        assert seam_ratio(img, axis) <= 1.5
+        assert seam_ratio(img, axis) <= SEAM_LIMIT
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -244,7 +251,7 @@ def test_mip_chain(full_set: noise.NoiseSet) -> None:
     assert abs(float(chain[2].mean()) - float(full_set.hf.mean())) < 1.0
     curl1 = noise.mip_chain(full_set.curl, 2)[1]
     for axis in range(2):
-        assert seam_ratio(curl1[..., 0], axis) <= 1.5
+        assert seam_ratio(curl1[..., 0], axis) <= SEAM_LIMIT
 
 
 def test_texture_memory_with_mips_is_within_budget(full_set: noise.NoiseSet) -> None:
