@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
+import shutil
 import sys
 import tempfile
 import time
@@ -171,6 +172,7 @@ def run(argv: Sequence[str], in_blender: bool = False) -> int:
         print(f"{PROG}: internal error: {type(err).__name__}: {err} (details in {log})", file=sys.stderr)
         return 3
     print(summary)
+    shutil.rmtree(log_dir, ignore_errors=True)  # kept only when something went wrong
     return 0
 
 
@@ -189,7 +191,7 @@ def _execute(args, in_blender: bool, log: Path) -> str:
         if value is not None and value < (0 if name == "bounces" else 1):
             raise NubisError(f"--{name} must be a positive whole number, not {value}")
     if getattr(args, "motion", None):
-        check_output_path(args.motion, (".exr",))
+        args.motion = check_output_path(args.motion, (".exr",))
     voxel = getattr(args, "voxel_size", None)
     if voxel is not None and not voxel > 0:
         raise NubisError(f"--voxel-size must be a positive number of metres, not {voxel}")

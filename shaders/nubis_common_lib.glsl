@@ -43,7 +43,7 @@ vec2 nubis_ray_sphere(vec3 origin, vec3 dir, float planet_radius, float altitude
     return vec2(1.0, -1.0);
   }
   /* Stable quadratic roots (Numerical Recipes 5.6). */
-  float q = -(b + sign(b) * sqrt(disc));
+  float q = -(b + (b >= 0.0 ? 1.0 : -1.0) * sqrt(disc)); /* sign(0) would be 0: a perpendicular ray */
   if (abs(q) < 1e-12) {
     return vec2(0.0, 0.0);
   }

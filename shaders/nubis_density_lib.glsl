@@ -13,23 +13,29 @@ struct NubisFieldSample {
   float inside; /* 1 inside the field and the draw radius, fading to 0 at their edges */
 };
 
+/* How much of a column exists at world xy: 1 inside the field and the draw radius, fading to 0 at
+ * their edges, and 0 outside a comparison's clip box. Shared by the volume and the cirrus. */
+float nubis_inside(vec2 xy, vec2 uv)
+{
+  /* Nothing outside the painted field: repeating it would invent clouds nobody authored. */
+  vec2 edge = min(uv, 1.0 - uv) * P.field.z;
+  float in_field = clamp01(min(edge.x, edge.y) / max(P.draw.z, 1.0));
+  /* SPEC 1.1, S15: clouds are drawn within the draw radius; the fade lives in the density itself so
+   * that the bake holds exactly what the viewport shows. */
+  float in_radius = clamp01((P.layer.w - length(xy - P.draw.xy)) / max(P.draw.z, 1.0));
+  if (P.clip_box.z >= P.clip_box.x && (any(lessThan(xy, P.clip_box.xy)) || any(greaterThan(xy, P.clip_box.zw)))) {
+    return 0.0;
+  }
+  return in_field * in_radius;
+}
+
 NubisFieldSample nubis_sample_field(vec2 xy)
 {
   NubisFieldSample f;
   vec2 uv = (xy - P.field.xy) * P.field.w + 0.5;
   f.a = textureLod(field_a, clamp(uv, 0.0, 1.0), 0.0);
   f.b = textureLod(field_b, clamp(uv, 0.0, 1.0), 0.0);
-  /* Nothing outside the painted field: repeating it would invent clouds nobody authored. */
-  vec2 edge = min(uv, 1.0 - uv) * P.field.z;
-  float in_field = clamp01(min(edge.x, edge.y) / max(P.draw.z, 1.0));
-  /* SPEC 1.1, S15: clouds are drawn within the draw radius; the fade lives in the density itself so
-   * that the bake holds exactly what the viewport shows. */
-  float dist = length(xy - P.draw.xy);
-  float in_radius = clamp01((P.layer.w - dist) / max(P.draw.z, 1.0));
-  f.inside = in_field * in_radius;
-  if (P.clip_box.z >= P.clip_box.x && (any(lessThan(xy, P.clip_box.xy)) || any(greaterThan(xy, P.clip_box.zw)))) {
-    f.inside = 0.0;
-  }
+  f.inside = nubis_inside(xy, uv);
   return f;
 }
 
@@ -69,12 +75,12 @@ vec2 nubis_rotate_about(vec2 xy, vec2 centre, float angle)
 /* Angle of ring `ring` (0 = innermost of 6) at ring coordinate u = 6 * dist / radius: speeds fall
  * ring by ring from the centre, each ring has its own phase (skew), and rings outside faster ones are
  * twisted with the radius for the spiral tendrils of a boundary layer. */
-float nubis_ring_angle(int ring, float u, float spin)
+float nubis_ring_angle(int ring, float u, float spin, float time)
 {
   float speed = spin * (1.0 - float(ring) / 6.0);
   float skew = float(ring) * 1.913;
   float twist = ring > 0 ? P.storm_info.y * (float(ring) + 1.0 - u) : 0.0;
-  return P.wind2.z * speed + skew + twist;
+  return time * speed + skew + twist;
 }
 
 /* Detail-noise sample position after every storm's vortex; `second` and `weight` return the
@@ -104,17 +110,17 @@ vec2 nubis_vortex(vec2 xy, out vec2 second, out float weight)
       /* PS4 quality (GDC22): one sample, the ring boundary jittered instead of blended. */
       float jitter = fract(sin(dot(xy, vec2(12.9898, 78.233))) * 43758.5453) - 0.5;
       ring = clamp(int(floor(u + jitter * overlap)), 0, 5);
-      xy = nubis_rotate_about(xy, shape.xy, nubis_ring_angle(ring, u, spin) * fade);
+      xy = nubis_rotate_about(xy, shape.xy, nubis_ring_angle(ring, u, spin, P.storm_flash[i].w) * fade);
       second = xy;
     }
     else if (abs(e) < 0.5 * overlap && boundary >= 1.0 && boundary <= 5.0) {
       int inner = int(boundary) - 1;
       weight = smoothstep(-0.5 * overlap, 0.5 * overlap, e);
-      second = nubis_rotate_about(xy, shape.xy, nubis_ring_angle(inner + 1, u, spin) * fade);
-      xy = nubis_rotate_about(xy, shape.xy, nubis_ring_angle(inner, u, spin) * fade);
+      second = nubis_rotate_about(xy, shape.xy, nubis_ring_angle(inner + 1, u, spin, P.storm_flash[i].w) * fade);
+      xy = nubis_rotate_about(xy, shape.xy, nubis_ring_angle(inner, u, spin, P.storm_flash[i].w) * fade);
     }
     else {
-      xy = nubis_rotate_about(xy, shape.xy, nubis_ring_angle(ring, u, spin) * fade);
+      xy = nubis_rotate_about(xy, shape.xy, nubis_ring_angle(ring, u, spin, P.storm_flash[i].w) * fade);
       second = xy;
     }
   }
@@ -244,11 +250,7 @@ float nubis_cirrus_density(vec2 xy)
 {
   vec2 uv = (xy - P.field.xy) * P.field.w + 0.5;
   vec4 c = textureLod(field_c, clamp(uv, 0.0, 1.0), 0.0);
-  vec2 edge = min(uv, 1.0 - uv) * P.field.z;
-  float inside = clamp01(min(edge.x, edge.y) / max(P.draw.z, 1.0));
-  /* Like the volume, the cirrus ends softly at the draw radius instead of at the field's edge. */
-  inside *= clamp01((P.layer.w - distance(xy, P.draw.xy)) / max(P.draw.z, 1.0));
-  float coverage = clamp01(c.r * P.cirrus.y) * inside;
+  float coverage = clamp01(c.r * P.cirrus.y) * nubis_inside(xy, uv);
   if (coverage <= 0.0) {
     return 0.0;
   }

@@ -25,7 +25,8 @@ struct NubisParams {
   vec4 storm_shape[4];      /* per storm: centre x, y, radius, blend factor */
   vec4 storm_light[4];      /* per storm: spin (rad/s at the centre), darkening, glow intensity, ambient boost */
   vec4 storm_glow[4];       /* per storm: glow colour rgb, flash intensity */
-  vec4 storm_flash[4];      /* per storm: flash offset x, y from the centre, ground discharge (0/1), - */
+  vec4 storm_flash[4];      /* per storm: flash offset x, y from the centre, ground discharge (0/1),
+                             * its vortex time (seconds, wrapped for float precision) */
   vec4 motion;              /* timestep of the motion vectors in seconds, wind speed (m/s), -, - */
   vec4 clip_box;   /* x0, y0, x1, y1: no clouds outside (a comparison clips to the baked box); x1 < x0: off */
   vec4 options;    /* jitter (0/1), jittered storm rings (0/1), accumulation pass, - */

@@ -112,9 +112,16 @@ def test_blender_command_is_registered_and_runs(blender, tmp_path):
 
 
 def test_blend_file_round_trip_through_the_cli(blender, make_scene, tmp_path):
+    """--blend renders the saved file's own cloudscape, not the default preset."""
     scene = make_scene("default")
+    scene.nubis.density_coverage = 0.0  # this file's sky is empty; the default preset's is not
+    scene.nubis.cirrus_coverage = 0.0
     path = tmp_path / "sky.blend"
     blender.ops.wm.save_as_mainfile(filepath=str(path))
-    r = run_cli("render", "--blend", str(path), "--out", str(tmp_path / "b.png"), "--width", "32", "--height", "18")
+    out = tmp_path / "b.exr"
+    r = run_cli("render", "--blend", str(path), "--out", str(out), "--width", "32", "--height", "18")
     assert r.returncode == 0, r.stderr
-    assert scene is not None
+    assert "(0% cloud cover)" in r.stdout
+    from nubis_addon.core.imageio import read_image
+
+    assert read_image(out)[..., 3].max() == 0.0

@@ -74,8 +74,10 @@ def test_motion_vectors_follow_the_wind(make_scene):
 
     from nubis_addon.blender import pipeline
 
-    speed = 400.0
-    scene = split_coverage_scene(make_scene, wind_speed=speed, wind_upward_bias=0.0, wind_direction=0.0)
+    speed, time_scale = 100.0, 4.0  # the features move at speed x time scale in animation seconds
+    scene = split_coverage_scene(
+        make_scene, wind_speed=speed, wind_upward_bias=0.0, wind_direction=0.0, wind_time_scale=time_scale
+    )
     w = h = 64
     m = pipeline.render_motion(scene, w, h)
     cloudy = m[..., 3] > 0.5
@@ -86,7 +88,7 @@ def test_motion_vectors_follow_the_wind(make_scene):
     rows, cols = np.mgrid[0:h, 0:w]
     ndc_x, ndc_y = (cols + 0.5) / w * 2 - 1, 1 - (rows + 0.5) / h * 2
     z = (m[..., 2] / np.sqrt(1 + ndc_x**2 + ndc_y**2))[cloudy]
-    expected = speed * dt * w / (2.0 * z)
+    expected = speed * time_scale * dt * w / (2.0 * z)
     np.testing.assert_allclose(m[..., 0][cloudy], expected, rtol=0.01)
     assert np.abs(m[..., 1][cloudy]).max() < 0.01 * expected.max()
     assert np.all(m[m[..., 3] == 0] == 0.0)

@@ -125,6 +125,7 @@ def bake(
     voxel_size: float | None = None,
     progress: Progress | None = None,
     camera_only: bool = False,
+    size: tuple[int, int] | None = None,
 ):
     """Bake the viewport's density to an OpenVDB `density` grid in world space (atomic write).
 
@@ -134,7 +135,7 @@ def bake(
     state = scene_io.state_from_scene(scene)
     region = None
     if camera_only:
-        w, h = resolution(scene, None, None)
+        w, h = size or resolution(scene, None, None)
         inv = np.array(scene_io.camera_inv_view_proj(scene, w, h))
         region = view_footprint(state, inv)
     plan = plan_bake(state, voxel_size or scene.nubis.bake_voxel_size, region=region)
@@ -199,7 +200,7 @@ def compare(
     out = check_output_dir(out_dir)
     timings = {}
     t = time.perf_counter()
-    baked = bake(scene, out / "clouds.vdb", voxel_size, camera_only=True)
+    baked = bake(scene, out / "clouds.vdb", voxel_size, camera_only=True, size=(width, height))
     timings["bake_s"] = time.perf_counter() - t
     # The viewport keeps only the baked clouds: sky light from beyond the box would otherwise be
     # shadowed by clouds Cycles never sees.

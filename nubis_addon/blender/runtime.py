@@ -8,6 +8,7 @@ from pathlib import Path
 import bpy
 
 from ..core import noise
+from ..core.errors import NubisError
 from ..render.engine import CloudGPU
 from ..render.gpu_context import ensure_gpu_context
 
@@ -25,7 +26,12 @@ def cache_dir() -> Path:
     else:
         # Run as a plain module (python -m nubis_addon): the folder the installed extension would use.
         path = Path(bpy.utils.user_resource("EXTENSIONS", path=os.path.join(".user", "user_default", "nubis", "cache")))
-    path.mkdir(parents=True, exist_ok=True)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise NubisError(
+            f"cannot create the cache folder '{path}' ({err.strerror}): set NUBIS_CACHE_DIR to a writable folder"
+        ) from None
     return path
 
 

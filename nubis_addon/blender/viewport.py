@@ -29,6 +29,15 @@ _pending_images: set[str] = set()
 
 
 @bpy.app.handlers.persistent
+def on_load(*_args) -> None:
+    """A new file: forget cached pixels and any paint regeneration pending for the old one."""
+    mark_dirty()
+    _pending_images.clear()
+    if bpy.app.timers.is_registered(_regenerate_after_paint):
+        bpy.app.timers.unregister(_regenerate_after_paint)
+
+
+@bpy.app.handlers.persistent
 def on_frame_change(scene, _depsgraph=None) -> None:
     """Animated storms (lifecycle blend, a moving Empty) change the field: re-composite on frame changes."""
     settings = getattr(scene, "nubis", None)
@@ -50,9 +59,10 @@ def on_depsgraph_update(scene, depsgraph) -> None:
         return
     used = scene_io.layer_images(settings)
     edited = {u.id.name for u in depsgraph.updates if isinstance(u.id, bpy.types.Image) and u.id.name in used}
-    if edited and not _pending_images:
-        bpy.app.timers.register(_regenerate_after_paint, first_interval=0.25)
-    _pending_images.update(edited)
+    if edited:
+        _pending_images.update(edited)
+        if not bpy.app.timers.is_registered(_regenerate_after_paint):
+            bpy.app.timers.register(_regenerate_after_paint, first_interval=0.25)
 
 
 def _regenerate_after_paint():
@@ -167,8 +177,8 @@ def register() -> None:
     global _handle
     if _handle is None:
         _handle = bpy.types.SpaceView3D.draw_handler_add(_draw_callback, (), "WINDOW", "POST_VIEW")
-    if mark_dirty not in bpy.app.handlers.load_post:
-        bpy.app.handlers.load_post.append(mark_dirty)
+    if on_load not in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.append(on_load)
     if on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post:
         bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
     if on_frame_change not in bpy.app.handlers.frame_change_post:
@@ -180,8 +190,8 @@ def unregister() -> None:
     if _handle is not None:
         bpy.types.SpaceView3D.draw_handler_remove(_handle, "WINDOW")
         _handle = None
-    if mark_dirty in bpy.app.handlers.load_post:
-        bpy.app.handlers.load_post.remove(mark_dirty)
+    if on_load in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.remove(on_load)
     if on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
         bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
     if on_frame_change in bpy.app.handlers.frame_change_post:
@@ -191,6 +201,9 @@ def unregister() -> None:
     _offscreen.update(size=None, buffer=None)
     _composite.clear()
     _fields_cache.update(key=None, fields=None)
+    _pending_images.clear()
+    if bpy.app.timers.is_registered(_regenerate_after_paint):
+        bpy.app.timers.unregister(_regenerate_after_paint)
 
 
 def is_registered() -> bool:

@@ -5,6 +5,7 @@ The layout is read from the GLSL struct itself, so Python and the shaders cannot
 
 from __future__ import annotations
 
+import math
 import re
 from functools import cache
 
@@ -82,8 +83,9 @@ def param_vectors(state: CloudState) -> dict[str, tuple[float, float, float, flo
         "storm_shape": [(s.x, s.y, s.radius, s.blend) for s in state.storms],
         "storm_light": [(s.spin, s.darkening, s.glow, s.ambient_boost) for s in state.storms],
         "storm_glow": [(*s.glow_color, s.flash) for s in state.storms],
-        "storm_flash": [(s.flash_x, s.flash_y, s.flash_ground, 0.0) for s in state.storms],
-        "motion": (state.motion_dt, p["wind_speed"] * p["wind_time_scale"], 0.0, 0.0),
+        "storm_flash": [(s.flash_x, s.flash_y, s.flash_ground, _storm_time(state.time, s.spin)) for s in state.storms],
+        # motion_dt is already in simulated seconds (time scale included).
+        "motion": (state.motion_dt, p["wind_speed"], 0.0, 0.0),
         "clip_box": state.clip_box or (1.0, 1.0, -1.0, -1.0),
         "options": (
             1.0 if state.jitter else 0.0,
@@ -116,6 +118,14 @@ def pack(state: CloudState) -> np.ndarray:
     if not np.all(np.isfinite(data)):
         raise NubisError("non-finite cloud settings: check the scene's Nubis values for NaN or infinity")
     return data
+
+
+def _storm_time(time: float, spin: float) -> float:
+    """Time wrapped (in float64, before float32 upload) to a period after which every ring's angle
+    (spin x (6 - ring) / 6 x time) has turned by whole turns, so long animations keep their precision."""
+    if abs(spin) < 1e-12:
+        return 0.0
+    return math.fmod(time, 12.0 * math.pi / abs(spin))
 
 
 def _normalized(v) -> tuple[float, float, float]:
