@@ -110,8 +110,9 @@ vec2 nubis_vortex(vec2 xy, out vec2 second, out float weight)
       /* PS4 quality (GDC22): one sample, the ring boundary jittered instead of blended. */
       float jitter = fract(sin(dot(xy, vec2(12.9898, 78.233))) * 43758.5453) - 0.5;
       ring = clamp(int(floor(u + jitter * overlap)), 0, 5);
-      xy = nubis_rotate_about(xy, shape.xy, nubis_ring_angle(ring, u, spin, P.storm_flash[i].w) * fade);
-      second = xy;
+      float angle = nubis_ring_angle(ring, u, spin, P.storm_flash[i].w) * fade;
+      xy = nubis_rotate_about(xy, shape.xy, angle);
+      second = nubis_rotate_about(second, shape.xy, angle); /* an earlier storm's second sample turns too */
     }
     else if (abs(e) < 0.5 * overlap && boundary >= 1.0 && boundary <= 5.0) {
       int inner = int(boundary) - 1;
@@ -120,8 +121,9 @@ vec2 nubis_vortex(vec2 xy, out vec2 second, out float weight)
       xy = nubis_rotate_about(xy, shape.xy, nubis_ring_angle(inner, u, spin, P.storm_flash[i].w) * fade);
     }
     else {
-      xy = nubis_rotate_about(xy, shape.xy, nubis_ring_angle(ring, u, spin, P.storm_flash[i].w) * fade);
-      second = xy;
+      float angle = nubis_ring_angle(ring, u, spin, P.storm_flash[i].w) * fade;
+      xy = nubis_rotate_about(xy, shape.xy, angle);
+      second = nubis_rotate_about(second, shape.xy, angle);
     }
   }
 #endif

@@ -134,3 +134,28 @@ def test_motion_vectors_turn_with_the_vortex(make_scene):
     assert m[..., 1][right].mean() < 0 < m[..., 1][left].mean()
     top, bottom = cloudy & (rows < 24), cloudy & (rows > 40)
     assert m[..., 0][top].mean() < 0 < m[..., 0][bottom].mean()
+
+
+def test_removing_a_storm_keeps_the_others_animation(storm_scene, blender):
+    scene, _storm = storm_scene
+    s = scene.nubis
+    assert blender.ops.nubis.storm_add() == {"FINISHED"}
+    s.active_storm = 1
+    scene.frame_set(1)
+    assert blender.ops.nubis.storm_lifecycle(ramp_in=1.0, hold=1.0, ramp_out=1.0) == {"FINISHED"}
+    s.active_storm = 0
+    assert blender.ops.nubis.storm_remove() == {"FINISHED"}
+    from nubis_addon.blender import scene_io
+
+    paths = {fc.data_path for fc in scene_io.fcurves(scene)}
+    assert paths == {"nubis.storms[0].blend"}  # the keyed storm moved to index 0 and kept its keys
+    scene.frame_set(1 + 24)
+    assert s.storms[0].blend == pytest.approx(1.0)
+    assert blender.ops.nubis.storm_remove() == {"FINISHED"}
+    assert not scene_io.fcurves(scene)
+
+
+def test_bake_operator_refuses_a_path_relative_to_an_unsaved_file(storm_scene, blender):
+    assert not blender.data.filepath
+    with pytest.raises(RuntimeError, match="not saved yet"):
+        blender.ops.nubis.bake_vdb(filepath="//clouds.vdb")

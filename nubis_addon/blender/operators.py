@@ -21,6 +21,12 @@ def _preset_items(_self, _context):
     return items or [("default", "Default", "")]
 
 
+def _absolute(path: str) -> str:
+    if path.startswith("//") and not bpy.data.filepath:
+        raise NubisError("the path is relative to the .blend file, which is not saved yet: save it or give a full path")
+    return bpy.path.abspath(path)
+
+
 def _has_cloudscape(context) -> bool:
     scene = context.scene
     return scene is not None and getattr(scene, "nubis", None) is not None and scene.nubis.field_a is not None
@@ -207,6 +213,7 @@ class NUBIS_OT_storm_remove(NeedsCloudscape, NubisOperator, bpy.types.Operator):
         storm = s.storms[s.active_storm]
         if storm.empty is not None:
             bpy.data.objects.remove(storm.empty)
+        scene_io.remove_storm_animation(context.scene, s.active_storm)
         s.storms.remove(s.active_storm)
         s.active_storm = max(0, min(s.active_storm, len(s.storms) - 1))
         scene_io.generate_fields(context.scene)
@@ -218,6 +225,18 @@ def _active_storm(context):
     if not s.storms:
         raise NubisError("add a superstorm first (Add Superstorm)")
     return s.storms[min(s.active_storm, len(s.storms) - 1)]
+
+
+def _insert_keys(scene, storm, prop: str, keys, interpolation: str = "LINEAR") -> None:
+    """Key `prop` of a storm at (frame, value) pairs straight into its F-curve. Setting the property
+    first would not do: its update re-composites the field, which evaluates the animation and puts
+    the already keyed value back before keyframe_insert reads it."""
+    storm.keyframe_insert(prop, frame=keys[0][0])
+    path = storm.path_from_id(prop)
+    curve = next(fc for fc in scene_io.fcurves(scene) if fc.data_path == path)
+    for frame, value in keys:
+        curve.keyframe_points.insert(frame, value, options={"FAST"}).interpolation = interpolation
+    curve.update()
 
 
 class NUBIS_OT_storm_lifecycle(NeedsCloudscape, NubisOperator, bpy.types.Operator):
@@ -238,9 +257,7 @@ class NUBIS_OT_storm_lifecycle(NeedsCloudscape, NubisOperator, bpy.types.Operato
         storm = _active_storm(context)
         fps = scene.render.fps / scene.render.fps_base
         keys = storms.lifecycle_keys(scene.frame_current, fps, self.ramp_in, self.hold, self.ramp_out)
-        for frame, blend in keys:
-            storm.blend = blend
-            storm.keyframe_insert("blend", frame=frame)
+        _insert_keys(context.scene, storm, "blend", keys)
         return f"Lifecycle keyed over frames {keys[0][0]}-{keys[-1][0]}"
 
 
@@ -264,18 +281,15 @@ class NUBIS_OT_lightning_sequence(NeedsCloudscape, NubisOperator, bpy.types.Oper
         storm = _active_storm(context)
         fps = scene.render.fps / scene.render.fps_base
         keys = storms.lightning_keys(scene.frame_current, fps, self.flashes, self.discharges, self.peak, self.seed)
-        for key in keys:
-            storm.flash = key["flash"]
-            storm.flash_x, storm.flash_y = key["x"] * storm.radius, key["y"] * storm.radius
-            storm.flash_ground = key["ground"]
-            for prop in ("flash", "flash_x", "flash_y", "flash_ground"):
-                storm.keyframe_insert(prop, frame=int(key["frame"]))
+        frames = [int(k["frame"]) for k in keys]
+        _insert_keys(scene, storm, "flash", list(zip(frames, (k["flash"] for k in keys), strict=True)))
         # Positions jump from flash to flash; only the intensity is interpolated.
-        for fc in scene_io.fcurves(scene):
-            if fc.data_path.endswith(("flash_x", "flash_y", "flash_ground")):
-                for point in fc.keyframe_points:
-                    point.interpolation = "CONSTANT"
-        storm.flash = 0.0
+        for prop, values in (
+            ("flash_x", [k["x"] * storm.radius for k in keys]),
+            ("flash_y", [k["y"] * storm.radius for k in keys]),
+            ("flash_ground", [k["ground"] for k in keys]),
+        ):
+            _insert_keys(scene, storm, prop, list(zip(frames, values, strict=True)), "CONSTANT")
         return f"{self.flashes} flashes and {self.discharges} discharges keyed from frame {int(keys[0]['frame'])}"
 
 
@@ -304,14 +318,16 @@ class NUBIS_OT_bake_vdb(NeedsCloudscape, NubisOperator, bpy.types.Operator):
     bl_label = "Bake OpenVDB"
     bl_options = {"REGISTER", "UNDO"}
 
-    filepath: StringProperty(subtype="FILE_PATH", default="//nubis_clouds.vdb")
+    filepath: StringProperty(
+        subtype="FILE_PATH", default="//nubis_clouds.vdb", options={"PATH_SUPPORTS_BLEND_RELATIVE"}
+    )
     voxel_size: FloatProperty(
         name="Voxel Size", default=0.0, min=0.0, unit="LENGTH", description="0 uses the scene's bake voxel size"
     )
 
     def run(self, context):
         wm = context.window_manager
-        path = bpy.path.abspath(self.filepath)
+        path = _absolute(self.filepath)
         wm.progress_begin(0, 100)
         try:
             result = pipeline.bake(
@@ -329,12 +345,12 @@ class NUBIS_OT_bake_frames(NeedsCloudscape, NubisOperator, bpy.types.Operator):
     bl_idname = "nubis.bake_frames"
     bl_label = "Bake Sequence"
 
-    directory: StringProperty(subtype="DIR_PATH", default="//nubis_vdb/")
+    directory: StringProperty(subtype="DIR_PATH", default="//nubis_vdb/", options={"PATH_SUPPORTS_BLEND_RELATIVE"})
     step: IntProperty(name="Frame Step", default=1, min=1)
 
     def run(self, context):
         scene = context.scene
-        folder = bpy.path.abspath(self.directory)
+        folder = _absolute(self.directory)
         frames = range(scene.frame_start, scene.frame_end + 1, self.step)
         wm = context.window_manager
         wm.progress_begin(0, len(frames))

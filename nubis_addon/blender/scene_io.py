@@ -185,22 +185,44 @@ def storms_animated(settings) -> bool:
     return bool(anim and anim.action and any("storms" in fc.data_path for fc in _fcurves(anim.action)))
 
 
+def remove_storm_animation(scene, index: int) -> None:
+    """Storm F-curves are addressed by collection index: drop the removed storm's curves and move the
+    later storms' curves down one, so no storm inherits another's lifecycle or lightning."""
+    anim = scene.animation_data
+    if not anim or not anim.action:
+        return
+    prefix = "nubis.storms["
+    for owner, curve in _fcurve_owners(anim.action):
+        path = curve.data_path
+        if not path.startswith(prefix):
+            continue
+        i = int(path[len(prefix) : path.index("]")])
+        if i == index:
+            owner.remove(curve)
+        elif i > index:
+            curve.data_path = f"{prefix}{i - 1}{path[path.index(']') :]}"
+
+
+def _fcurve_owners(action) -> list:
+    """(collection, curve) pairs, for legacy and Blender 5.0 layered actions alike."""
+    curves = getattr(action, "fcurves", None)
+    if curves is not None:
+        return [(curves, c) for c in list(curves)]
+    out = []
+    for layer in getattr(action, "layers", ()):
+        for strip in layer.strips:
+            for bag in getattr(strip, "channelbags", ()):
+                out.extend((bag.fcurves, c) for c in list(bag.fcurves))
+    return out
+
+
 def fcurves(scene) -> list:
     anim = scene.animation_data
     return _fcurves(anim.action) if anim and anim.action else []
 
 
-def _fcurves(action):
-    curves = getattr(action, "fcurves", None)
-    if curves is not None:
-        return list(curves)
-    # Blender 5.0 keeps F-curves in layered actions.
-    out = []
-    for layer in getattr(action, "layers", ()):
-        for strip in layer.strips:
-            for bag in getattr(strip, "channelbags", ()):
-                out.extend(bag.fcurves)
-    return out
+def _fcurves(action) -> list:
+    return [curve for _owner, curve in _fcurve_owners(action)]
 
 
 def _camera_xy(scene) -> tuple[float, float]:
