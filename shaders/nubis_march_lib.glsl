@@ -1,15 +1,23 @@
 /* The view-ray march: premultiplied scene-linear radiance and alpha (SPEC 2.12, 3.1, 3.3), shared by
  * the raymarch and motion stages. Requires the cloud libraries. */
 
-/* The world-space ray through a screen position (uv in [0, 1]) for an inverse view-projection; works
- * for perspective and orthographic views alike. */
-void nubis_view_ray(vec2 screen_uv, mat4 inverse_view_projection, out vec3 origin, out vec3 dir)
+/* The world-space ray through a screen position (uv in [0, 1]). A perspective view passes its eye
+ * (eye.w = 1): unprojecting the near plane through a frustum kilometres deep loses metres to float
+ * cancellation, which shifts every ray sideways and moves cloud edges. Orthographic views (eye.w = 0)
+ * start on the near plane. */
+void nubis_view_ray(vec2 screen_uv, mat4 inverse_view_projection, vec4 eye, out vec3 origin, out vec3 dir)
 {
   vec2 ndc = screen_uv * 2.0 - 1.0;
-  vec4 near_h = inverse_view_projection * vec4(ndc, -1.0, 1.0);
   vec4 far_h = inverse_view_projection * vec4(ndc, 1.0, 1.0);
-  origin = near_h.xyz / near_h.w;
-  dir = normalize(far_h.xyz / far_h.w - origin);
+  vec3 far_point = far_h.xyz / far_h.w;
+  if (eye.w > 0.5) {
+    origin = eye.xyz;
+  }
+  else {
+    vec4 near_h = inverse_view_projection * vec4(ndc, -1.0, 1.0);
+    origin = near_h.xyz / near_h.w;
+  }
+  dir = normalize(far_point - origin);
 }
 
 /* SPEC 3.7: the cirrus layer, sampled once where the ray crosses its sphere, lit by a thin-layer

@@ -4,7 +4,7 @@
 void main()
 {
   vec3 origin, dir;
-  nubis_view_ray(uv, inv_view_proj, origin, dir);
+  nubis_view_ray(uv, inv_view_proj, eye, origin, dir);
   float cloud_depth;
   vec4 clouds = nubis_march(origin, dir, gl_FragCoord.xy, cloud_depth);
   if (clouds.a <= 0.0) {

@@ -87,7 +87,7 @@ def render_viewport(
     for i in range(passes):
         state.jitter_pass = i
         clouds.update(state)
-        frame = engine.render_offscreen(clouds, inv, width, height)
+        frame = engine.render_offscreen(clouds, inv, scene_io.camera_eye(scene), width, height)
         total = frame if total is None else total + frame
     return total / passes
 
@@ -108,7 +108,7 @@ def render_motion(scene, width: int, height: int) -> np.ndarray:
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
     clouds.update(state)
     inv = scene_io.camera_inv_view_proj(scene, width, height)
-    return engine.render_motion(clouds, inv, inv.inverted(), width, height)
+    return engine.render_motion(clouds, inv, scene_io.camera_eye(scene), inv.inverted(), width, height)
 
 
 @dataclass

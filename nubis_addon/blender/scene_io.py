@@ -398,6 +398,16 @@ def camera_inv_view_proj(scene, width: int, height: int):
     return (proj @ view).inverted()
 
 
+def camera_eye(scene) -> tuple[float, float, float, float]:
+    """The scene camera's position (w = 1), or w = 0 for an orthographic camera (rays start on the
+    near plane then)."""
+    cam = scene.camera
+    if cam is None or getattr(cam.data, "type", "PERSP") == "ORTHO":
+        return (0.0, 0.0, 0.0, 0.0)
+    t = evaluated_matrix(cam).translation
+    return (float(t.x), float(t.y), float(t.z), 1.0)
+
+
 def evaluated_matrix(obj):
     """An object's evaluated world matrix: right after a script moves it, `matrix_world` is stale
     until the depsgraph updates, and drivers and constraints only show in the evaluated copy."""

@@ -110,7 +110,7 @@ def _state(scene, view_origin):
     return scene_io.state_from_scene(scene, camera_location=view_origin, fields=_fields_cache["fields"])
 
 
-def draw_view(scene, inv_view_proj, view_origin, width: int, height: int) -> None:
+def draw_view(scene, inv_view_proj, view_origin, width: int, height: int, perspective: bool = True) -> None:
     """March the clouds into a buffer of 1/N the size and composite it over the background."""
     settings = scene.nubis
     # Creating an offscreen rebinds framebuffers; remember the target so the composite lands there.
@@ -130,7 +130,8 @@ def draw_view(scene, inv_view_proj, view_origin, width: int, height: int) -> Non
         gpu.state.active_framebuffer_get().clear(color=(0.0, 0.0, 0.0, 0.0))
         gpu.state.blend_set("NONE")
         gpu.state.depth_test_set("NONE")
-        engine.draw_clouds(clouds, inv_view_proj)
+        eye = (*view_origin[:3], 1.0) if perspective else (0.0, 0.0, 0.0, 0.0)
+        engine.draw_clouds(clouds, inv_view_proj, eye)
     sh, batch = _composite_shader()
     with target.bind():
         gpu.state.blend_set("ALPHA_PREMULT")
@@ -161,6 +162,7 @@ def _draw_callback() -> None:
             rv3d.view_matrix.inverted().translation,
             region.width,
             region.height,
+            rv3d.is_perspective,
         )
         _last_error.clear()
     except NubisError as err:

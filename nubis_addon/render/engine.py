@@ -61,9 +61,9 @@ def _create_info(
 # shaders/nubis_<stage>_frag.glsl, compiled after the cloud libraries.
 # The bake reads the lighting library too, for the glow grid.
 STAGES: dict[str, tuple[tuple[tuple[str, str], ...], tuple[tuple[str, str], ...]]] = {
-    "raymarch": ((("MAT4", "inv_view_proj"),), ()),
+    "raymarch": ((("MAT4", "inv_view_proj"), ("VEC4", "eye")), ()),
     "bake": ((("VEC4", "bake_origin"), ("VEC4", "bake_voxel")), ()),
-    "motion": ((("MAT4", "inv_view_proj"),), ()),
+    "motion": ((("MAT4", "inv_view_proj"), ("VEC4", "eye")), ()),
 }
 
 
@@ -119,9 +119,10 @@ class CloudGPU:
             sh.uniform_sampler(name, textures[name])
 
 
-def draw_clouds(gpu_inputs: CloudGPU, inv_view_proj) -> None:
-    """Draw the clouds into the bound framebuffer (premultiplied radiance, alpha)."""
-    draw_stage("raymarch", gpu_inputs, {"inv_view_proj": inv_view_proj})
+def draw_clouds(gpu_inputs: CloudGPU, inv_view_proj, eye) -> None:
+    """Draw the clouds into the bound framebuffer (premultiplied radiance, alpha). `eye` is the
+    perspective camera's position with w = 1, or w = 0 for an orthographic view."""
+    draw_stage("raymarch", gpu_inputs, {"inv_view_proj": inv_view_proj, "eye": tuple(eye)})
 
 
 def draw_offscreen(width: int, height: int, draw: Callable[[], None]) -> np.ndarray:
@@ -157,14 +158,16 @@ def draw_stage(
     fullscreen_batch(stage, gpu_inputs.storms).draw(sh)
 
 
-def render_motion(gpu_inputs: CloudGPU, inv_view_proj, prev_view_proj, width: int, height: int) -> np.ndarray:
+def render_motion(gpu_inputs: CloudGPU, inv_view_proj, eye, prev_view_proj, width: int, height: int) -> np.ndarray:
     """Per-pixel motion vectors (dx, dy in pixels per timestep), cloud distance and alpha, top row first.
     `prev_view_proj` is the camera one timestep earlier (the same matrix for a still camera)."""
     # mathutils matrices are row-major; GLSL reads columns.
     cams = np.array([np.array(inv_view_proj.inverted()).T, np.array(prev_view_proj).T], np.float32)
     cameras = gpu.types.GPUUniformBuf(cams.tobytes())
     px = draw_offscreen(
-        width, height, lambda: draw_stage("motion", gpu_inputs, {"inv_view_proj": inv_view_proj}, {"C": cameras})
+        width,
+        height,
+        lambda: draw_stage("motion", gpu_inputs, {"inv_view_proj": inv_view_proj, "eye": tuple(eye)}, {"C": cameras}),
     )
     # Rows run top-down in the result, so a motion up the screen becomes negative y, as in image space.
     out = px[::-1].copy()
@@ -172,7 +175,7 @@ def render_motion(gpu_inputs: CloudGPU, inv_view_proj, prev_view_proj, width: in
     return out
 
 
-def render_offscreen(gpu_inputs: CloudGPU, inv_view_proj, width: int, height: int, tile: int = 256) -> np.ndarray:
+def render_offscreen(gpu_inputs: CloudGPU, inv_view_proj, eye, width: int, height: int, tile: int = 256) -> np.ndarray:
     """Scene-linear premultiplied RGBA, shape (height, width, 4), top row first.
 
     The frame is drawn in tiles so that one huge draw call never stalls a software rasterizer.
@@ -183,7 +186,7 @@ def render_offscreen(gpu_inputs: CloudGPU, inv_view_proj, width: int, height: in
             for x in range(0, width, tile):
                 gpu.state.scissor_test_set(True)
                 gpu.state.scissor_set(x, y, min(tile, width - x), min(tile, height - y))
-                draw_clouds(gpu_inputs, inv_view_proj)
+                draw_clouds(gpu_inputs, inv_view_proj, eye)
         gpu.state.scissor_test_set(False)
 
     return draw_offscreen(width, height, tiles)[::-1].copy()

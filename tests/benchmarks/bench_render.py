@@ -56,11 +56,12 @@ def main() -> None:
     from nubis_addon.blender import runtime
 
     clouds = runtime.cloud_gpu(0)
+    eye = scene_io.camera_eye(scene)
     clouds.update(state)
     times = {}
     for w, h in ((480, 270), (960, 540), (240, 135)):
         inv = scene_io.camera_inv_view_proj(scene, w, h)
-        times[(w, h)] = best_of(lambda w=w, h=h, inv=inv: engine.render_offscreen(clouds, inv, w, h))
+        times[(w, h)] = best_of(lambda w=w, h=h, inv=inv: engine.render_offscreen(clouds, inv, eye, w, h))
         rows.append((f"frame {w}x{h}, default preset, real-time light march", f"{times[(w, h)] * 1000:.0f} ms"))
     rows.append(
         ("  ratio 960x540 / 240x135 (a 1/4 x 1/4 working buffer)", f"{times[(960, 540)] / times[(240, 135)]:.1f}x")
@@ -68,7 +69,7 @@ def main() -> None:
     state.light_mode = 1
     clouds.update(state)
     inv = scene_io.camera_inv_view_proj(scene, 240, 135)
-    ref = best_of(lambda: engine.render_offscreen(clouds, inv, 240, 135), 1)
+    ref = best_of(lambda: engine.render_offscreen(clouds, inv, eye, 240, 135), 1)
     rows.append(("frame 240x135, reference light march and sky visibility", f"{ref * 1000:.0f} ms"))
     rows.append(("  ratio reference / real-time at 240x135", f"{ref / times[(240, 135)]:.1f}x"))
     with tempfile.TemporaryDirectory() as tmp:
