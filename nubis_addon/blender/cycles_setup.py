@@ -83,6 +83,9 @@ def import_volume(scene, vdb_path: str) -> bpy.types.Object:
     if "density" not in [g.name for g in vol.grids]:
         bpy.data.volumes.remove(vol)
         raise NubisError(f"the VDB '{vdb_path}' has no 'density' grid: bake it again with Nubis")
+    # The reference must not round the bake: full-float grids, no clipping of thin edges.
+    vol.render.precision = "FULL"
+    vol.render.clipping = 0.0
     obj = bpy.data.objects.new(VOLUME_NAME, vol)
     scene.collection.objects.link(obj)
     vol.materials.append(build_material(scene.nubis, "glow" in [g.name for g in vol.grids]))
