@@ -139,6 +139,7 @@ def bake(
         inv = np.array(scene_io.camera_inv_view_proj(scene, w, h))
         region = view_footprint(state, inv)
     plan = plan_bake(state, voxel_size or scene.nubis.bake_voxel_size, region=region)
+    state.cirrus_slab = plan.cirrus_slab
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
     clouds.update(state)
     density, glow = gpu_bake.bake_density(clouds, plan, progress)

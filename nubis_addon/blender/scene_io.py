@@ -146,17 +146,17 @@ def storm_lights(settings) -> tuple[StormLight, ...]:
     return tuple(
         StormLight(
             *storm_centre(s),
-            s.radius,
-            s.blend,
-            s.spin,
-            s.darkening,
-            s.glow,
-            s.ambient_boost,
-            tuple(s.glow_color),
-            s.flash,
-            s.flash_x,
-            s.flash_y,
-            s.flash_ground,
+            radius=s.radius,
+            blend=s.blend,
+            spin=s.spin,
+            darkening=s.darkening,
+            glow=s.glow,
+            ambient_boost=s.ambient_boost,
+            glow_color=tuple(s.glow_color),
+            flash=s.flash,
+            flash_x=s.flash_x,
+            flash_y=s.flash_y,
+            flash_ground=s.flash_ground,
         )
         for s in list(settings.storms)[:MAX_STORMS]
     )
@@ -181,8 +181,7 @@ def storms_animated(settings) -> bool:
     for s in settings.storms:
         if s.empty is not None and s.empty.animation_data and s.empty.animation_data.action:
             return True
-    anim = settings.id_data.animation_data
-    return bool(anim and anim.action and any("storms" in fc.data_path for fc in _fcurves(anim.action)))
+    return any(fc.data_path.startswith("nubis.storms[") for fc in fcurves(settings.id_data))
 
 
 def remove_storm_animation(scene, index: int) -> None:
@@ -218,11 +217,7 @@ def _fcurve_owners(action) -> list:
 
 def fcurves(scene) -> list:
     anim = scene.animation_data
-    return _fcurves(anim.action) if anim and anim.action else []
-
-
-def _fcurves(action) -> list:
-    return [curve for _owner, curve in _fcurve_owners(action)]
+    return [curve for _owner, curve in _fcurve_owners(anim.action)] if anim and anim.action else []
 
 
 def _camera_xy(scene) -> tuple[float, float]:

@@ -21,6 +21,7 @@ class BakePlan:
     origin: tuple[float, float, float]  # world centre of voxel (0, 0, 0)
     voxel_size: float
     dims: tuple[int, int, int]  # voxels along x, y, z
+    cirrus_slab: float | None = None  # thickness of the baked cirrus slab, when the sky has cirrus
 
     @property
     def voxels(self) -> int:
@@ -101,10 +102,10 @@ def plan_bake(
             raise NubisError("the camera sees none of the cloud field: aim it at the clouds or bake the whole sky")
         raise NubisError("the data field lies outside the draw radius around the camera: move the camera or the field")
     lo, hi = state.shell()
+    slab = None
     if state.has_cirrus():
         # The 2D cirrus layer bakes as a slab at least two voxels thick, so voxel centres cannot miss it.
         slab = max(p["cirrus_thickness"], 2.0 * voxel_size)
-        state.cirrus_slab = slab
         hi = max(hi, p["cirrus_altitude"] + slab / 2)
     planet = p["layer_planet_radius"]
     far = max(math.hypot(x, y) for x in (x0, x1) for y in (y0, y1))
@@ -112,7 +113,7 @@ def plan_bake(
     z0, z1 = lo - sag, hi
     v = voxel_size
     dims = tuple(max(1, math.ceil((b - a) / v)) for a, b in ((x0, x1), (y0, y1), (z0, z1)))
-    plan = BakePlan((x0 + v / 2, y0 + v / 2, z0 + v / 2), v, dims)
+    plan = BakePlan((x0 + v / 2, y0 + v / 2, z0 + v / 2), v, dims, slab)
     if plan.bytes_estimate > memory_limit or max(dims[:2]) > MAX_SLICE:
         suggested = v * max((plan.bytes_estimate / memory_limit) ** (1 / 3), max(dims[:2]) / MAX_SLICE) * 1.05
         raise NubisError(
