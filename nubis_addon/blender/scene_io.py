@@ -7,8 +7,9 @@ from pathlib import Path
 
 import bpy
 import numpy as np
-from mathutils import Euler, Vector
+from mathutils import Euler, Matrix, Vector
 
+from ..core import camera
 from ..core import fields as fieldgen
 from ..core import storms as stormgen
 from ..core.errors import NubisError
@@ -389,8 +390,8 @@ def camera_inv_view_proj(scene, width: int, height: int):
         raise NubisError("the scene has no camera: add one or use New Cloudscape")
     depsgraph = bpy.context.evaluated_depsgraph_get()
     proj = cam.evaluated_get(depsgraph).calc_matrix_camera(depsgraph, x=width, y=height, scale_x=1.0, scale_y=1.0)
-    view = evaluated_matrix(cam).normalized().inverted()
-    return (proj @ view).inverted()
+    view = np.linalg.inv(np.array(evaluated_matrix(cam).normalized(), dtype=np.float64))
+    return Matrix(camera.ray_inverse_view_projection(proj, view).tolist())
 
 
 def camera_eye(scene) -> tuple[float, float, float, float]:

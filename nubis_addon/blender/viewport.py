@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import bpy
 import gpu
+import mathutils
 from gpu.types import GPUShaderCreateInfo, GPUStageInterfaceInfo
 from gpu_extras.batch import batch_for_shader
 
+from ..core import camera
 from ..core.errors import NubisError
 from ..render import engine
 from ..render.sources import read_shader
@@ -158,7 +160,7 @@ def _draw_callback() -> None:
     try:
         draw_view(
             scene,
-            rv3d.perspective_matrix.inverted(),
+            mathutils.Matrix(camera.ray_inverse_view_projection(rv3d.window_matrix, rv3d.view_matrix).tolist()),
             rv3d.view_matrix.inverted().translation,
             region.width,
             region.height,
