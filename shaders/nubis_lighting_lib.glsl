@@ -135,24 +135,48 @@ float nubis_reference_depth(vec3 p, vec3 dir, int samples)
   return depth;
 }
 
+/* The cosine of the angle from the forward direction for a uniform u in [0, 1), distributed as a
+ * Henyey-Greenstein lobe of eccentricity g (inverse of its cumulative distribution). */
+float nubis_henyey_greenstein_sample(float g, float u)
+{
+  if (abs(g) < 1e-3) {
+    return 1.0 - 2.0 * u;
+  }
+  float s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u);
+  return clamp((1.0 + g * g - s * s) / (2.0 * g), -1.0, 1.0);
+}
+
 /* Reference sky light: the world is a uniform sphere of radiance (as in the Cycles scene), so single
- * scattering of it is the radiance times the transmittance averaged over all directions (the phase
- * is near-isotropic at g = 0.2). Twelve Fibonacci-sphere directions stand in for the sphere. */
-float nubis_reference_sky_visibility(vec3 p)
+ * scattering of it is the radiance times the transmittance weighted by the phase function over all
+ * directions. The phase is far from isotropic (the silver-lining lobe peaks ~45x above it), so the
+ * directions are drawn from the two lobes in proportion to their weights (importance sampling,
+ * stratified in the lobe's cosine), turned about the view ray by a per-pixel angle so neighbouring
+ * pixels see different directions and supersampling averages them out. */
+float nubis_reference_sky_visibility(vec3 p, vec3 view_dir)
 {
   /* Budget: Mesa's llvmpipe stops a shader's loops after 65535 iterations in total (its loop
    * limiter), which silently cut long reference marches short; 12 x 16 + 48 per cloud sample keeps
    * a 128-step view ray under it. */
   const int count = 12;
-  float visibility = 0.0;
+  int silver = int(floor(float(count) * P.phase.z + 0.5));
+  silver = clamp(silver, P.phase.z > 0.0 ? 1 : 0, P.phase.z < 1.0 ? count - 1 : count);
+  vec3 side = normalize(abs(view_dir.z) < 0.9 ? cross(view_dir, vec3(0.0, 0.0, 1.0)) :
+                                                cross(view_dir, vec3(1.0, 0.0, 0.0)));
+  vec3 up = cross(view_dir, side);
+  float spin = 6.2831853 * fract(nubis_pixel_hash(gl_FragCoord.xy + vec2(0.5, 17.5)) + 0.7548777 * P.options.z);
+  float lobes[2] = float[2](0.0, 0.0);
   for (int i = 0; i < count; i++) {
-    float z = 1.0 - (2.0 * float(i) + 1.0) / float(count);
-    float r = sqrt(1.0 - z * z);
-    float phi = float(i) * 2.39996323; /* the golden angle */
-    vec3 dir = vec3(r * cos(phi), r * sin(phi), z);
-    visibility += exp(-nubis_reference_depth(p, dir, 16) * P.density.x);
+    bool in_silver = i < silver;
+    int k = in_silver ? i : i - silver;
+    int n = in_silver ? silver : count - silver;
+    float g = in_silver ? P.phase.y : P.phase.x;
+    float cos_t = nubis_henyey_greenstein_sample(g, (float(k) + 0.5) / float(n));
+    float sin_t = sqrt(max(0.0, 1.0 - cos_t * cos_t));
+    float phi = spin + float(i) * 2.39996323; /* the golden angle */
+    vec3 dir = view_dir * cos_t + (side * cos(phi) + up * sin(phi)) * sin_t;
+    lobes[in_silver ? 1 : 0] += exp(-nubis_reference_depth(p, dir, 16) * P.density.x) / float(n);
   }
-  return visibility / float(count);
+  return mix(lobes[0], lobes[1], P.phase.z);
 }
 
 /* Optical depth towards the sun. Mode 0: the real-time march of GPU Pro 7 / S15, five samples in a
@@ -214,7 +238,7 @@ vec3 nubis_in_scattering(vec3 p, vec3 view_dir, NubisDensity d, float view_alpha
     ambient_probability = sqrt(1.0 - clamp01(d.coarse)) * mix(P.ambient.w, 1.0, d.h);
   }
   else {
-    ambient_probability = nubis_reference_sky_visibility(p);
+    ambient_probability = nubis_reference_sky_visibility(p, view_dir);
   }
   ambient_probability *= nubis_storm_ambient(p, d.h);
   return direct + P.ambient.rgb * ambient_probability + nubis_storm_glow(p, d.fine);

@@ -1,10 +1,17 @@
 """Measured parity of the viewport with Cycles (compare --mode single), pinned at a small size.
 
 The shot looks steeply up into the default cumulus so the camera-only bake is small enough for
-40 m voxels; the cirrus is off because the 2D layer becomes a slab only approximately.
+20 m voxels; the cirrus is off because the 2D layer becomes a slab only approximately. Cycles
+renders 2 x 2048 samples with different seeds: their mean is the reference and their difference
+measures its noise, which must sit well below the limits for the comparison to mean anything.
 """
 
 import pytest
+
+# The issue's targets for single scattering (measured 2026-11-22 on llvmpipe: alpha RMSE 0.006,
+# luminance error 0.030, bias +0.001, IoU 0.99; Cycles' own noise 0.0024 / 0.018).
+ALPHA_RMSE_MAX = 0.02
+LUMINANCE_ERROR_MAX = 0.05
 
 
 @pytest.fixture(scope="module")
@@ -20,21 +27,19 @@ def single(tmp_path_factory, blender):
     scene = blender.context.scene
     scene_io.apply_preset(scene, preset)
     out = tmp_path_factory.mktemp("parity")
-    return pipeline.compare(scene, out, 48, 27, samples=512, mode="single", voxel_size=40.0, noise_estimate=True)
+    return pipeline.compare(scene, out, 48, 27, samples=4096, mode="single", voxel_size=20.0, noise_estimate=True)
 
 
 def test_single_scattering_parity(single):
     m = single
-    assert m["mode"] == "single" and m["volume_bounces"] == 0
-    # Measured 2026-11 on llvmpipe (see README): alpha RMSE 0.031, luminance error 0.15, bias within
-    # a few percent. The limits sit just above the measurement so a regression fails the test.
-    assert m["alpha_rmse"] <= 0.04, m
-    assert m["luminance_rel_error"] <= 0.20, m
-    assert abs(m["luminance_bias"]) <= 0.06, m
-    assert m["silhouette_iou"] >= 0.93, m
+    assert m["mode"] == "single" and m["volume_bounces"] == 0 and m["samples"] == 4096
+    assert m["alpha_rmse"] <= ALPHA_RMSE_MAX, m
+    assert m["luminance_rel_error"] <= LUMINANCE_ERROR_MAX, m
+    assert abs(m["luminance_bias"]) <= 0.02, m
+    assert m["silhouette_iou"] >= 0.97, m
 
 
-def test_cycles_noise_is_below_the_measured_error(single):
+def test_cycles_noise_is_well_below_the_limits(single):
     noise = single["cycles_noise"]
-    assert noise["alpha_rmse"] < single["alpha_rmse"]
-    assert noise["luminance_rel_error"] < single["luminance_rel_error"]
+    assert noise["alpha_rmse"] <= ALPHA_RMSE_MAX / 3, noise
+    assert noise["luminance_rel_error"] <= LUMINANCE_ERROR_MAX / 2, noise

@@ -103,8 +103,14 @@ def remove_volume(scene) -> None:
             bpy.data.volumes.remove(vol)
 
 
-def configure_render(scene, width: int, height: int, samples: int | None, bounces: int | None = None) -> None:
+def configure_render(
+    scene, width: int, height: int, samples: int | None, bounces: int | None = None, exact_samples: bool = False
+) -> None:
+    """`exact_samples` turns adaptive sampling off, so a measurement gets the samples it asked for
+    (adaptive sampling stops near a noise of 1 % whatever the count, which caps the reference's quality)."""
     scene.render.engine = "CYCLES"
+    if exact_samples:
+        scene.cycles.use_adaptive_sampling = False
     scene.cycles.device = "CPU"
     if samples:
         scene.cycles.samples = samples

@@ -165,6 +165,7 @@ def render_cycles(
     vdb_path: str | None = None,
     voxel_size: float | None = None,
     bounces: int | None = None,
+    exact_samples: bool = False,
 ) -> np.ndarray:
     """Bake (unless given a VDB), import it with the matched material, render with Cycles; premultiplied RGBA."""
     with tempfile.TemporaryDirectory(prefix="nubis-cycles-") as tmp:
@@ -173,7 +174,7 @@ def render_cycles(
             bake(scene, vdb_path, voxel_size)
         cycles_setup.import_volume(scene, vdb_path)
         exr = Path(tmp) / "cycles.exr"
-        cycles_setup.configure_render(scene, width, height, samples, bounces)
+        cycles_setup.configure_render(scene, width, height, samples, bounces, exact_samples)
         scene.render.filepath = str(exr)
         bpy.ops.render.render(write_still=True, scene=scene.name)
         if not exr.is_file():
@@ -222,25 +223,40 @@ def compare(
     # Cycles counts bounces after the first scattering: 0 volume bounces is single scattering.
     bounces = 0 if mode == "single" else None
     t = time.perf_counter()
-    cycles = render_cycles(scene, width, height, samples, vdb_path=str(baked.path), bounces=bounces)
+    if noise_estimate:
+        # Cycles' own noise, at no extra cost: two half-sample renders that differ only in seed. Their
+        # mean is the reference; it is noisier than either by 1/sqrt(2) and their difference by sqrt(2),
+        # so its noise is half their difference.
+        total = samples or scene.cycles.samples
+        half_samples = max(1, total // 2)
+        first = render_cycles(
+            scene, width, height, half_samples, vdb_path=str(baked.path), bounces=bounces, exact_samples=True
+        )
+        scene.cycles.seed += 1
+        try:
+            second = render_cycles(
+                scene, width, height, half_samples, vdb_path=str(baked.path), bounces=bounces, exact_samples=True
+            )
+        finally:
+            scene.cycles.seed -= 1
+        cycles = (first + second) / 2
+        own = metrics.compare(first, second)
+        noise = {"alpha_rmse": own["alpha_rmse"] / 2, "luminance_rel_error": own["luminance_rel_error"] / 2}
+        scene.cycles.samples = 2 * half_samples
+    else:
+        cycles = render_cycles(
+            scene, width, height, samples, vdb_path=str(baked.path), bounces=bounces, exact_samples=True
+        )
     timings["cycles_s"] = time.perf_counter() - t
     result = metrics.compare(viewport, cycles)
+    if noise_estimate:
+        result["cycles_noise"] = noise
     if mode == "full":
         # The real-time cone march against the reference march, everything else equal.
         reference = downsample(render_viewport(scene, width * ss, height * ss, 1, mode, clip), ss)
         cone = metrics.compare(viewport, reference)
         result["cone_march_vs_reference"] = {
             k: cone[k] for k in ("alpha_rmse", "luminance_rel_error", "luminance_bias")
-        }
-    if noise_estimate:
-        # Cycles' own noise: two renders that differ only in seed differ by sqrt(2) x the noise.
-        scene.cycles.seed += 1
-        again = render_cycles(scene, width, height, samples, vdb_path=str(baked.path), bounces=bounces)
-        scene.cycles.seed -= 1
-        own = metrics.compare(again, cycles)
-        result["cycles_noise"] = {
-            "alpha_rmse": own["alpha_rmse"] / np.sqrt(2),
-            "luminance_rel_error": own["luminance_rel_error"] / np.sqrt(2),
         }
     result.update(
         mode=mode,
