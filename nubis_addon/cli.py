@@ -75,7 +75,11 @@ def build_parser() -> argparse.ArgumentParser:
                 default="full",
                 help="single: single scattering on both sides; full: every term (default)",
             )
-            p.add_argument("--noise-estimate", action="store_true", help="render Cycles twice to measure its own noise")
+            p.add_argument(
+                "--noise-estimate",
+                action="store_true",
+                help="split the samples over two seeds to measure Cycles' own noise",
+            )
     return parser
 
 

@@ -262,3 +262,30 @@ float nubis_cirrus_density(vec2 xy)
   float v = t < 0.5 ? mix(layers.r, layers.g, t * 2.0) : mix(layers.g, layers.b, t * 2.0 - 1.0);
   return clamp01(remap(v, 1.0 - coverage, 1.0, 0.0, 1.0));
 }
+
+/* Optical depth of the cirrus layer along a ray from p, where the ray crosses the layer's sphere
+ * ahead of it: a thin layer's slant path grows with 1 / cos of the zenith angle. The same value
+ * darkens the view ray (its alpha) and the light reaching the clouds below (its shadow), which is
+ * what the baked slab gives Cycles. */
+float nubis_cirrus_optical_depth(vec3 p, vec3 dir)
+{
+  if (P.cirrus.y <= 0.0 || P.cirrus.w <= 0.0) {
+    return 0.0;
+  }
+  float altitude = nubis_altitude(p, P.layer.x);
+  vec2 hit = nubis_ray_sphere(p, dir, P.layer.x, P.cirrus.x);
+  if (hit.x > hit.y) {
+    return 0.0;
+  }
+  float t = altitude < P.cirrus.x ? hit.y : hit.x;
+  if (t <= 0.0) {
+    return 0.0;
+  }
+  vec3 q = p + dir * t;
+  float density = nubis_cirrus_density(q.xy);
+  if (density <= 0.0) {
+    return 0.0;
+  }
+  vec3 up = normalize(q + vec3(0.0, 0.0, P.layer.x));
+  return density * P.cirrus.w / max(abs(dot(dir, up)), 0.05);
+}

@@ -17,6 +17,15 @@ float nubis_phase(float cos_angle, float eccentricity_scale)
              P.phase.z);
 }
 
+/* SPEC 2.5, GPU Pro 7: raining clouds absorb more light. Modelled as absorption added to the
+ * scattering, so extinction grows by this factor and the albedo is its inverse; the view march, the
+ * light march and the bake (an `absorption` grid for Cycles) all use it, so Cycles sees the same
+ * dark rain cores. */
+float nubis_rain_extinction(float precipitation)
+{
+  return mix(1.0, P.phase.w, clamp01(precipitation));
+}
+
 /* ---- superstorm lighting (SPEC 2.10, GDC22) -------------------------------------------------------- */
 
 /* SPEC 2.10.1: light samples near a storm's centre count as denser, so the storm reads darker and
@@ -130,7 +139,8 @@ float nubis_reference_depth(vec3 p, vec3 dir, int samples)
   for (int i = 0; i < samples; i++) {
     float u = (float(i) + 0.5) / n;
     vec3 q = p + dir * (len * u * u);
-    depth += nubis_density(q, false, 0.0).fine * (2.0 * len * u / n) * nubis_storm_darkening(q);
+    NubisDensity s = nubis_density(q, false, 0.0);
+    depth += s.fine * nubis_rain_extinction(s.precipitation) * (2.0 * len * u / n) * nubis_storm_darkening(q);
   }
   return depth;
 }
@@ -174,7 +184,8 @@ float nubis_reference_sky_visibility(vec3 p, vec3 view_dir)
     float sin_t = sqrt(max(0.0, 1.0 - cos_t * cos_t));
     float phi = spin + float(i) * 2.39996323; /* the golden angle */
     vec3 dir = view_dir * cos_t + (side * cos(phi) + up * sin(phi)) * sin_t;
-    lobes[in_silver ? 1 : 0] += exp(-nubis_reference_depth(p, dir, 16) * P.density.x) / float(n);
+    float tau = nubis_reference_depth(p, dir, 16) * P.density.x + nubis_cirrus_optical_depth(p, dir);
+    lobes[in_silver ? 1 : 0] += exp(-tau) / float(n);
   }
   return mix(lobes[0], lobes[1], P.phase.z);
 }
@@ -194,12 +205,15 @@ float nubis_light_optical_depth(vec3 p, float view_alpha)
       float t = step_len * (float(i) + 0.5);
       vec3 q = p + sun * t + NUBIS_CONE_KERNEL[i] * (step_len * float(i) * 0.5);
       NubisDensity s = nubis_density(q, cheap, 1.0);
-      tau += (cheap ? s.coarse : s.fine) * step_len * nubis_storm_darkening(q);
+      float rain = nubis_rain_extinction(s.precipitation);
+      tau += (cheap ? s.coarse : s.fine) * rain * step_len * nubis_storm_darkening(q);
     }
     /* The long sample catches shadows of distant clouds (GPU Pro 7 fig 4.36). It stands for the
      * stretch between the cone's end and itself, so it is weighted by that length. */
     vec3 far_point = p + sun * (step_len * 15.0);
-    tau += nubis_density(far_point, true, 1.0).coarse * step_len * 10.0 * nubis_storm_darkening(far_point);
+    NubisDensity far_sample = nubis_density(far_point, true, 1.0);
+    tau += far_sample.coarse * nubis_rain_extinction(far_sample.precipitation) * step_len * 10.0 *
+           nubis_storm_darkening(far_point);
   }
   else {
     tau = nubis_reference_depth(p, sun, 48);
@@ -210,8 +224,9 @@ float nubis_light_optical_depth(vec3 p, float view_alpha)
 /* Light scattered towards the eye per unit of scattering at a point inside the cloud. */
 vec3 nubis_in_scattering(vec3 p, vec3 view_dir, NubisDensity d, float view_alpha)
 {
-  /* SPEC 2.5, GPU Pro 7: raining clouds absorb more light: thicken what the light passes through. */
-  float tau = nubis_light_optical_depth(p, view_alpha) * mix(1.0, P.phase.w, clamp01(d.precipitation));
+  float tau = nubis_light_optical_depth(p, view_alpha);
+  /* High cirrus dims the sun on the clouds below it, as its baked slab does in Cycles. */
+  tau += nubis_cirrus_optical_depth(p, P.sun_dir.xyz);
   float cos_angle = dot(view_dir, P.sun_dir.xyz);
   /* SPEC 2.9: NOT from the Guerrilla sources. Wrenninge's octaves (Oz, 2013) stand in for the light
    * that scatters more than once: each octave sees a thinner cloud and a flatter phase. Octave 1 alone

@@ -20,32 +20,44 @@ void nubis_view_ray(vec2 screen_uv, mat4 inverse_view_projection, vec4 eye, out 
   dir = normalize(far_point - origin);
 }
 
-/* SPEC 3.7: the cirrus layer, sampled once where the ray crosses its sphere, lit by a thin-layer
- * single-scattering term (sun x phase, plus sky). Returns premultiplied radiance and alpha. */
+/* SPEC 3.7: the cirrus layer, sampled once where the ray crosses its sphere. Its light is the exact
+ * single scattering of a thin homogeneous slab (the layer Cycles renders from the bake): with slant
+ * factors m = 1 / cos(zenith) for the view and the sun and vertical optical depth tau, sunlight
+ * that passes through the slab towards the eye gives m_v / (m_v - m_s) (e^(-tau m_s) - e^(-tau m_v)),
+ * sunlight scattered back to the side it came from m_v / (m_v + m_s) (1 - e^(-tau (m_v + m_s))).
+ * Sky light is taken as scattered in proportion to the layer's opacity. Premultiplied radiance, alpha. */
 vec4 nubis_cirrus(vec3 origin, vec3 dir)
 {
   float altitude = nubis_altitude(origin, P.layer.x);
-  vec2 hit = nubis_ray_sphere(origin, dir, P.layer.x, P.cirrus.x);
-  if (hit.x > hit.y) {
-    return vec4(0.0);
-  }
-  float t = altitude < P.cirrus.x ? hit.y : hit.x;
   vec2 ground = nubis_ray_sphere(origin, dir, P.layer.x, 0.0);
+  vec2 hit = nubis_ray_sphere(origin, dir, P.layer.x, P.cirrus.x);
+  float t = altitude < P.cirrus.x ? hit.y : hit.x;
   bool hits_ground = ground.x <= ground.y && ground.y > 0.0 && ground.x < t;
-  if (t <= 0.0 || (hits_ground && altitude >= 0.0)) {
+  if (hits_ground && altitude >= 0.0) {
     return vec4(0.0);
   }
-  vec3 p = origin + dir * t;
-  float density = nubis_cirrus_density(p.xy);
-  if (density <= 0.0) {
+  float tau_view = nubis_cirrus_optical_depth(origin, dir);
+  if (tau_view <= 0.0) {
     return vec4(0.0);
   }
-  /* Slant path through a thin layer: optical depth grows with 1 / cos of the zenith angle. */
-  vec3 up = normalize(p + vec3(0.0, 0.0, P.layer.x));
-  float slant = 1.0 / max(abs(dot(dir, up)), 0.05);
-  float alpha = 1.0 - exp(-density * P.cirrus.w * slant);
-  vec3 light = P.sun_rad.rgb * nubis_phase(dot(dir, P.sun_dir.xyz), 1.0) + P.ambient.rgb;
-  return vec4(light * alpha, alpha);
+  vec3 up = normalize(origin + dir * t + vec3(0.0, 0.0, P.layer.x));
+  float mu_v = dot(dir, up);
+  float mu_s = dot(P.sun_dir.xyz, up);
+  float m_v = 1.0 / max(abs(mu_v), 0.05);
+  float m_s = 1.0 / max(abs(mu_s), 0.05);
+  float tau = tau_view / m_v;
+  float sun_fraction;
+  if ((mu_v > 0.0) == (mu_s > 0.0)) {
+    float dm = m_v - m_s;
+    sun_fraction = abs(dm) < 1e-3 ? m_v * tau * exp(-tau * m_v) :
+                                    m_v / dm * (exp(-tau * m_s) - exp(-tau * m_v));
+  }
+  else {
+    sun_fraction = m_v / (m_v + m_s) * (1.0 - exp(-tau * (m_v + m_s)));
+  }
+  float alpha = 1.0 - exp(-tau_view);
+  vec3 light = P.sun_rad.rgb * nubis_phase(dot(dir, P.sun_dir.xyz), 1.0) * sun_fraction + P.ambient.rgb * alpha;
+  return vec4(light, alpha);
 }
 
 /* `cloud_depth` returns the transmittance-weighted distance of what the ray saw (GDC22's cloud distance,
@@ -115,12 +127,14 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth)
     NubisDensity d = nubis_density(p, false, 0.0);
     /* SPEC 2.8, GPU Pro 7: no light march where there is no cloud. */
     if (d.fine > 0.0) {
-      float sigma = d.fine * P.density.x;
+      float rain = nubis_rain_extinction(d.precipitation);
+      float sigma = d.fine * P.density.x * rain;
       float step_t = exp(-sigma * dt);
       vec3 s = nubis_in_scattering(p, dir, d, 1.0 - transmittance);
       /* Energy-conserving step (Hillaire 2016): the exact integral of constant in-scattering over
-       * the step, for albedo 1, instead of a Riemann sum that brightens with larger steps. */
-      radiance += transmittance * s * (1.0 - step_t);
+       * the step, instead of a Riemann sum that brightens with larger steps; the albedo is 1 but
+       * where rain absorbs. */
+      radiance += transmittance * s * ((1.0 - step_t) / rain);
       depth_sum += t * transmittance * (1.0 - step_t);
       transmittance *= step_t;
       /* SPEC 3.5: stop once the ray is practically opaque. */

@@ -22,10 +22,11 @@ def _grid_times(nt, grid: str, factor: float):
     return attr, scale
 
 
-def build_material(settings, with_glow: bool = False) -> bpy.types.Material:
-    """Extinction = density x sigma (the viewport's own); albedo 1; the viewport's two phase lobes
-    as a mix of two Volume Scatter closures, which share one extinction and mix their phases (or
-    Cycles' Mie phase as an option); the storms' glow grid as emission."""
+def build_material(settings, with_glow: bool = False, with_absorption: bool = False) -> bpy.types.Material:
+    """Scattering = density x sigma (the viewport's own); the viewport's two phase lobes as a mix of
+    two Volume Scatter closures, which share one extinction and mix their phases (or Cycles' Mie
+    phase as an option); rain's absorption grid as Volume Absorption; the storms' glow grid as
+    emission."""
     mat = bpy.data.materials.get(MATERIAL_NAME) or bpy.data.materials.new(MATERIAL_NAME)
     if mat.node_tree is None:  # materials made before 5.0 may lack a node tree
         mat.use_nodes = True
@@ -57,6 +58,16 @@ def build_material(settings, with_glow: bool = False) -> bpy.types.Material:
         scatter = mix.outputs[0]
     out = nt.nodes.new("ShaderNodeOutputMaterial")
     volume_out = scatter
+    if with_absorption:
+        # SPEC 2.5: the viewport's rain raises extinction by absorbing; black absorbs all of it.
+        _absorb_attr, absorb_scale = _grid_times(nt, "absorption", settings.density_sigma)
+        absorb = nt.nodes.new("ShaderNodeVolumeAbsorption")
+        absorb.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+        nt.links.new(absorb_scale.outputs[0], absorb.inputs["Density"])
+        add = nt.nodes.new("ShaderNodeAddShader")
+        nt.links.new(volume_out, add.inputs[0])
+        nt.links.new(absorb.outputs[0], add.inputs[1])
+        volume_out = add.outputs[0]
     if with_glow:
         # The `glow` grid holds density x glow; the march emits sigma x that per metre, in the storm's colour.
         _glow_attr, glow_scale = _grid_times(nt, "glow", settings.density_sigma)
@@ -66,7 +77,7 @@ def build_material(settings, with_glow: bool = False) -> bpy.types.Material:
         emission.inputs["Color"].default_value = (*(c / peak for c in colour), 1.0)
         nt.links.new(glow_scale.outputs[0], emission.inputs["Strength"])
         add = nt.nodes.new("ShaderNodeAddShader")
-        nt.links.new(scatter, add.inputs[0])
+        nt.links.new(volume_out, add.inputs[0])
         nt.links.new(emission.outputs[0], add.inputs[1])
         volume_out = add.outputs[0]
     nt.links.new(volume_out, out.inputs["Volume"])
@@ -88,7 +99,8 @@ def import_volume(scene, vdb_path: str) -> bpy.types.Object:
     vol.render.clipping = 0.0
     obj = bpy.data.objects.new(VOLUME_NAME, vol)
     scene.collection.objects.link(obj)
-    vol.materials.append(build_material(scene.nubis, "glow" in [g.name for g in vol.grids]))
+    names = [g.name for g in vol.grids]
+    vol.materials.append(build_material(scene.nubis, "glow" in names, "absorption" in names))
     # The grids carry their world transform; the object must stay at the identity.
     obj.matrix_world.identity()
     return obj

@@ -14,9 +14,10 @@ import bpy
 import numpy as np
 
 from ..core import imageio, metrics, vdbio
-from ..core.bakeplan import BakePlan, plan_bake, view_footprint
+from ..core.bakeplan import BakePlan, comparison_voxel_size, plan_bake, view_footprint
 from ..core.errors import NubisError
 from ..core.fsutil import atomic_path, check_output_dir, check_output_path
+from ..core.state import CloudState
 from ..render import bake as gpu_bake
 from ..render import engine
 from . import cycles_setup, runtime, scene_io
@@ -57,19 +58,24 @@ def resolution(scene, width: int | None, height: int | None) -> tuple[int, int]:
 COMPARE_MODES = ("single", "full")
 
 
-def render_viewport(
-    scene,
-    width: int,
-    height: int,
-    light_mode: int = 0,
-    mode: str = "",
-    clip_box: tuple | None = None,
-    passes: int = 1,
-) -> np.ndarray:
-    """The viewport's clouds from the scene camera: premultiplied scene-linear RGBA, top row first.
+@dataclass
+class ViewportShot:
+    """Everything a viewport render of the scene camera needs, detached from the scene: a script
+    can change `state.params` and render again without touching Blender data."""
 
-    `mode` "single" or "full" prepares the render for a comparison with Cycles; `clip_box` (x0, y0, x1,
-    y1) keeps only the clouds inside a bake's box, so both renderers light the same clouds."""
+    state: CloudState
+    inv_view_proj: object
+    eye: tuple[float, float, float, float]
+    noise_seed: int
+    width: int
+    height: int
+
+
+def viewport_shot(
+    scene, width: int, height: int, light_mode: int = 0, mode: str = "", clip_box: tuple | None = None
+) -> ViewportShot:
+    """`mode` "single" or "full" prepares the shot for a comparison with Cycles; `clip_box` (x0, y0,
+    x1, y1) keeps only the clouds inside a bake's box, so both renderers light the same clouds."""
     state = scene_io.state_from_scene(scene)
     state.clip_box = clip_box
     state.light_mode = light_mode
@@ -79,17 +85,35 @@ def render_viewport(
     if mode in COMPARE_MODES:
         # The atmosphere fade has no counterpart in the Cycles scene.
         state.params["lighting_fade_distance"] = 0.0
-    clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
     inv = scene_io.camera_inv_view_proj(scene, width, height)
-    # Offline, several passes with shifted jitter replace the viewport's grain with a converged image.
+    return ViewportShot(state, inv, scene_io.camera_eye(scene), scene.nubis.noise_seed, width, height)
+
+
+def render_shot(shot: ViewportShot, passes: int = 1) -> np.ndarray:
+    """Premultiplied scene-linear RGBA, top row first. Offline, several passes with shifted jitter
+    replace the viewport's grain with a converged image."""
+    clouds = runtime.cloud_gpu(shot.noise_seed)
     passes = max(1, passes)
     total = None
     for i in range(passes):
-        state.jitter_pass = i
-        clouds.update(state)
-        frame = engine.render_offscreen(clouds, inv, scene_io.camera_eye(scene), width, height)
+        shot.state.jitter_pass = i
+        clouds.update(shot.state)
+        frame = engine.render_offscreen(clouds, shot.inv_view_proj, shot.eye, shot.width, shot.height)
         total = frame if total is None else total + frame
     return total / passes
+
+
+def render_viewport(
+    scene,
+    width: int,
+    height: int,
+    light_mode: int = 0,
+    mode: str = "",
+    clip_box: tuple | None = None,
+    passes: int = 1,
+) -> np.ndarray:
+    """The viewport's clouds from the scene camera: premultiplied scene-linear RGBA, top row first."""
+    return render_shot(viewport_shot(scene, width, height, light_mode, mode, clip_box), passes)
 
 
 def downsample(rgba: np.ndarray, factor: int) -> np.ndarray:
@@ -142,11 +166,13 @@ def bake(
     state.cirrus_slab = plan.cirrus_slab
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
     clouds.update(state)
-    density, glow = gpu_bake.bake_density(clouds, plan, progress)
+    density, glow, absorption = gpu_bake.bake_density(clouds, plan, progress)
     active = int(np.count_nonzero(density > vdbio.DEFAULT_TOLERANCE))
     grids = {"density": density}
     if float(glow.max()) > vdbio.DEFAULT_TOLERANCE:
         grids["glow"] = glow  # the storms' glow and lightning, for Cycles' emission
+    if float(absorption.max()) > vdbio.DEFAULT_TOLERANCE:
+        grids["absorption"] = absorption  # rain's extra absorption, for Cycles' Volume Absorption
     meta = {
         "nubis_sigma": float(scene.nubis.density_sigma),
         "nubis_voxel_size": float(plan.voxel_size),
@@ -184,6 +210,13 @@ def render_cycles(
     return rgba
 
 
+def bake_clip_box(plan: BakePlan) -> tuple[float, float, float, float]:
+    """The XY box (x0, y0, x1, y1) a bake covers: voxel centres sit half a voxel inside it."""
+    half = plan.voxel_size / 2
+    x0, y0 = plan.origin[0] - half, plan.origin[1] - half
+    return (x0, y0, x0 + plan.dims[0] * plan.voxel_size, y0 + plan.dims[1] * plan.voxel_size)
+
+
 def compare(
     scene,
     out_dir: str | os.PathLike,
@@ -196,24 +229,22 @@ def compare(
 ) -> dict:
     """Viewport and Cycles renders of the same shot, their side-by-side, a difference image and
     metrics.json (computed on the scene-linear EXR values); the bake Cycles rendered is kept as
-    clouds.vdb. Only the part of the sky the camera sees is baked."""
+    clouds.vdb. Only the part of the sky the camera sees is baked, at the finest voxel size (down to 20 m) that
+    fits 64 M voxels unless `voxel_size` is given."""
     if mode not in COMPARE_MODES:
         raise NubisError(f"unknown comparison mode '{mode}': use single or full")
     out = check_output_dir(out_dir)
     timings = {}
     t = time.perf_counter()
+    if voxel_size is None:
+        state = scene_io.state_from_scene(scene)
+        region = view_footprint(state, np.array(scene_io.camera_inv_view_proj(scene, width, height)))
+        voxel_size = comparison_voxel_size(state, scene.nubis.bake_voxel_size, region)
     baked = bake(scene, out / "clouds.vdb", voxel_size, camera_only=True, size=(width, height))
     timings["bake_s"] = time.perf_counter() - t
     # The viewport keeps only the baked clouds: sky light from beyond the box would otherwise be
     # shadowed by clouds Cycles never sees.
-    plan = baked.plan
-    half = plan.voxel_size / 2
-    clip = (
-        plan.origin[0] - half,
-        plan.origin[1] - half,
-        plan.origin[0] - half + plan.dims[0] * plan.voxel_size,
-        plan.origin[1] - half + plan.dims[1] * plan.voxel_size,
-    )
+    clip = bake_clip_box(baked.plan)
     t = time.perf_counter()
     # Cycles integrates each pixel's area (box filter below); the viewport samples the pixel centre.
     # Supersampling the viewport makes both estimate the same pixel value.
@@ -268,6 +299,7 @@ def compare(
         preset=scene.nubis.preset,
         voxel_size=baked.plan.voxel_size,
         bake_dims=list(baked.plan.dims),
+        clip_box=list(clip),
         seconds=timings,
     )
     save_render(scene, out / "viewport.exr", viewport)

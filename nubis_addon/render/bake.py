@@ -13,11 +13,12 @@ from .engine import CloudGPU, fullscreen_batch, read_pixels, shader
 
 def bake_density(
     gpu_inputs: CloudGPU, plan: BakePlan, progress: Callable[[float], None] | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """Fine density and storm glow emission at every voxel centre, each shaped (z, y, x)."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Fine density, storm glow emission and rain absorption at every voxel centre, each shaped (z, y, x)."""
     nx, ny, nz = plan.dims
     vol = np.empty((nz, ny, nx), np.float32)
     glow = np.empty((nz, ny, nx), np.float32)
+    absorption = np.empty((nz, ny, nx), np.float32)
     sh = shader("bake", gpu_inputs.storms)
     batch = fullscreen_batch("bake", gpu_inputs.storms)
     offscreen = gpu.types.GPUOffScreen(nx, ny, format="RGBA32F")
@@ -33,8 +34,9 @@ def bake_density(
                 px = read_pixels(fb, nx, ny)
                 vol[k] = px[..., 0]
                 glow[k] = px[..., 1]
+                absorption[k] = px[..., 2]
                 if progress:
                     progress((k + 1) / nz)
     finally:
         offscreen.free()
-    return vol, glow
+    return vol, glow, absorption
