@@ -94,3 +94,34 @@ def test_flash_renders_offline_through_the_glow_grid(make_scene, tmp_path):
         rgba = pipeline.render_cycles(scene, 32, 18, samples=8, vdb_path=str(result.path))
         means.append(float((rgba[..., :3] @ luminance).mean()))
     assert means[1] > 1.1 * means[0], means
+
+
+def test_rain_absorbs_in_the_viewport_the_bake_and_cycles(make_scene, tmp_path):
+    """SPEC 2.5 rain darkening is absorption: the viewport's raining clouds get darker and no thinner,
+    the bake carries it as an `absorption` grid (density x (rain - 1)) and Cycles adds it."""
+    from nubis_addon.blender import cycles_setup, pipeline, scene_io
+    from nubis_addon.core import metrics, vdbio
+
+    scene = split_coverage_scene(make_scene)
+    scene.nubis.lighting_rain_absorption = 4.0
+    dry = pipeline.render_viewport(scene, 48, 48)
+    a = scene_io.read_fields(scene.nubis)[0].copy()
+    a[..., 1] = 1.0  # precipitation everywhere
+    scene_io.write_field_image(scene.nubis, "a", a)
+    wet = pipeline.render_viewport(scene, 48, 48)
+    covered = dry[..., 3] > 0.5
+    assert covered.sum() > 100
+    # Opaque pixels differ by where the march stops (transmittance < 0.005), so compare the means.
+    assert wet[..., 3].mean() >= dry[..., 3].mean()
+    assert metrics.luminance(wet)[covered].mean() < 0.8 * metrics.luminance(dry)[covered].mean()
+
+    result = pipeline.bake(scene, tmp_path / "rain.vdb", voxel_size=400.0)
+    assert set(vdbio.read_grid_info(result.path)) == {"density", "absorption"}
+    density, lo = vdbio.read_grid_array(result.path, "density")
+    absorption, lo_abs = vdbio.read_grid_array(result.path, "absorption")
+    assert lo == lo_abs and density.shape == absorption.shape
+    assert absorption == pytest.approx(3.0 * density, abs=1e-4)
+    obj = cycles_setup.import_volume(scene, str(result.path))
+    nodes = [n.bl_idname for n in obj.data.materials[0].node_tree.nodes]
+    assert "ShaderNodeVolumeAbsorption" in nodes
+    cycles_setup.remove_volume(scene)
