@@ -13,7 +13,8 @@ void main()
   /* The storm glow as an emission grid: what the march adds per unit length is sigma x density x
    * glow, so the grid holds density x glow (its strongest channel) and Cycles multiplies by sigma. */
   vec3 glow = nubis_storm_glow(p, d.fine) * d.fine;
-  /* Rain's absorption (SPEC 2.5) in density units: Cycles adds it as a Volume Absorption. */
-  float absorption = d.fine * (nubis_rain_extinction(d.precipitation) - 1.0);
+  /* Rain's and storms' absorption (SPEC 2.5, 2.10.1) in density units: Cycles adds it as a Volume
+   * Absorption. */
+  float absorption = d.fine * (nubis_extinction_factor(p, d.precipitation) - 1.0);
   color = vec4(density, max(glow.r, max(glow.g, glow.b)), absorption, 1.0);
 }

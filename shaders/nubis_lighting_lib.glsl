@@ -28,8 +28,8 @@ float nubis_rain_extinction(float precipitation)
 
 /* ---- superstorm lighting (SPEC 2.10, GDC22) -------------------------------------------------------- */
 
-/* SPEC 2.10.1: light samples near a storm's centre count as denser, so the storm reads darker and
- * thicker. GDC22's printed min() never exceeds 1 (SPEC 6 Q13); we keep its pow(., 0.5) falloff and
+/* SPEC 2.10.1: near a storm's centre the cloud counts as denser, so the storm reads darker and
+ * thicker (as absorption, see nubis_extinction_factor). GDC22's printed min() never exceeds 1 (SPEC 6 Q13); we keep its pow(., 0.5) falloff and
  * scale towards the storm's darkening factor. */
 float nubis_storm_darkening(vec3 q)
 {
@@ -43,6 +43,13 @@ float nubis_storm_darkening(vec3 q)
   }
 #endif
   return scale;
+}
+
+/* Extinction over scattering at a point: rain's absorption times the storm's darkening. Both are
+ * absorption, so the view march, the light march and the baked `absorption` grid agree. */
+float nubis_extinction_factor(vec3 p, float precipitation)
+{
+  return nubis_rain_extinction(precipitation) * nubis_storm_darkening(p);
 }
 
 /* SPEC 2.10.2: a cylindrical field, fading with height, that blends the ambient to the storm's own
@@ -140,7 +147,7 @@ float nubis_reference_depth(vec3 p, vec3 dir, int samples)
     float u = (float(i) + 0.5) / n;
     vec3 q = p + dir * (len * u * u);
     NubisDensity s = nubis_density(q, false, 0.0);
-    depth += s.fine * nubis_rain_extinction(s.precipitation) * (2.0 * len * u / n) * nubis_storm_darkening(q);
+    depth += s.fine * nubis_extinction_factor(q, s.precipitation) * (2.0 * len * u / n);
   }
   return depth;
 }
@@ -205,15 +212,13 @@ float nubis_light_optical_depth(vec3 p, float view_alpha)
       float t = step_len * (float(i) + 0.5);
       vec3 q = p + sun * t + NUBIS_CONE_KERNEL[i] * (step_len * float(i) * 0.5);
       NubisDensity s = nubis_density(q, cheap, 1.0);
-      float rain = nubis_rain_extinction(s.precipitation);
-      tau += (cheap ? s.coarse : s.fine) * rain * step_len * nubis_storm_darkening(q);
+      tau += (cheap ? s.coarse : s.fine) * nubis_extinction_factor(q, s.precipitation) * step_len;
     }
     /* The long sample catches shadows of distant clouds (GPU Pro 7 fig 4.36). It stands for the
      * stretch between the cone's end and itself, so it is weighted by that length. */
     vec3 far_point = p + sun * (step_len * 15.0);
     NubisDensity far_sample = nubis_density(far_point, true, 1.0);
-    tau += far_sample.coarse * nubis_rain_extinction(far_sample.precipitation) * step_len * 10.0 *
-           nubis_storm_darkening(far_point);
+    tau += far_sample.coarse * nubis_extinction_factor(far_point, far_sample.precipitation) * step_len * 10.0;
   }
   else {
     tau = nubis_reference_depth(p, sun, 48);

@@ -127,14 +127,14 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth)
     NubisDensity d = nubis_density(p, false, 0.0);
     /* SPEC 2.8, GPU Pro 7: no light march where there is no cloud. */
     if (d.fine > 0.0) {
-      float rain = nubis_rain_extinction(d.precipitation);
-      float sigma = d.fine * P.density.x * rain;
+      float absorb = nubis_extinction_factor(p, d.precipitation);
+      float sigma = d.fine * P.density.x * absorb;
       float step_t = exp(-sigma * dt);
       vec3 s = nubis_in_scattering(p, dir, d, 1.0 - transmittance);
       /* Energy-conserving step (Hillaire 2016): the exact integral of constant in-scattering over
        * the step, instead of a Riemann sum that brightens with larger steps; the albedo is 1 but
-       * where rain absorbs. */
-      radiance += transmittance * s * ((1.0 - step_t) / rain);
+       * where rain or a storm absorbs. */
+      radiance += transmittance * s * ((1.0 - step_t) / absorb);
       depth_sum += t * transmittance * (1.0 - step_t);
       transmittance *= step_t;
       /* SPEC 3.5: stop once the ray is practically opaque. */

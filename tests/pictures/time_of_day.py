@@ -14,12 +14,14 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-# label, sun elevation, sun azimuth, sun colour, sun strength, world colour, camera heading
+# label, sun elevation, sun azimuth, sun colour, sun strength, world colour, camera pitch, heading.
+# Into-the-sun shots aim a few degrees beside the sun so thin cloud edges around it catch the
+# silver-lining lobe; the last looks away from a sun behind the camera (dark powder edges).
 SHOTS = (
-    ("sunrise", 4.0, 80.0, (1.0, 0.55, 0.3), 4.0, (0.35, 0.32, 0.45), 60.0),
-    ("noon", 70.0, 180.0, (1.0, 0.97, 0.92), 6.0, (0.25, 0.45, 0.85), 20.0),
-    ("sunset, into the sun", 6.0, 250.0, (1.0, 0.5, 0.25), 5.0, (0.32, 0.3, 0.5), 110.0),
-    ("sun behind the camera", 20.0, 200.0, (1.0, 0.93, 0.82), 5.0, (0.25, 0.45, 0.85), 20.0),
+    ("sunrise, towards the sun", 9.0, 80.0, (1.0, 0.55, 0.3), 4.0, (0.35, 0.32, 0.45), 102.0, -70.0),
+    ("noon", 70.0, 180.0, (1.0, 0.97, 0.92), 6.0, (0.25, 0.45, 0.85), 100.0, 20.0),
+    ("sunset, into the sun", 10.0, 250.0, (1.0, 0.5, 0.25), 5.0, (0.32, 0.3, 0.5), 103.0, 100.0),
+    ("sun behind the camera", 20.0, 200.0, (1.0, 0.93, 0.82), 5.0, (0.25, 0.45, 0.85), 100.0, 20.0),
 )
 
 
@@ -35,12 +37,12 @@ def main(out: str) -> None:
     nubis_addon.register()
     ensure_gpu_context()
     images = []
-    for _label, elevation, azimuth, colour, strength, world, heading in SHOTS:
+    for _label, elevation, azimuth, colour, strength, world, pitch, heading in SHOTS:
         preset = load_preset("default")
         preset.extra["sun"].update(elevation=elevation, azimuth=azimuth, color=list(colour), strength=strength)
         preset.extra["world"]["color"] = list(world)
         # Blender cameras look along -Z; heading turns about Z from +Y towards -X.
-        preset.extra["camera"]["rotation"] = [100.0, 0.0, heading]
+        preset.extra["camera"]["rotation"] = [pitch, 0.0, heading]
         bpy.ops.wm.read_factory_settings(use_empty=True)
         ensure_registered()
         scene = bpy.context.scene
