@@ -81,7 +81,9 @@ def viewport_shot(
     state.light_mode = light_mode
     if mode == "single":
         state.light_mode = 1
-        state.params.update(lighting_ms_octaves=1, lighting_powder=0.0)
+        # Physical single scattering: the sky is the world's radiance, not the real-time ambient's
+        # tuned strength.
+        state.params.update(lighting_ms_octaves=1, lighting_powder=0.0, lighting_ambient=1.0)
     if mode in COMPARE_MODES:
         # The atmosphere fade has no counterpart in the Cycles scene.
         state.params["lighting_fade_distance"] = 0.0

@@ -124,8 +124,8 @@ PARAMS: tuple[Param, ...] = (
     P("lighting", "phase_g0", "float", 0.2, -0.99, 0.99, "Eccentricity of the main phase lobe (GDC22: 0.2)"),
     P("lighting", "phase_g1", "float", 0.8, -0.99, 0.99, "Eccentricity of the silver-lining lobe"),
     P("lighting", "phase_mix", "float", 0.2, 0.0, 1.0, "Weight of the silver-lining lobe"),
-    P("lighting", "ambient", "float", 1.0, 0.0, 10.0, "Strength of the sky's ambient light"),
-    P("lighting", "ambient_bottom", "float", 0.5, 0.0, 1.0, "Ambient at the cloud base relative to the top (S15)"),
+    P("lighting", "ambient", "float", 1.3, 0.0, 10.0, "Strength of the sky's ambient light"),
+    P("lighting", "ambient_bottom", "float", 0.3, 0.0, 1.0, "Ambient at the cloud base relative to the top (S15)"),
     P(
         "lighting",
         "cycles_mie",
@@ -136,11 +136,14 @@ PARAMS: tuple[Param, ...] = (
     P("lighting", "droplet_size", "float", 20.0, 5.0, 50.0, "Droplet diameter for Cycles' Mie phase (micrometres)"),
     P("lighting", "rain_absorption", "float", 3.0, 1.0, 20.0, "Extra light absorption of raining clouds (GPU Pro 7)"),
     # Not from the Guerrilla sources: Wrenninge's multiple-scattering octaves (SPEC 2.9, an extension).
+    # Ambient, octave and powder defaults were tuned against Cycles with 8 volume bounces over every
+    # preset (tests/pictures/tune_lighting.py, README "Parity with Cycles"); the search put powder at 0,
+    # it stays at 0.25 so the sun-facing edges still darken as GPU Pro 7 intends.
     P("lighting", "ms_octaves", "int", 3, 1, 8, "Multiple-scattering octaves (1 = single scattering; not in Nubis)"),
-    P("lighting", "ms_attenuation", "float", 0.15, 0.0, 1.0, "Optical-depth scale per octave (Wrenninge a)"),
+    P("lighting", "ms_attenuation", "float", 0.2, 0.0, 1.0, "Optical-depth scale per octave (Wrenninge a)"),
     P("lighting", "ms_contribution", "float", 0.85, 0.0, 1.0, "Energy per octave (Wrenninge b)"),
-    P("lighting", "ms_eccentricity", "float", 0.5, 0.0, 1.0, "Phase eccentricity scale per octave (Wrenninge c)"),
-    P("lighting", "powder", "float", 0.5, 0.0, 1.0, "Dark edges with the sun behind you (GPU Pro 7 powder)"),
+    P("lighting", "ms_eccentricity", "float", 0.0, 0.0, 1.0, "Phase eccentricity scale per octave (Wrenninge c)"),
+    P("lighting", "powder", "float", 0.25, 0.0, 1.0, "Dark edges with the sun behind you (GPU Pro 7 powder)"),
     P(
         "lighting",
         "fade_distance",

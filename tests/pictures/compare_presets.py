@@ -32,17 +32,21 @@ def main(out_dir: str, width: int = 320, height: int = 180, samples: int = 64) -
         scene = bpy.context.scene
         scene_io.apply_preset(scene, load_preset(name))
         start = time.perf_counter()
-        m = pipeline.compare(scene, Path(out_dir) / name, width, height, samples, "full", None)
+        m = pipeline.compare(scene, Path(out_dir) / name, width, height, samples, "full", None, noise_estimate=True)
         m["total_s"] = time.perf_counter() - start
         rows.append((name, m))
         print(json.dumps({name: {k: m[k] for k in ("alpha_rmse", "luminance_rel_error", "luminance_bias")}}))
-    print("| preset | alpha RMSE | luminance error | luminance bias | IoU | cone vs reference (lum.) | voxel | time |")
-    print("|---|---|---|---|---|---|---|---|")
+    print(
+        "| preset | alpha RMSE | luminance error | luminance bias | IoU | Cycles noise (lum.) "
+        "| cone vs reference (lum.) | voxel | time |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|")
     for name, m in rows:
         cone = m["cone_march_vs_reference"]["luminance_rel_error"]
         print(
             f"| {name} | {m['alpha_rmse']:.3f} | {m['luminance_rel_error'] * 100:.1f} % | "
-            f"{m['luminance_bias'] * 100:+.1f} % | {m['silhouette_iou']:.2f} | {cone * 100:.1f} % | "
+            f"{m['luminance_bias'] * 100:+.1f} % | {m['silhouette_iou']:.2f} | "
+            f"{m['cycles_noise']['luminance_rel_error'] * 100:.1f} % | {cone * 100:.1f} % | "
             f"{m['voxel_size']:g} m | {m['total_s']:.0f} s |"
         )
 
