@@ -227,7 +227,9 @@ float nubis_light_optical_depth(vec3 p, float view_alpha)
 }
 
 /* Light scattered towards the eye per unit of scattering at a point inside the cloud. */
-vec3 nubis_in_scattering(vec3 p, vec3 view_dir, NubisDensity d, float view_alpha)
+/* `extinction_factor` is nubis_extinction_factor at p: where rain or a storm absorbs, the albedo is
+ * its inverse. */
+vec3 nubis_in_scattering(vec3 p, vec3 view_dir, NubisDensity d, float view_alpha, float extinction_factor)
 {
   float tau = nubis_light_optical_depth(p, view_alpha);
   /* High cirrus dims the sun on the clouds below it, as its baked slab does in Cycles. */
@@ -235,14 +237,17 @@ vec3 nubis_in_scattering(vec3 p, vec3 view_dir, NubisDensity d, float view_alpha
   float cos_angle = dot(view_dir, P.sun_dir.xyz);
   /* SPEC 2.9: NOT from the Guerrilla sources. Wrenninge's octaves (Oz, 2013) stand in for the light
    * that scatters more than once: each octave sees a thinner cloud and a flatter phase. Octave 1 alone
-   * is plain single scattering (Beer-Lambert x phase). */
+   * is plain single scattering (Beer-Lambert x phase). Octave i stands for light scattered once more
+   * than octave i - 1, so it loses another factor of the albedo where the cloud absorbs: without it
+   * the octaves kept rain cores and storms bright that Cycles' absorbing bounces make dark. */
   float direct_energy = 0.0;
   float a = 1.0, b = 1.0, c = 1.0;
+  float albedo = 1.0 / max(extinction_factor, 1.0);
   int octaves = int(P.scatter.x);
   for (int i = 0; i < octaves; i++) {
     direct_energy += b * exp(-a * tau) * nubis_phase(cos_angle, c);
     a *= P.scatter.y;
-    b *= P.scatter.z;
+    b *= P.scatter.z * albedo;
     c *= P.scatter.w;
   }
   /* SPEC 2.4 (GPU Pro 7 "Beer's powder", S15 view dependence): the in-scatter probability darkens

@@ -130,7 +130,7 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth)
       float absorb = nubis_extinction_factor(p, d.precipitation);
       float sigma = d.fine * P.density.x * absorb;
       float step_t = exp(-sigma * dt);
-      vec3 s = nubis_in_scattering(p, dir, d, 1.0 - transmittance);
+      vec3 s = nubis_in_scattering(p, dir, d, 1.0 - transmittance, absorb);
       /* Energy-conserving step (Hillaire 2016): the exact integral of constant in-scattering over
        * the step, instead of a Riemann sum that brightens with larger steps; the albedo is 1 but
        * where rain or a storm absorbs. */
