@@ -15,25 +15,33 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 
-def main(out_dir: str, width: int = 320, height: int = 180, samples: int = 64) -> None:
+def compare_preset(name: str, out_dir: Path, width: int, height: int, samples: int):
+    """A fresh scene with the preset, compared in full mode with Cycles' noise measured: (scene, metrics)."""
     import bpy
 
-    import nubis_addon
     from nubis_addon.blender import ensure_registered, pipeline, scene_io
-    from nubis_addon.core.presets import list_presets, load_preset
+    from nubis_addon.core.presets import load_preset
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    ensure_registered()
+    scene = bpy.context.scene
+    scene_io.apply_preset(scene, load_preset(name))
+    start = time.perf_counter()
+    m = pipeline.compare(scene, out_dir / name, width, height, samples, "full", None, noise_estimate=True)
+    m["total_s"] = time.perf_counter() - start
+    return scene, m
+
+
+def main(out_dir: str, width: int = 320, height: int = 180, samples: int = 128) -> None:
+    import nubis_addon
+    from nubis_addon.core.presets import list_presets
     from nubis_addon.render.gpu_context import ensure_gpu_context
 
     nubis_addon.register()
     ensure_gpu_context()
     rows = []
     for name in list_presets():
-        bpy.ops.wm.read_factory_settings(use_empty=True)
-        ensure_registered()
-        scene = bpy.context.scene
-        scene_io.apply_preset(scene, load_preset(name))
-        start = time.perf_counter()
-        m = pipeline.compare(scene, Path(out_dir) / name, width, height, samples, "full", None, noise_estimate=True)
-        m["total_s"] = time.perf_counter() - start
+        _scene, m = compare_preset(name, Path(out_dir), width, height, samples)
         rows.append((name, m))
         print(json.dumps({name: {k: m[k] for k in ("alpha_rmse", "luminance_rel_error", "luminance_bias")}}))
     print(

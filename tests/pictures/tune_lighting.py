@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import json
 import sys
-import time
 import tomllib
 from pathlib import Path
 
@@ -40,26 +39,21 @@ def preset_overrides(name: str) -> set[str]:
 
 
 def prepare(out: Path, width: int, height: int, samples: int) -> dict:
-    import bpy
+    from compare_presets import compare_preset  # the sibling script (this folder is on sys.path)
 
-    from nubis_addon.blender import ensure_registered, pipeline, scene_io
+    from nubis_addon.blender import pipeline
     from nubis_addon.core import imageio
-    from nubis_addon.core.presets import list_presets, load_preset
+    from nubis_addon.core.presets import list_presets
 
     shots = {}
     for name in list_presets():
-        bpy.ops.wm.read_factory_settings(use_empty=True)
-        ensure_registered()
-        scene = bpy.context.scene
-        scene_io.apply_preset(scene, load_preset(name))
-        start = time.perf_counter()
-        m = pipeline.compare(scene, out / name, width, height, samples, "full", None, noise_estimate=True)
+        scene, m = compare_preset(name, out, width, height, samples)
         ss = m["viewport_supersampling"]
         shot = pipeline.viewport_shot(scene, width * ss, height * ss, 0, "full", tuple(m["clip_box"]))
         cycles = imageio.read_image(out / name / "cycles.exr")
         shots[name] = (shot, ss, cycles, preset_overrides(name), m)
         noise = m["cycles_noise"]["luminance_rel_error"]
-        print(f"{name}: reference in {time.perf_counter() - start:.0f} s, Cycles noise {noise * 100:.1f} %", flush=True)
+        print(f"{name}: reference in {m['total_s']:.0f} s, Cycles noise {noise * 100:.1f} %", flush=True)
     return shots
 
 
