@@ -256,34 +256,29 @@ def compare(
     # Cycles counts bounces after the first scattering: 0 volume bounces is single scattering.
     bounces = 0 if mode == "single" else None
     t = time.perf_counter()
-    if noise_estimate:
-        # Cycles' own noise, at no extra cost: two half-sample renders that differ only in seed. Their
-        # mean is the reference; it is noisier than either by 1/sqrt(2) and their difference by sqrt(2),
-        # so its noise is half their difference.
-        total = samples or scene.cycles.samples
-        half_samples = max(1, total // 2)
-        first = render_cycles(
-            scene, width, height, half_samples, vdb_path=str(baked.path), bounces=bounces, exact_samples=True
-        )
-        scene.cycles.seed += 1
+    # With a noise estimate, Cycles renders half the samples twice with different seeds: their mean is
+    # the reference, noisier than either by 1/sqrt(2), and their difference is sqrt(2) x either's
+    # noise, so the mean's noise is half their difference. No extra cost.
+    total = samples or scene.cycles.samples
+    runs = 2 if noise_estimate else 1
+    renders = []
+    for seed_offset in range(runs):
+        scene.cycles.seed += seed_offset
         try:
-            second = render_cycles(
-                scene, width, height, half_samples, vdb_path=str(baked.path), bounces=bounces, exact_samples=True
+            renders.append(
+                render_cycles(
+                    scene, width, height, max(1, total // runs), str(baked.path), bounces=bounces, exact_samples=True
+                )
             )
         finally:
-            scene.cycles.seed -= 1
-        cycles = (first + second) / 2
-        own = metrics.compare(first, second)
-        noise = {"alpha_rmse": own["alpha_rmse"] / 2, "luminance_rel_error": own["luminance_rel_error"] / 2}
-        scene.cycles.samples = 2 * half_samples
-    else:
-        cycles = render_cycles(
-            scene, width, height, samples, vdb_path=str(baked.path), bounces=bounces, exact_samples=True
-        )
+            scene.cycles.seed -= seed_offset
+    cycles = sum(renders) / runs
+    scene.cycles.samples = max(1, total // runs) * runs
     timings["cycles_s"] = time.perf_counter() - t
     result = metrics.compare(viewport, cycles)
     if noise_estimate:
-        result["cycles_noise"] = noise
+        own = metrics.compare(renders[0], renders[1])
+        result["cycles_noise"] = {k: own[k] / 2 for k in ("alpha_rmse", "luminance_rel_error")}
     if mode == "full":
         # The real-time cone march against the reference march, everything else equal.
         reference = downsample(render_viewport(scene, width * ss, height * ss, 1, mode, clip), ss)

@@ -10,8 +10,9 @@ import numpy as np
 from .errors import NubisError
 from .state import CloudState
 
-# A float32 working copy, the transposed copy handed to OpenVDB and the sparse tree itself.
-BYTES_PER_VOXEL = 12
+# Float32 density, glow and absorption volumes, the transposed copy handed to OpenVDB and the sparse
+# tree itself.
+BYTES_PER_VOXEL = 20
 DEFAULT_MEMORY_LIMIT = 4 * 1024**3
 MAX_SLICE = 8192  # texels per side of one GPU slice
 
@@ -134,7 +135,7 @@ def comparison_voxel_size(
     state: CloudState, start: float, region: tuple[float, float, float, float], budget: int = COMPARE_VOXEL_BUDGET
 ) -> float:
     """The finest voxel size, halving from `start` down to 20 m, whose camera-only bake stays within
-    `budget` voxels (about 0.8 GB while baking)."""
+    `budget` voxels (about 1.3 GB while baking)."""
     size = start
     while size / 2 >= COMPARE_FINEST_VOXEL:
         try:
