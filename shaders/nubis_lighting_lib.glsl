@@ -181,7 +181,7 @@ float nubis_reference_sky_visibility(vec3 p, vec3 view_dir)
                                                 cross(view_dir, vec3(1.0, 0.0, 0.0)));
   vec3 up = cross(view_dir, side);
   float spin = 6.2831853 * fract(nubis_pixel_hash(gl_FragCoord.xy + vec2(0.5, 17.5)) + 0.7548777 * P.options.z);
-  float lobes[2] = float[2](0.0, 0.0);
+  float main_lobe = 0.0, silver_lobe = 0.0;
   for (int i = 0; i < count; i++) {
     bool in_silver = i < silver;
     int k = in_silver ? i : i - silver;
@@ -192,9 +192,14 @@ float nubis_reference_sky_visibility(vec3 p, vec3 view_dir)
     float phi = spin + float(i) * 2.39996323; /* the golden angle */
     vec3 dir = view_dir * cos_t + (side * cos(phi) + up * sin(phi)) * sin_t;
     float tau = nubis_reference_depth(p, dir, 16) * P.density.x + nubis_cirrus_optical_depth(p, dir);
-    lobes[in_silver ? 1 : 0] += exp(-tau) / float(n);
+    if (in_silver) {
+      silver_lobe += exp(-tau) / float(n);
+    }
+    else {
+      main_lobe += exp(-tau) / float(n);
+    }
   }
-  return mix(lobes[0], lobes[1], P.phase.z);
+  return mix(main_lobe, silver_lobe, P.phase.z);
 }
 
 /* Optical depth towards the sun. Mode 0: the real-time march of GPU Pro 7 / S15, five samples in a
