@@ -1,6 +1,27 @@
-/* Small pure helpers shared by the Nubis stages. */
+/* Small pure helpers shared by the Nubis stages. Texture sizes (NUBIS_*_SIZE, the padded sizes of
+ * render/textures.py) and the permutation switches (NUBIS_STORMS, NUBIS_REFERENCE, NUBIS_NAIVE,
+ * NUBIS_CIRRUS, NUBIS_FETCH_STATS) are compile-time defines set by render/engine.py. */
 
 #define NUBIS_PI 3.14159265358979
+
+/* The colour of a lightning flash (SPEC 2.10.4). */
+const vec3 NUBIS_FLASH_COLOUR = vec3(0.85, 0.9, 1.0);
+
+vec2 nubis_rotate_about(vec2 xy, vec2 centre, float angle)
+{
+  vec2 d = xy - centre;
+  float s = sin(angle), c = cos(angle);
+  return centre + vec2(c * d.x - s * d.y, s * d.x + c * d.y); /* counter-clockwise for angle > 0 */
+}
+
+/* The order in which the 16 pixels of a 4x4 block are marched by the temporal upscaler (S15: one pixel
+ * of every 4x4 block per frame): the 4x4 Bayer matrix, so consecutive redraws land far apart in the
+ * block and a partly converged image is evenly spread. */
+int nubis_bayer4(ivec2 pixel)
+{
+  const int order[16] = int[16](0, 8, 2, 10, 12, 4, 14, 6, 3, 11, 1, 9, 15, 7, 13, 5);
+  return order[(pixel.y & 3) * 4 + (pixel.x & 3)];
+}
 
 float clamp01(float x)
 {
@@ -72,4 +93,23 @@ vec2 nubis_tile_uv(vec2 uv, vec2 padded_size)
 {
   vec2 n = padded_size - 1.0;
   return (fract(uv) * n + 0.5) / padded_size;
+}
+
+/* The world-space ray through a screen position (uv in [0, 1]). A perspective view passes its eye
+ * (eye.w = 1): unprojecting the near plane through a frustum kilometres deep loses metres to float
+ * cancellation, which shifts every ray sideways and moves cloud edges. Orthographic views (eye.w = 0)
+ * start on the near plane. */
+void nubis_view_ray(vec2 screen_uv, mat4 inverse_view_projection, vec4 eye, out vec3 origin, out vec3 dir)
+{
+  vec2 ndc = screen_uv * 2.0 - 1.0;
+  vec4 far_h = inverse_view_projection * vec4(ndc, 1.0, 1.0);
+  vec3 far_point = far_h.xyz / far_h.w;
+  if (eye.w > 0.5) {
+    origin = eye.xyz;
+  }
+  else {
+    vec4 near_h = inverse_view_projection * vec4(ndc, -1.0, 1.0);
+    origin = near_h.xyz / near_h.w;
+  }
+  dir = normalize(far_point - origin);
 }

@@ -1,8 +1,19 @@
 /* The cloud density: the one function the viewport, the headless render and the VDB bake all call.
  * Requires: nubis_common_lib.glsl, the NubisParams block `P`, and the samplers
  * field_a (coverage, precipitation, top type, bottom type), field_b (storm coverage, min height,
- * max height, density multiplier), field_c (cirrus coverage, cirrus type), noise_lf, noise_lf_mip1,
- * noise_hf, noise_curl, noise_cirrus. */
+ * max height, density multiplier), field_c (cirrus coverage, cirrus type), the noise volumes with their
+ * mip levels as separate textures (noise_lf, noise_lf_mip1, noise_lf_mip2, noise_hf, noise_hf_mip1: Python
+ * uploads no mip chain), noise_curl, and noise_cirrus, whose mip chain is packed into one atlas. */
+
+#if NUBIS_FETCH_STATS
+/* Benchmark permutation only: 3D texture fetches of this fragment (docs/viewport.md). */
+int nubis_fetches_3d = 0;
+int nubis_density_calls = 0;
+int nubis_view_samples = 0;
+#  define NUBIS_COUNT_3D(n) nubis_fetches_3d += (n)
+#else
+#  define NUBIS_COUNT_3D(n)
+#endif
 
 /* SPEC 1.4.2, GPU Pro 7: the weights of the pre-built Worley fBm. */
 const vec3 NUBIS_FBM_WEIGHTS = vec3(0.625, 0.25, 0.125);
@@ -65,13 +76,6 @@ float nubis_height_fraction(float altitude, vec4 field_b_sample)
 
 /* ---- superstorm vortex (SPEC 1.9.5, GDC22; sine/cosine rotation after Matthew D. Roach) ---------- */
 
-vec2 nubis_rotate_about(vec2 xy, vec2 centre, float angle)
-{
-  vec2 d = xy - centre;
-  float s = sin(angle), c = cos(angle);
-  return centre + vec2(c * d.x - s * d.y, s * d.x + c * d.y); /* counter-clockwise for angle > 0 */
-}
-
 /* Angle of ring `ring` (0 = innermost of 6) at ring coordinate u = 6 * dist / radius: speeds fall
  * ring by ring from the centre, each ring has its own phase (skew), and rings outside faster ones are
  * twisted with the radius for the spiral tendrils of a boundary layer. */
@@ -131,13 +135,22 @@ vec2 nubis_vortex(vec2 xy, out vec2 second, out float weight)
 }
 
 /* Detail fBm at a (wind-moved) position, with the curl twist at the base. */
-float nubis_detail_fbm(vec3 p_hf, float h)
+float nubis_detail_fbm(vec3 p_hf, float h, int level)
 {
-  vec2 curl_uv = nubis_tile_uv(p_hf.xy / P.noise.z, vec2(textureSize(noise_curl, 0)));
+  vec2 curl_uv = nubis_tile_uv(p_hf.xy / P.noise.z, vec2(NUBIS_CURL_SIZE));
   vec2 curl = textureLod(noise_curl, curl_uv, 0.0).xy * 2.0 - 1.0;
   p_hf.xy += curl * (1.0 - h) * P.noise.w;
-  vec3 hf_uvw = nubis_tile_uvw(p_hf / P.noise.y, vec3(textureSize(noise_hf, 0)));
-  return dot(textureLod(noise_hf, hf_uvw, 0.0).rgb, NUBIS_FBM_WEIGHTS);
+  vec3 uvw = p_hf / P.noise.y;
+  NUBIS_COUNT_3D(1);
+  /* Branches, not a conditional expression: compilers may evaluate both sides of ?: and fetch twice. */
+  vec3 hf;
+  if (level < 1) {
+    hf = textureLod(noise_hf, nubis_tile_uvw(uvw, vec3(NUBIS_HF_SIZE)), 0.0).rgb;
+  }
+  else {
+    hf = textureLod(noise_hf_mip1, nubis_tile_uvw(uvw, vec3(NUBIS_HF1_SIZE)), 0.0).rgb;
+  }
+  return dot(hf, NUBIS_FBM_WEIGHTS);
 }
 
 struct NubisDensity {
@@ -149,19 +162,29 @@ struct NubisDensity {
 
 /* SPEC 1.6.5 (the add-on's canonical sampler), following GPU Pro 7's order: base shape, profile,
  * coverage, then detail erosion. `cheap` stops after the coverage step (GPU Pro 7's cheap sample:
- * one 3D fetch). `lod` 0 reads the full-resolution noise, 1 the half-resolution copy. */
+ * one 3D fetch). `lod` is a whole mip level: 0 reads the full-resolution noise, 1 the half-resolution
+ * copies, 2 the quarter-resolution base shape (the detail noise has two levels). */
 NubisDensity nubis_density(vec3 p, bool cheap, float lod)
 {
+#if NUBIS_FETCH_STATS
+  nubis_density_calls++;
+#endif
   NubisDensity d;
   d.fine = 0.0;
   d.coarse = 0.0;
   d.h = 0.0;
   d.precipitation = 0.0;
 
+  /* The early returns below skip work where the result is already known to be zero: S15's isosurface
+   * ("we only need to do the high detail noise where the low detail sample returns a non zero
+   * result"). The benchmark's naive march (NUBIS_NAIVE) takes the full sample at every step instead;
+   * the values are the same. */
   float altitude = nubis_altitude(p, P.layer.x);
+#if !NUBIS_NAIVE
   if (altitude < P.shell.x || altitude > P.shell.y) {
     return d;
   }
+#endif
   NubisFieldSample f = nubis_sample_field(p.xy);
   float h = nubis_height_fraction(altitude, f.b);
   d.h = clamp01(h);
@@ -180,7 +203,8 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
     /* The anvil "flattens out and spreads in the wind direction" (GDC22): its storm coverage is read
      * upwind, further the higher the sample, so the top streams downwind of the column. */
     vec2 upwind = p.xy - P.wind.xy * (P.storm_info.w * anvil_h);
-    float anvil_storm = clamp01(nubis_sample_field(upwind).b.r) * f.inside;
+    vec2 upwind_uv = (upwind - P.field.xy) * P.field.w + 0.5;
+    float anvil_storm = clamp01(textureLod(field_b, clamp(upwind_uv, 0.0, 1.0), 0.0).r) * f.inside;
     if (anvil_storm > 0.0) {
       storm = anvil_storm;
       float anvil = nubis_vertical_profile(1.0 - anvil_h, 0.3, 0.0) * storm;
@@ -192,9 +216,11 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
     }
   }
 #endif
+#if !NUBIS_NAIVE
   if (profile <= 0.0 || coverage <= 0.0) {
     return d;
   }
+#endif
 
   /* SPEC 1.7, GPU Pro 7: tops skew downwind and both noises drift with the wind and slightly
    * upward, each at its own speed. We subtract the offsets (GDC22, SPEC 6 Q16) so features move
@@ -206,8 +232,17 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
   vec3 p_lf = skewed - drift;
 
   vec3 lf_uvw = p_lf / P.noise.x;
-  vec4 lf = lod < 0.5 ? textureLod(noise_lf, nubis_tile_uvw(lf_uvw, vec3(textureSize(noise_lf, 0))), 0.0) :
-                        textureLod(noise_lf_mip1, nubis_tile_uvw(lf_uvw, vec3(textureSize(noise_lf_mip1, 0))), 0.0);
+  NUBIS_COUNT_3D(1);
+  vec4 lf;
+  if (lod < 0.5) {
+    lf = textureLod(noise_lf, nubis_tile_uvw(lf_uvw, vec3(NUBIS_LF_SIZE)), 0.0);
+  }
+  else if (lod < 1.5) {
+    lf = textureLod(noise_lf_mip1, nubis_tile_uvw(lf_uvw, vec3(NUBIS_LF1_SIZE)), 0.0);
+  }
+  else {
+    lf = textureLod(noise_lf_mip2, nubis_tile_uvw(lf_uvw, vec3(NUBIS_LF2_SIZE)), 0.0);
+  }
   float lf_fbm = dot(lf.gba, NUBIS_FBM_WEIGHTS);
   /* SPEC 1.6.2, GPU Pro 7: the Worley fBm dilates the Perlin-Worley base shape. */
   float base = remap(lf.r, -(1.0 - lf_fbm), 1.0, 0.0, 1.0) * profile;
@@ -217,7 +252,11 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
   with_coverage *= mix(1.0, coverage, P.density.w);
   float multiplier = max(f.b.a, 0.0);
   d.coarse = with_coverage * multiplier;
+#if NUBIS_NAIVE
+  if (cheap) {
+#else
   if (cheap || with_coverage <= 0.0) {
+#endif
     d.fine = d.coarse;
     return d;
   }
@@ -230,9 +269,10 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
   vec2 second;
   float ring_weight;
   vec2 turned = nubis_vortex(p.xy, second, ring_weight);
-  float hf_fbm = nubis_detail_fbm(vec3(p_hf.xy + (turned - p.xy), p_hf.z), h);
+  int hf_level = int(lod + 0.5);
+  float hf_fbm = nubis_detail_fbm(vec3(p_hf.xy + (turned - p.xy), p_hf.z), h, hf_level);
   if (ring_weight > 0.0) {
-    hf_fbm = mix(hf_fbm, nubis_detail_fbm(vec3(p_hf.xy + (second - p.xy), p_hf.z), h), ring_weight);
+    hf_fbm = mix(hf_fbm, nubis_detail_fbm(vec3(p_hf.xy + (second - p.xy), p_hf.z), h, hf_level), ring_weight);
   }
   /* GPU Pro 7: the stored (inverted) Worley fBm erodes the base into wisps, and flipped back it carves
    * billows above the lowest 10 %. SPEC 7.1: a
@@ -248,7 +288,25 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
 /* SPEC 1.8 (GDC22): the cirrus layer is 2D: three tiling cloudscapes from wispy cirrostratus (type 0)
  * through cirrus (0.5) to billowy cirrocumulus (1), blended by type and eroded by the inverse of
  * coverage; it scrolls with its own wind (GPU Pro 7, S15). Returns the density at world xy. */
-float nubis_cirrus_density(vec2 xy)
+/* One level of the cirrus texture's mip atlas (render/textures.py): level 0 at the left, the smaller
+ * levels stacked in a column to its right, each with its own wrapped edge texel. */
+vec3 nubis_cirrus_level(vec2 uv, int level)
+{
+  float n = float(NUBIS_CIRRUS_SIZE >> level);
+  vec2 origin = vec2(0.0);
+  if (level > 0) {
+    origin.x = float(NUBIS_CIRRUS_SIZE + 1);
+    for (int k = 1; k < level; k++) {
+      origin.y += float((NUBIS_CIRRUS_SIZE >> k) + 1);
+    }
+  }
+  vec2 texel = origin + fract(uv) * n + 0.5;
+  return textureLod(noise_cirrus, texel / vec2(NUBIS_CIRRUS_ATLAS), 0.0).rgb;
+}
+
+/* `lod` is the mip level as a fraction (the texels one pixel covers, log2): two levels are blended, so
+ * distant cirrus seen at a grazing angle filters instead of aliasing into streaks. */
+float nubis_cirrus_density(vec2 xy, float lod)
 {
   vec2 uv = (xy - P.field.xy) * P.field.w + 0.5;
   vec4 c = textureLod(field_c, clamp(uv, 0.0, 1.0), 0.0);
@@ -256,8 +314,13 @@ float nubis_cirrus_density(vec2 xy)
   if (coverage <= 0.0) {
     return 0.0;
   }
-  vec2 tex_uv = nubis_tile_uv((xy - P.cirrus2.xy) * P.cirrus.z, vec2(textureSize(noise_cirrus, 0)));
-  vec3 layers = textureLod(noise_cirrus, tex_uv, 0.0).rgb;
+  vec2 tex_uv = (xy - P.cirrus2.xy) * P.cirrus.z;
+  float level = clamp(lod, 0.0, float(NUBIS_CIRRUS_LEVELS - 1));
+  int l0 = int(floor(level));
+  vec3 layers = nubis_cirrus_level(tex_uv, l0);
+  if (level > float(l0) && l0 + 1 < NUBIS_CIRRUS_LEVELS) {
+    layers = mix(layers, nubis_cirrus_level(tex_uv, l0 + 1), level - float(l0));
+  }
   float t = clamp01(c.g);
   float v = t < 0.5 ? mix(layers.r, layers.g, t * 2.0) : mix(layers.g, layers.b, t * 2.0 - 1.0);
   return clamp01(remap(v, 1.0 - coverage, 1.0, 0.0, 1.0));
@@ -267,7 +330,7 @@ float nubis_cirrus_density(vec2 xy)
  * ahead of it: a thin layer's slant path grows with 1 / cos of the zenith angle. The same value
  * darkens the view ray (its alpha) and the light reaching the clouds below (its shadow), which is
  * what the baked slab gives Cycles. */
-float nubis_cirrus_optical_depth(vec3 p, vec3 dir)
+float nubis_cirrus_optical_depth(vec3 p, vec3 dir, float lod)
 {
   if (P.cirrus.y <= 0.0 || P.cirrus.w <= 0.0) {
     return 0.0;
@@ -282,10 +345,16 @@ float nubis_cirrus_optical_depth(vec3 p, vec3 dir)
     return 0.0;
   }
   vec3 q = p + dir * t;
-  float density = nubis_cirrus_density(q.xy);
-  if (density <= 0.0) {
-    return 0.0;
-  }
   vec3 up = normalize(q + vec3(0.0, 0.0, P.layer.x));
-  return density * P.cirrus.w / max(abs(dot(dir, up)), 0.05);
+  float slant = 1.0 / max(abs(dot(dir, up)), 0.05);
+  /* lod >= 0 is the caller's fixed level; lod < 0 asks for the view's own: the pixel's footprint on
+   * the layer (P.view: metres per metre of distance, plus a constant for orthographic views),
+   * stretched by the slant, in texels. */
+  float level = lod;
+  if (lod < 0.0) {
+    float footprint = (P.view.x * t + P.view.y) * slant;
+    level = log2(max(footprint * P.cirrus.z * float(NUBIS_CIRRUS_SIZE), 1.0));
+  }
+  float density = nubis_cirrus_density(q.xy, level);
+  return density * P.cirrus.w * slant;
 }

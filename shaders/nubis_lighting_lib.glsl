@@ -80,52 +80,70 @@ float nubis_glow_energy(vec3 p, vec3 centre, float radius, float fine_density, f
   return potential * below * pseudo_attenuation;
 }
 
-/* The storms' light per unit scattering: the constant red glow at the storm's centre, and lightning
- * (SPEC 2.10.4, GDC22): an intra-cloud flash is the same glow at the flash's own position with its
- * animated intensity; a ground discharge adds the external flash that lights the underside around the
- * strike. */
-vec3 nubis_storm_glow(vec3 p, float fine_density)
+/* Lightning (SPEC 2.10.4, GDC22): an intra-cloud flash is the internal glow at the flash's own position
+ * with its animated intensity; a ground discharge adds the external flash that lights the underside
+ * around the strike. This returns each storm's flash energy at unit intensity, so the temporal viewport
+ * can accumulate it as GDC22's flash mask and scale it by the intensity of the frame being shown. */
+vec4 nubis_flash_energy(vec3 p, float fine_density)
 {
-  vec3 glow = vec3(0.0);
+  vec4 energy = vec4(0.0);
 #if NUBIS_STORMS
   int count = min(int(P.storm_info.x), NUBIS_MAX_STORMS);
   float thickness = P.layer.z - P.layer.y;
-  const vec3 flash_colour = vec3(0.85, 0.9, 1.0);
   for (int i = 0; i < count; i++) {
     vec4 shape = P.storm_shape[i];
     if (shape.w <= 0.0) {
       continue;
     }
     float height = P.layer.y + P.storm_info.z * thickness;
+    vec4 where = P.storm_flash[i]; /* offset x, y from the centre; 1 for a ground discharge */
+    vec3 at = vec3(shape.xy + where.xy, height);
+    float e = nubis_glow_energy(p, at, 0.6 * shape.z, fine_density, thickness);
+    if (where.z > 0.5) {
+      /* The external flash: highlights on the underside features near the strike. */
+      float h = clamp01((nubis_altitude(p, P.layer.x) - P.layer.y) / thickness);
+      float near = pow(clamp01(1.0 - distance(p.xy, at.xy) / (0.5 * shape.z)), 4.0);
+      e += 0.05 * near * (1.0 - h) * (1.0 - h);
+    }
+    energy[i] = e * shape.w;
+  }
+#endif
+  return energy;
+}
+
+/* The flash intensities of this frame, one per storm. */
+vec4 nubis_flash_intensities()
+{
+  return vec4(P.storm_glow[0].w, P.storm_glow[1].w, P.storm_glow[2].w, P.storm_glow[3].w);
+}
+
+/* The constant red glow at each storm's centre, per unit scattering (SPEC 2.10.3). */
+vec3 nubis_storm_steady_glow(vec3 p, float fine_density)
+{
+  vec3 glow = vec3(0.0);
+#if NUBIS_STORMS
+  int count = min(int(P.storm_info.x), NUBIS_MAX_STORMS);
+  float thickness = P.layer.z - P.layer.y;
+  for (int i = 0; i < count; i++) {
+    vec4 shape = P.storm_shape[i];
     float intensity = P.storm_light[i].z;
-    if (intensity > 0.0) {
-      float e = nubis_glow_energy(p, vec3(shape.xy, height), shape.z, fine_density, thickness);
-      glow += P.storm_glow[i].rgb * intensity * e * shape.w;
+    if (shape.w <= 0.0 || intensity <= 0.0) {
+      continue;
     }
-    float flash = P.storm_glow[i].w;
-    if (flash > 0.0) {
-      vec4 where = P.storm_flash[i]; /* offset x, y from the centre; 1 for a ground discharge */
-      vec3 at = vec3(shape.xy + where.xy, height);
-      glow += flash_colour * flash * nubis_glow_energy(p, at, 0.6 * shape.z, fine_density, thickness) * shape.w;
-      if (where.z > 0.5) {
-        /* The external flash: highlights on the underside features near the strike. */
-        float h = clamp01((nubis_altitude(p, P.layer.x) - P.layer.y) / thickness);
-        float near = pow(clamp01(1.0 - distance(p.xy, at.xy) / (0.5 * shape.z)), 4.0);
-        glow += flash_colour * flash * 0.05 * near * (1.0 - h) * (1.0 - h) * shape.w;
-      }
-    }
+    float height = P.layer.y + P.storm_info.z * thickness;
+    float e = nubis_glow_energy(p, vec3(shape.xy, height), shape.z, fine_density, thickness);
+    glow += P.storm_glow[i].rgb * intensity * e * shape.w;
   }
 #endif
   return glow;
 }
 
-/* GPU Pro 7: six offsets in [-1, 1]^3 that widen the light march into a cone (SPEC 2.8). */
-const vec3 NUBIS_CONE_KERNEL[6] = vec3[6](vec3(0.38051305, 0.92453449, -0.02111345),
-                                          vec3(-0.50625799, -0.03590792, -0.86163418),
-                                          vec3(-0.32509218, -0.94557439, 0.01428793),
-                                          vec3(0.09026238, -0.27376545, 0.95755165),
-                                          vec3(0.28128598, 0.42443639, -0.86065785),
-                                          vec3(-0.16852403, 0.14748697, 0.97460106));
+/* All of the storms' light per unit scattering: the steady glow and this frame's flashes. */
+vec3 nubis_storm_glow(vec3 p, float fine_density)
+{
+  vec4 flashes = nubis_flash_energy(p, fine_density) * nubis_flash_intensities();
+  return nubis_storm_steady_glow(p, fine_density) + NUBIS_FLASH_COLOUR * (flashes.x + flashes.y + flashes.z + flashes.w);
+}
 
 /* Reference optical depth (without sigma): the full-detail density along `dir` until the ray leaves
  * the cloud shell (or the draw radius ends the clouds). */
@@ -169,7 +187,7 @@ float nubis_henyey_greenstein_sample(float g, float u)
  * directions are drawn from the two lobes in proportion to their weights (importance sampling,
  * stratified in the lobe's cosine), turned about the view ray by a per-pixel angle so neighbouring
  * pixels see different directions and supersampling averages them out. */
-float nubis_reference_sky_visibility(vec3 p, vec3 view_dir)
+float nubis_reference_sky_visibility(vec3 p, vec3 view_dir, vec2 pixel)
 {
   /* Budget: Mesa's llvmpipe stops a shader's loops after 65535 iterations in total (its loop
    * limiter), which silently cut long reference marches short; 12 x 16 + 48 per cloud sample keeps
@@ -180,7 +198,7 @@ float nubis_reference_sky_visibility(vec3 p, vec3 view_dir)
   vec3 side = normalize(abs(view_dir.z) < 0.9 ? cross(view_dir, vec3(0.0, 0.0, 1.0)) :
                                                 cross(view_dir, vec3(1.0, 0.0, 0.0)));
   vec3 up = cross(view_dir, side);
-  float spin = 6.2831853 * fract(nubis_pixel_hash(gl_FragCoord.xy + vec2(0.5, 17.5)) + 0.7548777 * P.options.z);
+  float spin = 6.2831853 * fract(nubis_pixel_hash(pixel + vec2(0.5, 17.5)) + 0.7548777 * P.options.z);
   float main_lobe = 0.0, silver_lobe = 0.0;
   for (int i = 0; i < count; i++) {
     bool in_silver = i < silver;
@@ -191,7 +209,7 @@ float nubis_reference_sky_visibility(vec3 p, vec3 view_dir)
     float sin_t = sqrt(max(0.0, 1.0 - cos_t * cos_t));
     float phi = spin + float(i) * 2.39996323; /* the golden angle */
     vec3 dir = view_dir * cos_t + (side * cos(phi) + up * sin(phi)) * sin_t;
-    float tau = nubis_reference_depth(p, dir, 16) * P.density.x + nubis_cirrus_optical_depth(p, dir);
+    float tau = nubis_reference_depth(p, dir, 16) * P.density.x + nubis_cirrus_optical_depth(p, dir, 0.0);
     if (in_silver) {
       silver_lobe += exp(-tau) / float(n);
     }
@@ -202,74 +220,111 @@ float nubis_reference_sky_visibility(vec3 p, vec3 view_dir)
   return mix(main_lobe, silver_lobe, P.phase.z);
 }
 
-/* Optical depth towards the sun. Mode 0: the real-time march of GPU Pro 7 / S15, five samples in a
- * widening cone plus one long-distance sample at three times the cone length, at the half-resolution
- * noise, switching to cheap samples once the view ray is 30 % opaque. Mode 1: a reference march of
- * many fine samples out of the cloud layer, for measuring the real-time one. */
-float nubis_light_optical_depth(vec3 p, float view_alpha)
+/* What the light of one view ray shares along its length (for a sun light they are constant along
+ * the ray, so they are computed once per pixel rather than at every sample): the cosine to the sun,
+ * the phase of each multiple-scattering octave (up to 8) and the powder weight. */
+struct NubisRayLight {
+  float cos_angle;
+  vec4 phase_lo; /* octaves 1-4 */
+  vec4 phase_hi; /* octaves 5-8 */
+  float powder_weight;
+};
+
+NubisRayLight nubis_ray_light(vec3 view_dir)
 {
-  vec3 sun = P.sun_dir.xyz;
-  float step_len = P.march.z;
-  float tau = 0.0;
-  if (P.march.w < 0.5) {
-    bool cheap = view_alpha > 0.3; /* S15: "2x faster", no visible change */
-    for (int i = 0; i < 5; i++) {
-      float t = step_len * (float(i) + 0.5);
-      vec3 q = p + sun * t + NUBIS_CONE_KERNEL[i] * (step_len * float(i) * 0.5);
-      NubisDensity s = nubis_density(q, cheap, 1.0);
-      tau += (cheap ? s.coarse : s.fine) * nubis_extinction_factor(q, s.precipitation) * step_len;
+  NubisRayLight l;
+  l.cos_angle = dot(view_dir, P.sun_dir.xyz);
+  l.phase_lo = vec4(0.0);
+  l.phase_hi = vec4(0.0);
+  float c = 1.0;
+  int octaves = min(int(P.scatter.x), 8);
+  for (int i = 0; i < octaves; i++) {
+    float ph = nubis_phase(l.cos_angle, c);
+    if (i < 4) {
+      l.phase_lo[i] = ph;
     }
-    /* The long sample catches shadows of distant clouds (GPU Pro 7 fig 4.36). It stands for the
-     * stretch between the cone's end and itself, so it is weighted by that length. */
-    vec3 far_point = p + sun * (step_len * 15.0);
-    NubisDensity far_sample = nubis_density(far_point, true, 1.0);
-    tau += far_sample.coarse * nubis_extinction_factor(far_point, far_sample.precipitation) * step_len * 10.0;
+    else {
+      l.phase_hi[i - 4] = ph;
+    }
+    c *= P.scatter.w;
   }
-  else {
-    tau = nubis_reference_depth(p, sun, 48);
+  /* SPEC 2.4 (GPU Pro 7 "Beer's powder", S15 view dependence): the in-scatter probability darkens
+   * the edges facing the sun, visible only with the sun behind the viewer. */
+  l.powder_weight = P.scatter2.x * clamp01(0.5 - 0.5 * l.cos_angle);
+  return l;
+}
+
+/* Optical depth towards the sun. Real time: the march of GPU Pro 7 / S15, samples in a widening cone
+ * plus one long-distance sample (GPU Pro 7 fig 4.36) at the coarse density. The taps (offset from the
+ * point, and the length each stands for) are the same for every sample of a frame, so Python computes
+ * them once (core/march.py) into P.light_taps; P.march.w counts them, the long one last. Samples
+ * read the noise one mip level coarser than the view ray (GPU Pro 7) and switch to cheap samples
+ * once the view ray is 30 % opaque (S15: "2x faster", no visible change); the naive march of the
+ * benchmark keeps full samples. The reference permutation marches many fine samples out of the
+ * layer instead, for measuring the real-time one. */
+float nubis_light_optical_depth(vec3 p, float view_alpha, float lod)
+{
+  float tau = 0.0;
+#if NUBIS_REFERENCE
+  tau = nubis_reference_depth(p, P.sun_dir.xyz, 48);
+#else
+#  if NUBIS_NAIVE
+  bool cheap = false;
+#  else
+  bool cheap = view_alpha > 0.3;
+#  endif
+  float light_lod = min(lod + 1.0, 2.0);
+  int taps = int(P.march.w);
+  for (int i = 0; i < taps - 1; i++) {
+    vec4 tap = P.light_taps[i];
+    vec3 q = p + tap.xyz;
+    NubisDensity s = nubis_density(q, cheap, light_lod);
+    tau += (cheap ? s.coarse : s.fine) * nubis_extinction_factor(q, s.precipitation) * tap.w;
   }
+  vec4 long_tap = P.light_taps[taps - 1];
+  vec3 far_point = p + long_tap.xyz;
+  NubisDensity far_sample = nubis_density(far_point, true, light_lod);
+  tau += far_sample.coarse * nubis_extinction_factor(far_point, far_sample.precipitation) * long_tap.w;
+#endif
   return tau * P.density.x;
 }
 
-/* Light scattered towards the eye per unit of scattering at a point inside the cloud. */
-/* `extinction_factor` is nubis_extinction_factor at p: where rain or a storm absorbs, the albedo is
- * its inverse. */
-vec3 nubis_in_scattering(vec3 p, vec3 view_dir, NubisDensity d, float view_alpha, float extinction_factor)
+/* Light scattered towards the eye per unit of scattering at a point inside the cloud, without the
+ * lightning flashes (nubis_flash_energy). `extinction_factor` is nubis_extinction_factor at p: where
+ * rain or a storm absorbs, the albedo is its inverse. */
+vec3 nubis_in_scattering(
+    vec3 p, vec3 view_dir, NubisDensity d, NubisRayLight ray, float view_alpha, float extinction_factor, float lod, vec2 pixel)
 {
-  float tau = nubis_light_optical_depth(p, view_alpha);
+  float tau = nubis_light_optical_depth(p, view_alpha, lod);
+#if NUBIS_CIRRUS
   /* High cirrus dims the sun on the clouds below it, as its baked slab does in Cycles. */
-  tau += nubis_cirrus_optical_depth(p, P.sun_dir.xyz);
-  float cos_angle = dot(view_dir, P.sun_dir.xyz);
+  tau += nubis_cirrus_optical_depth(p, P.sun_dir.xyz, 0.0);
+#endif
   /* SPEC 2.9: NOT from the Guerrilla sources. Wrenninge's octaves (Oz, 2013) stand in for the light
    * that scatters more than once: each octave sees a thinner cloud and a flatter phase. Octave 1 alone
    * is plain single scattering (Beer-Lambert x phase). Octave i stands for light scattered once more
    * than octave i - 1, so it loses another factor of the albedo where the cloud absorbs: without it
    * the octaves kept rain cores and storms bright that Cycles' absorbing bounces make dark. */
   float direct_energy = 0.0;
-  float a = 1.0, b = 1.0, c = 1.0;
+  float a = 1.0, b = 1.0;
   float albedo = 1.0 / max(extinction_factor, 1.0);
-  int octaves = int(P.scatter.x);
+  int octaves = min(int(P.scatter.x), 8);
   for (int i = 0; i < octaves; i++) {
-    direct_energy += b * exp(-a * tau) * nubis_phase(cos_angle, c);
+    float phase = i < 4 ? ray.phase_lo[i] : ray.phase_hi[i - 4];
+    direct_energy += b * exp(-a * tau) * phase;
     a *= P.scatter.y;
     b *= P.scatter.z * albedo;
-    c *= P.scatter.w;
   }
-  /* SPEC 2.4 (GPU Pro 7 "Beer's powder", S15 view dependence): the in-scatter probability darkens
-   * the edges facing the sun, visible only with the sun behind the viewer; GPU Pro 7's factor 2
-   * restores the energy where it applies. */
-  float powder_weight = P.scatter2.x * clamp01(0.5 - 0.5 * cos_angle);
-  direct_energy *= mix(1.0, 2.0 * (1.0 - exp(-2.0 * tau)), powder_weight);
+  /* GPU Pro 7's factor 2 restores the energy where the powder term applies. */
+  direct_energy *= mix(1.0, 2.0 * (1.0 - exp(-2.0 * tau)), ray.powder_weight);
   vec3 direct = P.sun_rad.rgb * direct_energy;
   /* SPEC 2.7: GDC22's ambient probability from the coarse density, growing with height (S15); the
-   * reference mode measures the sky's visibility instead. */
-  float ambient_probability;
-  if (P.march.w < 0.5) {
-    ambient_probability = sqrt(1.0 - clamp01(d.coarse)) * mix(P.ambient.w, 1.0, d.h);
-  }
-  else {
-    ambient_probability = nubis_reference_sky_visibility(p, view_dir);
-  }
+   * reference permutation measures the sky's visibility instead. */
+#if NUBIS_REFERENCE
+  float ambient_probability = nubis_reference_sky_visibility(p, view_dir, pixel);
+#else
+  float ambient_probability = sqrt(1.0 - clamp01(d.coarse)) * mix(P.ambient.w, 1.0, d.h);
+#endif
   ambient_probability *= nubis_storm_ambient(p, d.h);
-  return direct + P.ambient.rgb * ambient_probability + nubis_storm_glow(p, d.fine);
+  return direct + P.ambient.rgb * ambient_probability + nubis_storm_steady_glow(p, d.fine);
 }

@@ -1,25 +1,6 @@
 /* The view-ray march: premultiplied scene-linear radiance and alpha (SPEC 2.12, 3.1, 3.3), shared by
  * the raymarch and motion stages. Requires the cloud libraries. */
 
-/* The world-space ray through a screen position (uv in [0, 1]). A perspective view passes its eye
- * (eye.w = 1): unprojecting the near plane through a frustum kilometres deep loses metres to float
- * cancellation, which shifts every ray sideways and moves cloud edges. Orthographic views (eye.w = 0)
- * start on the near plane. */
-void nubis_view_ray(vec2 screen_uv, mat4 inverse_view_projection, vec4 eye, out vec3 origin, out vec3 dir)
-{
-  vec2 ndc = screen_uv * 2.0 - 1.0;
-  vec4 far_h = inverse_view_projection * vec4(ndc, 1.0, 1.0);
-  vec3 far_point = far_h.xyz / far_h.w;
-  if (eye.w > 0.5) {
-    origin = eye.xyz;
-  }
-  else {
-    vec4 near_h = inverse_view_projection * vec4(ndc, -1.0, 1.0);
-    origin = near_h.xyz / near_h.w;
-  }
-  dir = normalize(far_point - origin);
-}
-
 /* SPEC 3.7: the cirrus layer, sampled once where the ray crosses its sphere. Its light is the exact
  * single scattering of a thin homogeneous slab (the layer Cycles renders from the bake): with slant
  * factors m = 1 / cos(zenith) for the view and the sun and vertical optical depth tau, sunlight
@@ -36,7 +17,7 @@ vec4 nubis_cirrus(vec3 origin, vec3 dir)
   if (hits_ground && altitude >= 0.0) {
     return vec4(0.0);
   }
-  float tau_view = nubis_cirrus_optical_depth(origin, dir);
+  float tau_view = nubis_cirrus_optical_depth(origin, dir, -1.0);
   if (tau_view <= 0.0) {
     return vec4(0.0);
   }
@@ -60,11 +41,33 @@ vec4 nubis_cirrus(vec3 origin, vec3 dir)
   return vec4(light, alpha);
 }
 
-/* `cloud_depth` returns the transmittance-weighted distance of what the ray saw (GDC22's cloud distance,
- * SPEC 3.8), 0 where it saw nothing. */
-vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth)
+/* The mip level of the noise for a view sample at distance t: the pixel's footprint there (P.view.x
+ * metres per metre of distance, P.view.y for orthographic views) in texels of the base-shape noise,
+ * plus the quality's base level (GDC22: PS4 reads MIP 1, PS5 MIP 0). The fractional part is dithered
+ * per pixel, so neighbouring levels blend as the passes accumulate. */
+float nubis_view_lod(float t, float dither)
+{
+  float footprint = P.view.x * t + P.view.y;
+  float level = log2(max(footprint * float(NUBIS_LF_SIZE - 1) / P.noise.x, 1.0)) + P.view.z;
+  return min(floor(level + dither), 2.0);
+}
+
+/* The view-ray march (SPEC 2.12, 3.1, 3.3): premultiplied radiance and alpha. `cloud_depth` returns the
+ * transmittance-weighted distance of what the ray saw (GDC22's cloud distance, SPEC 3.8), 0 where it
+ * saw nothing; `flash_mask` each storm's lightning at unit intensity, integrated like the radiance
+ * (GDC22's flash mask): the radiance leaves the flashes out, and callers add
+ * NUBIS_FLASH_COLOUR * dot(flash_mask, nubis_flash_intensities()) when they show a frame.
+ *
+ * Coarse to fine (GPU Pro 7, S15, GDC22): through empty sky the march takes cheap samples (the base
+ * shape only, one 3D fetch) two steps apart; the first non-zero one steps back one step (S15: "always
+ * take a step backward") and fine samples follow on the same grid the naive march uses; six empty
+ * fine samples in a row (GPU Pro 7) return to the cheap search. Erosion only removes density, so an
+ * empty cheap sample is an empty fine one: the saving costs only slivers thinner than one step. The
+ * NUBIS_NAIVE permutation takes the fine sample at every step, for the benchmark. */
+vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out vec4 flash_mask)
 {
   cloud_depth = 0.0;
+  flash_mask = vec4(0.0);
   float R = P.layer.x;
   /* SPEC 3.1: segment between the shell's spheres; rays that meet the ground see no clouds. */
   vec2 ground = nubis_ray_sphere(origin, dir, R, 0.0);
@@ -118,29 +121,72 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth)
    * shifts it by the golden ratio so N passes cover the step evenly. */
   float jitter = P.options.x > 0.5 ? fract(nubis_pixel_hash(pixel) + 0.61803399 * P.options.z) : 0.5;
 
+  /* A second per-pixel value for the mip dither, independent of the step jitter. */
+  float dither = P.options.x > 0.5 ? fract(jitter * 7.0 + 0.5) : 0.5;
+  NubisRayLight ray = nubis_ray_light(dir);
+
   vec3 radiance = vec3(0.0);
   float transmittance = 1.0;
   float depth_sum = 0.0;
-  for (int i = 0; i < steps; i++) {
+  int i = 0;                    /* the next step to sample */
+  int uncovered = 0;            /* the first step that no empty cheap sample has cleared */
+  bool fine = NUBIS_NAIVE != 0; /* taking fine samples (true) or searching with cheap ones */
+  int empty_fine = 0;
+  for (int iteration = 0; iteration < 4096; iteration++) {
+    if (i >= steps) {
+      break;
+    }
     float t = t0 + (float(i) + jitter) * dt;
     vec3 p = origin + dir * t;
-    NubisDensity d = nubis_density(p, false, 0.0);
-    /* SPEC 2.8, GPU Pro 7: no light march where there is no cloud. */
-    if (d.fine > 0.0) {
-      float absorb = nubis_extinction_factor(p, d.precipitation);
-      float sigma = d.fine * P.density.x * absorb;
-      float step_t = exp(-sigma * dt);
-      vec3 s = nubis_in_scattering(p, dir, d, 1.0 - transmittance, absorb);
-      /* Energy-conserving step (Hillaire 2016): the exact integral of constant in-scattering over
-       * the step, instead of a Riemann sum that brightens with larger steps; the albedo is 1 but
-       * where rain or a storm absorbs. */
-      radiance += transmittance * s * ((1.0 - step_t) / absorb);
-      depth_sum += t * transmittance * (1.0 - step_t);
-      transmittance *= step_t;
-      /* SPEC 3.5: stop once the ray is practically opaque. */
-      if (transmittance < 0.005) {
-        break;
+    float lod = nubis_view_lod(t, dither);
+#if NUBIS_FETCH_STATS
+    nubis_view_samples++;
+#endif
+#if !NUBIS_NAIVE
+    if (!fine) {
+      NubisDensity c = nubis_density(p, true, lod);
+      if (c.coarse <= 0.0) {
+        uncovered = i + 1;
+        i += NUBIS_COARSE_STRIDE;
+        continue;
       }
+      fine = true;
+      empty_fine = 0;
+      i = max(i - NUBIS_COARSE_STRIDE + 1, uncovered);
+      continue;
+    }
+#endif
+    NubisDensity d = nubis_density(p, false, lod);
+    i++;
+    /* SPEC 2.8, GPU Pro 7: no light march where there is no cloud. */
+    if (d.fine <= 0.0) {
+#if !NUBIS_NAIVE
+      empty_fine++;
+      if (empty_fine >= 6) {
+        fine = false;
+        uncovered = i;
+      }
+#endif
+      continue;
+    }
+    empty_fine = 0;
+    float absorb = nubis_extinction_factor(p, d.precipitation);
+    float sigma = d.fine * P.density.x * absorb;
+    float step_t = exp(-sigma * dt);
+    vec3 s = nubis_in_scattering(p, dir, d, ray, 1.0 - transmittance, absorb, lod, pixel);
+    /* Energy-conserving step (Hillaire 2016): the exact integral of constant in-scattering over
+     * the step, instead of a Riemann sum that brightens with larger steps; the albedo is 1 but
+     * where rain or a storm absorbs. */
+    float weight = transmittance * ((1.0 - step_t) / absorb);
+    radiance += s * weight;
+#if NUBIS_STORMS
+    flash_mask += nubis_flash_energy(p, d.fine) * weight;
+#endif
+    depth_sum += t * transmittance * (1.0 - step_t);
+    transmittance *= step_t;
+    /* SPEC 3.5: stop once the ray is practically opaque. */
+    if (transmittance < 0.005) {
+      break;
     }
   }
   float alpha = 1.0 - transmittance;
@@ -149,31 +195,9 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth)
   if (P.scatter2.y > 0.0 && alpha > 0.0) {
     float fade = exp(-(depth_sum / alpha) / P.scatter2.y);
     radiance = mix(P.ambient.rgb * alpha, radiance, fade);
+    flash_mask *= fade;
   }
   return vec4(radiance, alpha);
 }
 
 
-/* SPEC 3.9.4 (GDC22): where the cloud seen at `world` was `dt` seconds ago. Scrolling clouds came from
- * upwind (the scroll direction times the timestep); inside a superstorm the point is turned back by its
- * ring's speed, blended by GDC22's mask pow(1 - d / radius, 0.1). */
-vec3 nubis_previous_position(vec3 world, float dt)
-{
-  vec3 scrolled = world - vec3(P.wind.xy, P.wind2.y) * P.motion.y * dt;
-#if NUBIS_STORMS
-  int count = min(int(P.storm_info.x), NUBIS_MAX_STORMS);
-  for (int i = 0; i < count; i++) {
-    vec4 shape = P.storm_shape[i];
-    float dist = distance(world.xy, shape.xy);
-    if (shape.w <= 0.0 || dist >= shape.z) {
-      continue;
-    }
-    int ring = min(int(floor(6.0 * dist / shape.z)), 5);
-    float speed = P.storm_light[i].x * (1.0 - float(ring) / 6.0);
-    vec3 turned = vec3(nubis_rotate_about(world.xy, shape.xy, -speed * dt), world.z);
-    float mask = pow(clamp01(1.0 - dist / shape.z), 0.1);
-    scrolled = mix(scrolled, turned, mask);
-  }
-#endif
-  return scrolled;
-}

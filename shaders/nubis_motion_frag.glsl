@@ -6,7 +6,8 @@ void main()
   vec3 origin, dir;
   nubis_view_ray(uv, inv_view_proj, eye, origin, dir);
   float cloud_depth;
-  vec4 clouds = nubis_march(origin, dir, gl_FragCoord.xy, cloud_depth);
+  vec4 flash_mask;
+  vec4 clouds = nubis_march(origin, dir, gl_FragCoord.xy, cloud_depth, flash_mask);
   if (clouds.a <= 0.0) {
     color = vec4(0.0);
     return;

@@ -16,7 +16,7 @@ struct NubisParams {
   vec4 sun_rad;    /* sun colour * strength (irradiance), - */
   vec4 ambient;    /* ambient sky colour * strength, ambient at the base relative to the top */
   vec4 phase;      /* g0, g1, weight of lobe 1, rain absorption multiplier */
-  vec4 march;      /* view steps looking up, view steps to the horizon, light step length, light mode */
+  vec4 march;      /* view steps looking up, view steps to the horizon, light step length, light taps */
   vec4 scatter;    /* multiple-scattering octaves, attenuation a, contribution b, eccentricity scale c */
   vec4 scatter2;   /* powder strength, fade distance (0 = off), -, - */
   vec4 cirrus;     /* altitude, coverage multiplier, 1 / texture period, optical depth at density 1 */
@@ -30,6 +30,18 @@ struct NubisParams {
   vec4 motion;              /* timestep of the motion vectors in seconds, wind speed (m/s), -, - */
   vec4 clip_box;   /* x0, y0, x1, y1: no clouds outside (a comparison clips to the baked box); x1 < x0: off */
   vec4 options;    /* jitter (0/1), jittered storm rings (0/1), accumulation pass, - */
+  vec4 view;       /* pixel footprint: metres per metre of distance, metres (orthographic), base mip, - */
+  vec4 light_taps[16]; /* the light march's taps (core/march.py): offset from the point, length it stands for */
+};
+
+/* The temporal resolve's inputs (render/temporal.py), one block per redraw. */
+struct NubisTemporal {
+  mat4 inv_view_proj;  /* this redraw's camera, as the march's rays */
+  mat4 prev_view_proj; /* the camera of the previous redraw */
+  vec4 eye;            /* this redraw's eye (w = 1: perspective) */
+  vec4 size;           /* history width, height, working-buffer width, height */
+  vec4 frame;          /* Bayer index marched now, redraws since the last change, weight of the new sample, dt */
+  vec4 flags;          /* history valid (0/1), -, -, - */
 };
 
 /* The motion stage's cameras: now and one timestep earlier (the same for a still camera). */

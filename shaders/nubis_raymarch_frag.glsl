@@ -1,11 +1,21 @@
-/* The viewport and offscreen render: clouds, then the cirrus layer behind them. */
+/* The full-resolution march: the headless render, the naive march of the benchmark and the offline
+ * path. Every pixel is marched, flashes included; the clouds, then the cirrus layer behind them. */
 void main()
 {
   vec3 origin, dir;
   nubis_view_ray(uv, inv_view_proj, eye, origin, dir);
   float cloud_depth;
-  vec4 clouds = nubis_march(origin, dir, gl_FragCoord.xy, cloud_depth);
+  vec4 flash_mask;
+  vec4 clouds = nubis_march(origin, dir, gl_FragCoord.xy, cloud_depth, flash_mask);
+  clouds.rgb += NUBIS_FLASH_COLOUR * dot(flash_mask, nubis_flash_intensities());
+#if NUBIS_CIRRUS
   /* SPEC 1.8, GPU Pro 7: the high layer is sampled at the end of the march, behind the volume. */
   vec4 cirrus = nubis_cirrus(origin, dir);
-  color = clouds + (1.0 - clouds.a) * cirrus;
+  clouds += (1.0 - clouds.a) * cirrus;
+#endif
+#if NUBIS_FETCH_STATS
+  color = vec4(float(nubis_fetches_3d), float(nubis_view_samples), float(nubis_density_calls), 1.0);
+#else
+  color = clouds;
+#endif
 }

@@ -25,3 +25,31 @@ def ray_inverse_view_projection(window_matrix, view_matrix) -> np.ndarray:
         proj = proj.copy()
         proj[2] = (0.0, 0.0, -(f + n) / (f - n), -2.0 * f * n / (f - n))
     return np.linalg.inv(proj @ view)
+
+
+def _unproject(inv: np.ndarray, ndc_x: float, ndc_y: float, depth: float) -> np.ndarray:
+    h = inv @ np.array([ndc_x, ndc_y, depth, 1.0])
+    return h[:3] / h[3]
+
+
+def pixel_footprint(inv_view_proj, width: int, height: int) -> tuple[float, float]:
+    """How wide one pixel is at the centre of the view: (radians, i.e. metres per metre of distance,
+    metres) for a perspective view (angle, 0) or an orthographic one (0, metres). It picks the noise mip
+    levels the march reads at a distance."""
+    inv = np.array(inv_view_proj, dtype=np.float64).reshape(4, 4)
+    dx = 2.0 / max(width, 1)
+    near = [_unproject(inv, x, 0.0, -1.0) for x in (0.0, dx)]
+    far = [_unproject(inv, x, 0.0, 1.0) for x in (0.0, dx)]
+    dirs = [f - n for f, n in zip(far, near, strict=True)]
+    spread = float(np.linalg.norm(near[1] - near[0]))
+    a, b = (d / np.linalg.norm(d) for d in dirs)
+    angle = float(np.arccos(np.clip(np.dot(a, b), -1.0, 1.0)))
+    if angle < 1e-9:  # parallel rays: orthographic
+        return 0.0, spread
+    return angle, 0.0
+
+
+def forward_view_projection(inv_view_proj) -> np.ndarray:
+    """The view-projection whose inverse builds the rays, for projecting world points back to the
+    screen (reprojection needs only x, y and w, which the substitute depth row leaves exact)."""
+    return np.linalg.inv(np.array(inv_view_proj, dtype=np.float64).reshape(4, 4))

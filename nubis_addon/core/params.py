@@ -185,6 +185,45 @@ PARAMS: tuple[Param, ...] = (
     P("march", "steps_min", "int", 64, 8, 1024, "View samples looking straight up (GPU Pro 7: 64)"),
     P("march", "steps_max", "int", 128, 8, 2048, "View samples towards the horizon (GPU Pro 7: 128)"),
     P("march", "light_step", "float", 200.0, 1.0, 5000.0, "Length of a light-march step", "LENGTH"),
+    # GDC22's platform table: 6 light samples and noise MIP 1 on PS4, 10 and MIP 0 on PS5.
+    P(
+        "march",
+        "light_samples",
+        "int",
+        6,
+        2,
+        16,
+        "Light-march samples: a cone towards the sun plus one long-distance sample (GDC22: 6 on PS4, 10 on PS5)",
+    ),
+    P("march", "mip", "int", 0, 0, 2, "Base mip level of the 3D noise (GDC22: 1 on PS4, 0 on PS5)"),
+    # The temporal viewport (docs/viewport.md).
+    P(
+        "viewport",
+        "resolution",
+        "float",
+        1.0,
+        0.25,
+        1.0,
+        "Resolution of the viewport's converged image relative to the view (GDC22: 1/2 on PS4, 1 on PS5)",
+    ),
+    P(
+        "viewport",
+        "blur",
+        "float",
+        1.0,
+        1.0,
+        2.0,
+        "Width of the upscale filter in pixels of the converged image (GDC22: 2x on PS4, 1x on PS5)",
+    ),
+    P(
+        "viewport",
+        "samples",
+        "int",
+        8,
+        1,
+        256,
+        "Samples per pixel the still viewport converges to (16 redraws each), then it stops redrawing",
+    ),
     P("bake", "voxel_size", "float", 100.0, 1.0, 10000.0, "Edge of a voxel in the OpenVDB bake", "LENGTH"),
 )
 del P

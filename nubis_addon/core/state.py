@@ -53,6 +53,10 @@ class CloudState:
     clip_box: tuple[float, float, float, float] | None = None  # x0, y0, x1, y1: clouds only inside
     storms: tuple[StormLight, ...] = ()
     motion_dt: float = 1.0 / 24.0  # seconds per frame, for motion vectors
+    # A pixel's footprint for the noise mip levels: metres per metre of distance (perspective) plus
+    # metres (orthographic). 0 reads the full-resolution noise everywhere, as the bake does.
+    pixel_angle: float = 0.0
+    pixel_size: float = 0.0
 
     def has_cirrus(self) -> bool:
         return self.field_c is not None and self.params["cirrus_coverage"] > 0 and float(self.field_c[..., 0].max()) > 0

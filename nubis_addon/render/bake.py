@@ -19,8 +19,9 @@ def bake_density(
     vol = np.empty((nz, ny, nx), np.float32)
     glow = np.empty((nz, ny, nx), np.float32)
     absorption = np.empty((nz, ny, nx), np.float32)
-    sh = shader("bake", gpu_inputs.storms)
-    batch = fullscreen_batch("bake", gpu_inputs.storms)
+    defines = gpu_inputs.defines()
+    sh = shader("bake", defines)
+    batch = fullscreen_batch("bake", defines)
     offscreen = gpu.types.GPUOffScreen(nx, ny, format="RGBA32F")
     try:
         with offscreen.bind():

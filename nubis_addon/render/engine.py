@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import gpu
 import numpy as np
@@ -21,64 +22,104 @@ CLOUD_SAMPLERS = (
     ("FLOAT_2D", "field_c"),
     ("FLOAT_3D", "noise_lf"),
     ("FLOAT_3D", "noise_lf_mip1"),
+    ("FLOAT_3D", "noise_lf_mip2"),
     ("FLOAT_3D", "noise_hf"),
+    ("FLOAT_3D", "noise_hf_mip1"),
     ("FLOAT_2D", "noise_curl"),
     ("FLOAT_2D", "noise_cirrus"),
 )
-_shaders: dict[str, gpu.types.GPUShader] = {}
-_batches: dict[str, gpu.types.GPUBatch] = {}
+# The permutation switches every stage is compiled with (0 or 1); see shaders/nubis_common_lib.glsl.
+SWITCHES = ("NUBIS_STORMS", "NUBIS_REFERENCE", "NUBIS_NAIVE", "NUBIS_CIRRUS", "NUBIS_FETCH_STATS")
 
 
-def _create_info(
-    stage: str,
-    push_constants: tuple[tuple[str, str], ...],
-    extra_samplers: tuple[tuple[str, str], ...] = (),
-    storms: bool = False,
-) -> GPUShaderCreateInfo:
-    iface = GPUStageInterfaceInfo(f"nubis_{stage}_iface")
+@dataclass(frozen=True)
+class Stage:
+    """A full-screen shader stage: fragment source shaders/nubis_<name>_frag.glsl after its libraries."""
+
+    push_constants: tuple[tuple[str, str], ...] = ()
+    samplers: tuple[tuple[str, str], ...] = ()  # beyond the cloud inputs
+    libs: tuple[str, ...] = CLOUD_LIBS
+    cloud_inputs: bool = True  # binds the cloud samplers (the libraries in CLOUD_LIBS read them)
+    outputs: tuple[str, ...] = ("color",)
+    blocks: tuple[tuple[str, str], ...] = ()  # extra uniform blocks (struct type, name) after P
+
+
+_VIEW = (("MAT4", "inv_view_proj"), ("VEC4", "eye"))
+# The bake reads the lighting library too, for the glow grid.
+STAGES: dict[str, Stage] = {
+    "raymarch": Stage(_VIEW),
+    "bake": Stage((("VEC4", "bake_origin"), ("VEC4", "bake_voxel"))),
+    "motion": Stage(_VIEW, blocks=(("NubisMotionCameras", "C"),)),
+    # The temporal viewport (render/temporal.py): one pixel of every 4x4 block into the working buffer,
+    # the resolve into the full-resolution history, and the upscale onto the view.
+    "temporal_march": Stage(
+        (*_VIEW, ("VEC4", "block"), ("VEC4", "cull")),
+        (("FLOAT_2D", "scene_depth"),),
+        outputs=("color", "attr", "flash"),
+    ),
+    "resolve": Stage(
+        samplers=tuple(
+            ("FLOAT_2D", n) for n in ("work_color", "work_attr", "work_flash", "hist_color", "hist_attr", "hist_flash")
+        ),
+        libs=("nubis_common_lib.glsl", "nubis_motion_lib.glsl"),
+        cloud_inputs=False,
+        outputs=("color", "attr", "flash"),
+        blocks=(("NubisTemporal", "T"),),
+    ),
+    "upscale": Stage(
+        (("VEC4", "filter_size"),),
+        (("FLOAT_2D", "hist_color"), ("FLOAT_2D", "hist_flash")),
+        libs=("nubis_common_lib.glsl",),
+        cloud_inputs=False,
+    ),
+}
+_shaders: dict[tuple, gpu.types.GPUShader] = {}
+_batches: dict[tuple, gpu.types.GPUBatch] = {}
+
+
+def _create_info(name: str, defines: dict[str, object]) -> GPUShaderCreateInfo:
+    stage = STAGES[name]
+    iface = GPUStageInterfaceInfo(f"nubis_{name}_iface")
     iface.smooth("VEC2", "uv")
     info = GPUShaderCreateInfo()
-    # Two permutations: the superstorm terms cost a software rasterizer ~40 % even with no storm in the
-    # scene, so skies without storms compile them out.
-    info.define("NUBIS_STORMS", "1" if storms else "0")
+    # Permutations rather than branches on uniforms: the superstorm terms cost a software rasterizer
+    # ~40 % even with no storm in the scene, so skies without storms compile them out; the same holds
+    # for the reference light march, the cirrus layer, the naive march and the fetch counter.
+    for key, value in defines.items():
+        info.define(key, str(value))
     info.typedef_source(read_shader("nubis_params.glsl"))
     info.uniform_buf(0, "NubisParams", "P")
-    if stage == "motion":
-        info.uniform_buf(1, "NubisMotionCameras", "C")
-    for slot, (kind, name) in enumerate(CLOUD_SAMPLERS + extra_samplers):
-        info.sampler(slot, kind, name)
-    for kind, name in push_constants:
-        info.push_constant(kind, name)
+    for slot, (struct, block) in enumerate(stage.blocks, start=1):
+        info.uniform_buf(slot, struct, block)
+    samplers = (CLOUD_SAMPLERS if stage.cloud_inputs else ()) + stage.samplers
+    for slot, (kind, sampler) in enumerate(samplers):
+        info.sampler(slot, kind, sampler)
+    for kind, constant in stage.push_constants:
+        info.push_constant(kind, constant)
     info.vertex_in(0, "VEC2", "pos")
     info.vertex_out(iface)
-    info.fragment_out(0, "VEC4", "color")
+    for slot, out in enumerate(stage.outputs):
+        info.fragment_out(slot, "VEC4", out)
     info.vertex_source(read_shader("nubis_fullscreen_vert.glsl"))
-    info.fragment_source(assemble(*CLOUD_LIBS, f"nubis_{stage}_frag.glsl"))
+    info.fragment_source(assemble(*stage.libs, f"nubis_{name}_frag.glsl"))
     return info
 
 
-# Each stage: its push constants and any samplers beyond the cloud inputs. Fragment source is
-# shaders/nubis_<stage>_frag.glsl, compiled after the cloud libraries.
-# The bake reads the lighting library too, for the glow grid.
-STAGES: dict[str, tuple[tuple[tuple[str, str], ...], tuple[tuple[str, str], ...]]] = {
-    "raymarch": ((("MAT4", "inv_view_proj"), ("VEC4", "eye")), ()),
-    "bake": ((("VEC4", "bake_origin"), ("VEC4", "bake_voxel")), ()),
-    "motion": ((("MAT4", "inv_view_proj"), ("VEC4", "eye")), ()),
-}
+def _key(name: str, defines: dict[str, object]) -> tuple:
+    return (name, *sorted(defines.items()))
 
 
-def shader(stage: str, storms: bool = False) -> gpu.types.GPUShader:
-    key = f"{stage}:{int(storms)}"
+def shader(name: str, defines: dict[str, object]) -> gpu.types.GPUShader:
+    key = _key(name, defines)
     if key not in _shaders:
-        push_constants, extra_samplers = STAGES[stage]
-        _shaders[key] = gpu.shader.create_from_info(_create_info(stage, push_constants, extra_samplers, storms))
+        _shaders[key] = gpu.shader.create_from_info(_create_info(name, defines))
     return _shaders[key]
 
 
-def fullscreen_batch(stage: str, storms: bool = False) -> gpu.types.GPUBatch:
-    key = f"{stage}:{int(storms)}"
+def fullscreen_batch(name: str, defines: dict[str, object]) -> gpu.types.GPUBatch:
+    key = _key(name, defines)
     if key not in _batches:
-        _batches[key] = batch_for_shader(shader(stage, storms), "TRIS", {"pos": ((-1, -1), (3, -1), (-1, 3))})
+        _batches[key] = batch_for_shader(shader(name, defines), "TRIS", {"pos": ((-1, -1), (3, -1), (-1, 3))})
     return _batches[key]
 
 
@@ -89,8 +130,13 @@ class CloudGPU:
         self.noise = NoiseTextures(noise_set)
         self._field_arrays: tuple = ()
         self.field_a = self.field_b = self.field_c = None
-        self.storms = False
+        self.switches = dict.fromkeys(SWITCHES, 0)
         self.ubo = None
+        self.ubo_bytes = b""
+
+    @property
+    def storms(self) -> bool:
+        return bool(self.switches["NUBIS_STORMS"])
 
     def update(self, state: CloudState) -> None:
         # Fields are replaced, never edited in place, by everything that changes them: holding the
@@ -99,30 +145,34 @@ class CloudGPU:
         if len(self._field_arrays) != 3 or any(a is not b for a, b in zip(arrays, self._field_arrays, strict=True)):
             self.field_a, self.field_b, self.field_c = (field_texture(a) for a in arrays)
             self._field_arrays = arrays
-        self.ubo = gpu.types.GPUUniformBuf(uniforms.pack(state).tobytes())
-        self.storms = bool(state.storms)
+        self.ubo_bytes = uniforms.pack(state).tobytes()
+        self.ubo = gpu.types.GPUUniformBuf(self.ubo_bytes)
+        self.switches.update(
+            NUBIS_STORMS=int(bool(state.storms)),
+            NUBIS_REFERENCE=int(state.light_mode == 1),
+            NUBIS_CIRRUS=int(state.has_cirrus()),
+        )
 
-    def bind(self, sh: gpu.types.GPUShader) -> None:
+    def defines(self, **switches: int) -> dict[str, object]:
+        """The permutation for this state, with `switches` (e.g. NUBIS_NAIVE=1) on top."""
+        return {"NUBIS_COARSE_STRIDE": 2, **self.noise.defines, **self.switches, **switches}
+
+    def bind(self, sh: gpu.types.GPUShader, cloud_inputs: bool = True) -> None:
         sh.bind()
         sh.uniform_block("P", self.ubo)
-        textures = {
-            "field_a": self.field_a,
-            "field_b": self.field_b,
-            "field_c": self.field_c,
-            "noise_lf": self.noise.lf,
-            "noise_lf_mip1": self.noise.lf_mip1,
-            "noise_hf": self.noise.hf,
-            "noise_curl": self.noise.curl,
-            "noise_cirrus": self.noise.cirrus,
-        }
+        if not cloud_inputs:
+            return
+        textures = {"field_a": self.field_a, "field_b": self.field_b, "field_c": self.field_c}
         for _kind, name in CLOUD_SAMPLERS:
-            sh.uniform_sampler(name, textures[name])
+            tex = textures.get(name) or self.noise.textures[name.removeprefix("noise_")]
+            sh.uniform_sampler(name, tex)
 
 
-def draw_clouds(gpu_inputs: CloudGPU, inv_view_proj, eye) -> None:
+def draw_clouds(gpu_inputs: CloudGPU, inv_view_proj, eye, **switches: int) -> None:
     """Draw the clouds into the bound framebuffer (premultiplied radiance, alpha). `eye` is the
-    perspective camera's position with w = 1, or w = 0 for an orthographic view."""
-    draw_stage("raymarch", gpu_inputs, {"inv_view_proj": inv_view_proj, "eye": tuple(eye)})
+    perspective camera's position with w = 1, or w = 0 for an orthographic view. `switches` pick a
+    permutation: NUBIS_NAIVE=1 for the benchmark's naive march, NUBIS_FETCH_STATS=1 to count fetches."""
+    draw_stage("raymarch", gpu_inputs, {"inv_view_proj": inv_view_proj, "eye": tuple(eye)}, switches=switches)
 
 
 def draw_offscreen(width: int, height: int, draw: Callable[[], None]) -> np.ndarray:
@@ -145,17 +195,19 @@ def draw_stage(
     uniforms: dict | None = None,
     blocks: dict | None = None,
     samplers: dict | None = None,
+    switches: dict | None = None,
 ) -> None:
     """One full-screen draw of a cloud stage with the cloud inputs bound plus the stage's own."""
-    sh = shader(stage, gpu_inputs.storms)
-    gpu_inputs.bind(sh)
+    defines = gpu_inputs.defines(**(switches or {}))
+    sh = shader(stage, defines)
+    gpu_inputs.bind(sh, STAGES[stage].cloud_inputs)
     for name, value in (uniforms or {}).items():
         sh.uniform_float(name, value)
     for name, value in (blocks or {}).items():
         sh.uniform_block(name, value)
     for name, value in (samplers or {}).items():
         sh.uniform_sampler(name, value)
-    fullscreen_batch(stage, gpu_inputs.storms).draw(sh)
+    fullscreen_batch(stage, defines).draw(sh)
 
 
 def render_motion(gpu_inputs: CloudGPU, inv_view_proj, eye, prev_view_proj, width: int, height: int) -> np.ndarray:
@@ -175,7 +227,9 @@ def render_motion(gpu_inputs: CloudGPU, inv_view_proj, eye, prev_view_proj, widt
     return out
 
 
-def render_offscreen(gpu_inputs: CloudGPU, inv_view_proj, eye, width: int, height: int, tile: int = 256) -> np.ndarray:
+def render_offscreen(
+    gpu_inputs: CloudGPU, inv_view_proj, eye, width: int, height: int, tile: int = 256, **switches: int
+) -> np.ndarray:
     """Scene-linear premultiplied RGBA, shape (height, width, 4), top row first.
 
     The frame is drawn in tiles so that one huge draw call never stalls a software rasterizer.
@@ -186,7 +240,7 @@ def render_offscreen(gpu_inputs: CloudGPU, inv_view_proj, eye, width: int, heigh
             for x in range(0, width, tile):
                 gpu.state.scissor_test_set(True)
                 gpu.state.scissor_set(x, y, min(tile, width - x), min(tile, height - y))
-                draw_clouds(gpu_inputs, inv_view_proj, eye)
+                draw_clouds(gpu_inputs, inv_view_proj, eye, **switches)
         gpu.state.scissor_test_set(False)
 
     return draw_offscreen(width, height, tiles)[::-1].copy()

@@ -10,11 +10,11 @@ from __future__ import annotations
 import gpu
 import numpy as np
 
-from .engine import STAGES, CloudGPU, draw_offscreen, draw_stage
+from .engine import STAGES, CloudGPU, Stage, draw_offscreen, draw_stage
 
 # Registered here rather than in engine.py: the probe is a test instrument, and a stage only compiles
 # when someone asks for it, so the product never pays for it.
-STAGES.setdefault("probe", ((("VEC4", "probe_mode"),), (("FLOAT_2D", "probe_points"),)))
+STAGES.setdefault("probe", Stage((("VEC4", "probe_mode"),), (("FLOAT_2D", "probe_points"),)))
 
 MAX_WIDTH = 1024  # texels per row of the point texture; rows grow as needed
 _MODE_DENSITY = 0.0

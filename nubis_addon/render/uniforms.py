@@ -11,6 +11,7 @@ from functools import cache
 
 import numpy as np
 
+from ..core import march
 from ..core.errors import NubisError
 from ..core.state import CloudState, wind_vector
 from .sources import read_shader
@@ -64,7 +65,7 @@ def param_vectors(state: CloudState) -> dict[str, tuple[float, float, float, flo
             float(p["march_steps_min"]),
             float(p["march_steps_max"]),
             p["march_light_step"],
-            float(state.light_mode),
+            float(p["march_light_samples"]),
         ),
         "scatter": (
             float(p["lighting_ms_octaves"]),
@@ -93,6 +94,10 @@ def param_vectors(state: CloudState) -> dict[str, tuple[float, float, float, flo
             float(state.jitter_pass),
             0.0,
         ),
+        "view": (state.pixel_angle, state.pixel_size, float(p["march_mip"]), 0.0),
+        "light_taps": [
+            tuple(t) for t in march.light_taps(state.sun_direction, p["march_light_step"], p["march_light_samples"])
+        ],
     }
 
 

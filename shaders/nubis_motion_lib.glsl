@@ -1,0 +1,49 @@
+/* Where the clouds seen now were a moment ago (GDC22's motion vectors), for the motion stage and the
+ * temporal resolve. Requires nubis_common_lib.glsl and the NubisParams block `P`; no textures. */
+
+/* The rate (radians per second) at which the detail noise at `xy` turns inside storm `i`: the same
+ * rings, ring blend and fades as nubis_vortex, differentiated in time. The vortex reads the noise at
+ * rotate(p, +angle(t)), so a feature seen at p now was at rotate(p, +rate * dt) dt seconds ago: the
+ * visible vortex turns clockwise for a positive spin. */
+float nubis_storm_turn_rate(vec2 xy, int i)
+{
+  vec4 shape = P.storm_shape[i];
+  float u = 6.0 * distance(xy, shape.xy) / shape.z;
+  float fade = (1.0 - smoothstep(5.0, 6.0, u)) * smoothstep(0.0, 0.25, shape.w);
+  float spin = P.storm_light[i].x;
+  const float overlap = 0.3; /* in ring widths, as nubis_vortex */
+  float boundary = floor(u + 0.5);
+  float e = u - boundary;
+  float rate;
+  if (P.options.y < 0.5 && abs(e) < 0.5 * overlap && boundary >= 1.0 && boundary <= 5.0) {
+    float inner = boundary - 1.0;
+    float w = smoothstep(-0.5 * overlap, 0.5 * overlap, e);
+    rate = spin * mix(1.0 - inner / 6.0, 1.0 - (inner + 1.0) / 6.0, w);
+  }
+  else {
+    rate = spin * (1.0 - min(floor(u), 5.0) / 6.0);
+  }
+  return rate * fade;
+}
+
+/* SPEC 3.9.4 (GDC22): where the cloud seen at `world` was `dt` seconds ago. Scrolling clouds came from
+ * upwind (the scroll direction times the timestep); inside a superstorm the point is turned back by its
+ * ring's rate, blended by GDC22's mask pow(1 - d / radius, 0.1). */
+vec3 nubis_previous_position(vec3 world, float dt)
+{
+  vec3 scrolled = world - vec3(P.wind.xy, P.wind2.y) * P.motion.y * dt;
+#if NUBIS_STORMS
+  int count = min(int(P.storm_info.x), NUBIS_MAX_STORMS);
+  for (int i = 0; i < count; i++) {
+    vec4 shape = P.storm_shape[i];
+    float dist = distance(world.xy, shape.xy);
+    if (shape.w <= 0.0 || dist >= shape.z) {
+      continue;
+    }
+    vec3 turned = vec3(nubis_rotate_about(world.xy, shape.xy, nubis_storm_turn_rate(world.xy, i) * dt), world.z);
+    float mask = pow(clamp01(1.0 - dist / shape.z), 0.1);
+    scrolled = mix(scrolled, turned, mask);
+  }
+#endif
+  return scrolled;
+}

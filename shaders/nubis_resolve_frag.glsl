@@ -1,0 +1,99 @@
+/* Temporal upscaling, step 2 (S15, GDC22; docs/viewport.md): the full-resolution history of this
+ * redraw, from the working buffer just marched and the history of the previous redraw.
+ *   - The pixel marched now takes the new sample; once every pixel has one (16 redraws after a
+ *     change), later passes average into it with weight T.frame.z.
+ *   - Every other pixel keeps its history while nothing changes: it was marched or reprojected since.
+ *   - On the redraw after a change, every other pixel is reprojected: its cloud (at the distance the
+ *     new march saw nearby, else the one it had) is moved back by the clouds' own motion (wind scroll,
+ *     storm rotation) and projected with the previous camera; the history there is clamped to the
+ *     new samples around it, which removes ghosts. Pixels that come from off screen, or whose history
+ *     is not valid, take the working buffer upscaled (S15: "substitute the result from one of the low
+ *     res buffers"), so a pan shows no black or stale edges.
+ * Outputs: colour, (cloud distance, valid, -, -), flash mask, as the march's. */
+
+vec4 nubis_work_bilinear(sampler2D tex, vec2 history_pixel)
+{
+  /* Working-buffer texel (i, j) holds history pixel 4 (i, j) + the block's marched offset, which
+   * changes every redraw; the block centre is a fair estimate of where every texel sits. */
+  vec2 uv = history_pixel / (4.0 * T.size.zw);
+  return textureLod(tex, uv, 0.0);
+}
+
+void main()
+{
+  ivec2 q = ivec2(gl_FragCoord.xy);
+  ivec2 block = q / 4;
+  int age = (int(T.frame.x) - nubis_bayer4(q) + 16) & 15; /* redraws since this pixel was marched */
+  int since_change = int(T.frame.y);
+  bool valid = T.flags.x > 0.5;
+  vec4 hist_c = texelFetch(hist_color, q, 0);
+  vec4 hist_a = texelFetch(hist_attr, q, 0);
+  vec4 hist_f = texelFetch(hist_flash, q, 0);
+  if (age == 0) {
+    vec4 new_c = texelFetch(work_color, block, 0);
+    vec4 new_a = texelFetch(work_attr, block, 0);
+    vec4 new_f = texelFetch(work_flash, block, 0);
+    float w = (valid && since_change >= 16) ? T.frame.z : 1.0;
+    color = mix(hist_c, new_c, w);
+    flash = mix(hist_f, new_f, w);
+    attr = vec4(new_a.x, 1.0, 0.0, 0.0);
+    return;
+  }
+  if (valid && since_change > 0) {
+    color = hist_c;
+    attr = hist_a;
+    flash = hist_f;
+    return;
+  }
+  /* Reproject. The neighbourhood: the 3x3 working-buffer texels around this pixel's block. */
+  vec4 lo = vec4(1e30), hi = vec4(-1e30);
+  vec4 lo_f = vec4(1e30), hi_f = vec4(-1e30);
+  float near_depth = 0.0;
+  ivec2 work_size = ivec2(T.size.zw);
+  for (int dy = -1; dy <= 1; dy++) {
+    for (int dx = -1; dx <= 1; dx++) {
+      ivec2 b = clamp(block + ivec2(dx, dy), ivec2(0), work_size - 1);
+      vec4 c = texelFetch(work_color, b, 0);
+      vec4 f = texelFetch(work_flash, b, 0);
+      lo = min(lo, c);
+      hi = max(hi, c);
+      lo_f = min(lo_f, f);
+      hi_f = max(hi_f, f);
+      float d = texelFetch(work_attr, b, 0).x;
+      if (d > 0.0 && (near_depth <= 0.0 || (dx == 0 && dy == 0))) {
+        near_depth = d;
+      }
+    }
+  }
+  vec2 centre = vec2(q) + 0.5;
+  vec4 fill_c = nubis_work_bilinear(work_color, centre);
+  vec4 fill_f = nubis_work_bilinear(work_flash, centre);
+  if (!valid) {
+    color = fill_c;
+    flash = fill_f;
+    attr = vec4(0.0);
+    return;
+  }
+  vec3 origin, dir;
+  nubis_view_ray(centre / T.size.xy, T.inv_view_proj, T.eye, origin, dir);
+  float depth = near_depth > 0.0 ? near_depth : hist_a.x;
+  if (depth <= 0.0) {
+    /* No cloud seen here: reproject at the middle of the cloud layer, or as a direction far away. */
+    vec2 mid = nubis_ray_sphere(origin, dir, P.layer.x, 0.5 * (P.shell.x + P.shell.y));
+    depth = mid.y > 0.0 ? (mid.x > 0.0 ? mid.x : mid.y) : 1e6;
+  }
+  vec3 world = origin + dir * depth;
+  vec4 before = T.prev_view_proj * vec4(nubis_previous_position(world, T.frame.w), 1.0);
+  vec2 prev_uv = before.xy / before.w * 0.5 + 0.5;
+  if (before.w <= 0.0 || any(lessThan(prev_uv, vec2(0.0))) || any(greaterThan(prev_uv, vec2(1.0)))) {
+    color = fill_c;
+    flash = fill_f;
+    attr = vec4(depth, 0.0, 0.0, 0.0);
+    return;
+  }
+  vec4 prev_c = textureLod(hist_color, prev_uv, 0.0);
+  vec4 prev_f = textureLod(hist_flash, prev_uv, 0.0);
+  color = clamp(prev_c, lo, hi);
+  flash = clamp(prev_f, lo_f, hi_f);
+  attr = vec4(depth, 0.0, 0.0, 0.0);
+}
