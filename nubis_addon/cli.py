@@ -4,6 +4,9 @@
     python -m nubis_addon bake    [--preset NAME | --blend FILE] --out PATH.vdb [--voxel-size METRES]
     python -m nubis_addon cycles  [--preset NAME | --blend FILE] --out PATH [--samples N --width W --height H]
     python -m nubis_addon compare [--preset NAME | --blend FILE] --out DIR [--samples N --width W --height H]
+    python -m nubis_addon preview [--preset NAME | --blend FILE] --out DIR [--width W --height H --frames A-B
+                                  --redraws N --orbit DEG --quality Q --naive]
+    python -m nubis_addon benchmark [--preset NAME | --blend FILE] --out DIR [--width W --height H --quality Q]
 
 and the same as ``blender -b [FILE.blend] --command nubis ...``. Each command prints a one-line summary and
 exits 0, or prints a one-line error that says what to do and exits non-zero.
@@ -38,12 +41,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _ArgumentParser(prog=PROG, description="Nubis volumetric clouds, headless.")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_ArgumentParser)
 
-    def common(p: argparse.ArgumentParser) -> None:
+    def common(p: argparse.ArgumentParser, frame: bool = True) -> None:
         src = p.add_mutually_exclusive_group()
         src.add_argument("--preset", help="preset name in presets/ (default: 'default') or a .toml path")
         src.add_argument("--blend", help="a .blend file saved with a Nubis cloudscape")
         p.add_argument("--out", required=True, help="output path")
-        p.add_argument("--frame", type=int, help="frame to render (wind time)")
+        if frame:
+            p.add_argument("--frame", type=int, help="frame to render (wind time)")
 
     def size(p: argparse.ArgumentParser) -> None:
         p.add_argument("--width", type=int, help="image width in pixels (default: the scene's)")
@@ -80,7 +84,29 @@ def build_parser() -> argparse.ArgumentParser:
                 action="store_true",
                 help="split the samples over two seeds to measure Cycles' own noise",
             )
+    _realtime_commands(sub, common, size)
     return parser
+
+
+def _realtime_commands(sub, common, size) -> None:
+    """The real-time viewport headless (docs/viewport.md): `preview` and `benchmark`."""
+    from .core.quality import qualities
+
+    levels = tuple(qualities())
+    p = sub.add_parser("preview", help="replay the 3D viewport's temporal draw path from the scene camera")
+    common(p, frame=False)
+    size(p)
+    p.add_argument("--frames", help="frames to draw, A-B or N (default: the current frame)")
+    p.add_argument("--redraws", type=int, default=1, help="viewport redraws per frame (default 1; 16 fill every pixel)")
+    p.add_argument(
+        "--orbit", type=float, default=0.0, help="turn the camera by DEG degrees per frame about the vertical"
+    )
+    p.add_argument("--quality", choices=levels, help="quality level (default: the scene's settings)")
+    p.add_argument("--naive", action="store_true", help="also write each frame's naive full-resolution march")
+    p = sub.add_parser("benchmark", help="time the viewport's redraw against the naive march and EEVEE")
+    common(p, frame=False)
+    size(p)
+    p.add_argument("--quality", choices=levels, help="quality level (default: the scene's settings)")
 
 
 @contextlib.contextmanager
@@ -184,7 +210,7 @@ def _execute(args, in_blender: bool, log: Path) -> str:
     start = time.perf_counter()
     cmd = args.command
     # Check the destination before minutes of work, and never leave a partial file there.
-    if cmd == "compare":
+    if cmd in ("compare", "preview", "benchmark"):
         out = check_output_dir(args.out)
     elif cmd == "bake":
         out = check_output_path(args.out, (".vdb",))
@@ -205,7 +231,7 @@ def _execute(args, in_blender: bool, log: Path) -> str:
         from .render.gpu_context import ensure_gpu_context
 
         scene = load_scene(args, in_blender)
-        if args.frame is not None:
+        if getattr(args, "frame", None) is not None:
             scene.frame_set(args.frame)
         ensure_gpu_context()
     label = scene.nubis.preset or "scene"
@@ -231,6 +257,8 @@ def _execute(args, in_blender: bool, log: Path) -> str:
             f"{result.active_voxels} active, in {result.seconds:.1f} s -> {out}"
         )
     w, h = pipeline.resolution(scene, args.width, args.height)
+    if cmd in ("preview", "benchmark"):
+        return _realtime(cmd, args, scene, out, w, h, log, label, start)
     if cmd == "cycles":
         with _quiet(log):
             rgba = pipeline.render_cycles(scene, w, h, args.samples, voxel_size=voxel, bounces=args.bounces)
@@ -244,6 +272,33 @@ def _execute(args, in_blender: bool, log: Path) -> str:
         f"compared {label} ({args.mode}) at {w}x{h}: alpha RMSE {m['alpha_rmse']:.4f}, luminance error "
         f"{m['luminance_rel_error'] * 100:.1f}%, silhouette IoU {m['silhouette_iou']:.3f} "
         f"in {time.perf_counter() - start:.1f} s -> {out}"
+    )
+
+
+def _realtime(cmd: str, args, scene, out: Path, w: int, h: int, log: Path, label: str, start: float) -> str:
+    from .blender import preview
+
+    if cmd == "preview":
+        frames = preview.parse_frames(args.frames, scene.frame_current)
+        progress = _progress("preview")
+        with _quiet(log):
+            r = preview.preview(
+                scene, out, w, h, frames, args.redraws, args.orbit, args.naive, args.quality, progress=progress
+            )
+        ms = sorted(x for frame in r.redraw_ms for x in frame)
+        median = ms[len(ms) // 2]
+        naive = f", naive {sorted(r.naive_ms)[len(r.naive_ms) // 2]:.0f} ms" if r.naive_ms else ""
+        return (
+            f"previewed {label} at {w}x{h} ({r.quality}): {len(frames)} frame(s) x {args.redraws} redraw(s), "
+            f"median redraw {median:.1f} ms{naive}, in {time.perf_counter() - start:.1f} s -> {out}"
+        )
+    with _quiet(log):
+        result = preview.benchmark(scene, out, w, h, args.quality)
+    print(preview.table(result))
+    return (
+        f"benchmarked {label} at {w}x{h} ({result['quality']}): naive {result['naive_ms']:.0f} ms, redraw "
+        f"{result['redraw_ms']:.1f} ms ({result['naive_over_redraw']:.1f}x), EEVEE {result['eevee_ms']:.0f} ms "
+        f"({result['eevee_over_redraw']:.0f}x) in {time.perf_counter() - start:.1f} s -> {out}"
     )
 
 

@@ -6,6 +6,9 @@
 
 /* The colour of a lightning flash (SPEC 2.10.4). */
 const vec3 NUBIS_FLASH_COLOUR = vec3(0.85, 0.9, 1.0);
+/* The flash mask is a radiance per unit flash intensity, far below half float's normal range (which
+ * GPUs flush to zero): the temporal buffers store it scaled by this. */
+const float NUBIS_FLASH_MASK_SCALE = 4096.0;
 
 vec2 nubis_rotate_about(vec2 xy, vec2 centre, float angle)
 {

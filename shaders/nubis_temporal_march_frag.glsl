@@ -36,5 +36,5 @@ void main()
 #endif
   color = clouds;
   attr = vec4(cloud_depth, 1.0, 0.0, 0.0);
-  flash = flash_mask;
+  flash = flash_mask * NUBIS_FLASH_MASK_SCALE;
 }

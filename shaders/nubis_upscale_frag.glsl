@@ -21,6 +21,6 @@ void main()
     }
   }
   vec4 intensities = vec4(P.storm_glow[0].w, P.storm_glow[1].w, P.storm_glow[2].w, P.storm_glow[3].w);
-  c.rgb += NUBIS_FLASH_COLOUR * dot(f, intensities);
+  c.rgb += NUBIS_FLASH_COLOUR * (dot(f, intensities) / NUBIS_FLASH_MASK_SCALE);
   color = c;
 }

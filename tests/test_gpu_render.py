@@ -44,7 +44,8 @@ def test_default_preset_has_sky_and_cloud(make_scene):
 
 
 def test_viewport_draw_uses_the_render_code(make_scene):
-    """The draw-handler path (low-res buffer + composite) reproduces the offscreen render."""
+    """The draw-handler path (one pixel in 16 per redraw into the temporal history, upscaled over the
+    bound framebuffer) reproduces the offscreen render once every pixel has its sample."""
     import gpu
 
     from nubis_addon.blender import pipeline, scene_io, viewport
@@ -52,17 +53,18 @@ def test_viewport_draw_uses_the_render_code(make_scene):
 
     assert viewport.is_registered()
     scene = make_scene("default")
-    scene.nubis.viewport_scale = 1
     w, h = 64, 36
     expected = pipeline.render_viewport(scene, w, h)
     inv = scene_io.camera_inv_view_proj(scene, w, h)
     offscreen = gpu.types.GPUOffScreen(w, h, format="RGBA32F")
     with offscreen.bind():
         fb = gpu.state.active_framebuffer_get()
-        fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
-        viewport.draw_view(scene, inv, scene.camera.matrix_world.translation, w, h)
+        for _ in range(16):
+            fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+            tv = viewport.draw_view(scene, inv, scene.camera.matrix_world.translation, w, h, key="test")
         got = read_pixels(fb, w, h)[::-1]
     offscreen.free()
+    assert tv.since_change == 16 and not tv.converged
     assert viewport.last_error() == ""
     # The viewport buffer is half float; everything else is the same shader.
     np.testing.assert_allclose(got, expected, atol=2e-3)

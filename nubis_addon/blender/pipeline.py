@@ -13,7 +13,7 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from ..core import imageio, metrics, vdbio
+from ..core import camera, imageio, metrics, vdbio
 from ..core.bakeplan import BakePlan, comparison_voxel_size, plan_bake, view_footprint
 from ..core.errors import NubisError
 from ..core.fsutil import atomic_path, check_output_dir, check_output_path
@@ -88,6 +88,8 @@ def viewport_shot(
         # The atmosphere fade has no counterpart in the Cycles scene.
         state.params["lighting_fade_distance"] = 0.0
     inv = scene_io.camera_inv_view_proj(scene, width, height)
+    # The noise mip levels follow the pixel's footprint, as in the 3D viewport.
+    state.pixel_angle, state.pixel_size = camera.pixel_footprint(np.array(inv), width, height)
     return ViewportShot(state, inv, scene_io.camera_eye(scene), scene.nubis.noise_seed, width, height)
 
 

@@ -247,13 +247,10 @@ def _settings_annotations() -> dict:
             default=(0.3, 0.45, 0.8),
             update=_tag_redraw,
         ),
-        viewport_scale=IntProperty(
-            name="Viewport Downscale",
-            default=4,
-            min=1,
-            max=16,
-            update=_tag_redraw,
-            description="The viewport marches one pixel in N x N and upscales",
+        viewport_quality=StringProperty(
+            name="Quality",
+            default="standard",
+            description="The quality level last applied (presets/quality/quality.toml); 'custom' once edited",
         ),
     )
     return ann

@@ -1,23 +1,21 @@
-"""The 3D viewport draw: the same cloud shader as the headless render, at reduced resolution."""
+"""The 3D viewport draw: the temporal viewport of render/temporal.py, the same code the `preview` command runs."""
 
 from __future__ import annotations
 
 import bpy
 import gpu
-import mathutils
-from gpu.types import GPUShaderCreateInfo, GPUStageInterfaceInfo
-from gpu_extras.batch import batch_for_shader
+import numpy as np
 
 from ..core import camera
 from ..core.errors import NubisError
-from ..render import engine
-from ..render.sources import read_shader
+from ..render import temporal
 from . import runtime, scene_io
 
 _handle = None
 _fields_cache: dict = {"key": None, "fields": None}
-_offscreen: dict = {"size": None, "buffer": None}
-_composite: dict = {}
+_views: dict = {}  # region pointer -> TemporalViewport
+_depth_cache: dict = {}
+_scene_updates = [0]  # counts depsgraph updates: the scene's geometry (and so its depth) may have changed
 _last_error: list[str] = []
 
 
@@ -55,7 +53,9 @@ def on_frame_change(scene, _depsgraph=None) -> None:
 @bpy.app.handlers.persistent
 def on_depsgraph_update(scene, depsgraph) -> None:
     """Painting an image layer in the image editor re-composites the field. Strokes arrive as image
-    updates; a short timer gathers them so a fast brush does not re-composite on every dab."""
+    updates; a short timer gathers them so a fast brush does not re-composite on every dab. Any update
+    may move geometry, so the viewport reads its depth again."""
+    _scene_updates[0] += 1
     settings = getattr(scene, "nubis", None)
     if settings is None or settings.field_a is None:
         return
@@ -82,23 +82,6 @@ def _regenerate_after_paint():
     return None
 
 
-def _composite_shader():
-    if "shader" not in _composite:
-        iface = GPUStageInterfaceInfo("nubis_composite_iface")
-        iface.smooth("VEC2", "uv")
-        info = GPUShaderCreateInfo()
-        info.sampler(0, "FLOAT_2D", "cloud_buffer")
-        info.vertex_in(0, "VEC2", "pos")
-        info.vertex_out(iface)
-        info.fragment_out(0, "VEC4", "color")
-        info.vertex_source(read_shader("nubis_background_vert.glsl"))
-        info.fragment_source(read_shader("nubis_composite_frag.glsl"))
-        sh = gpu.shader.create_from_info(info)
-        _composite["shader"] = sh
-        _composite["batch"] = batch_for_shader(sh, "TRIS", {"pos": ((-1, -1), (3, -1), (-1, 3))})
-    return _composite["shader"], _composite["batch"]
-
-
 def _state(scene, view_origin):
     """Settings, sun and sky are read every redraw (cheap); the field pixels only when they changed."""
     s = scene.nubis
@@ -112,40 +95,83 @@ def _state(scene, view_origin):
     return scene_io.state_from_scene(scene, camera_location=view_origin, fields=_fields_cache["fields"])
 
 
-def draw_view(scene, inv_view_proj, view_origin, width: int, height: int, perspective: bool = True) -> None:
-    """March the clouds into a buffer of 1/N the size and composite it over the background."""
+_MAX_VIEWS = 8  # 3D views with a history of their own; the least recently drawn is freed beyond this
+
+
+def temporal_view(key) -> temporal.TemporalViewport:
+    """The temporal state of one 3D view (keyed by its region), created on first use."""
+    tv = _views.pop(key, None) or temporal.TemporalViewport()
+    _views[key] = tv  # most recently used last
+    while len(_views) > _MAX_VIEWS:
+        _views.pop(next(iter(_views))).free()
+    return tv
+
+
+def draw_view(
+    scene,
+    inv_view_proj,
+    view_origin,
+    width: int,
+    height: int,
+    perspective: bool = True,
+    key=None,
+    depth=None,
+    depth_key=None,
+) -> temporal.TemporalViewport:
+    """One redraw of the temporal viewport (render/temporal.py) over the bound framebuffer: march one
+    pixel in 16 and resolve the history, unless it has converged, then upscale it behind the scene's
+    objects. `depth` (a float texture of the view's depth) lets the march skip what geometry hides."""
     settings = scene.nubis
-    # Creating an offscreen rebinds framebuffers; remember the target so the composite lands there.
+    # Binding the history's framebuffers rebinds; remember the target so the upscale lands there.
     target = gpu.state.active_framebuffer_get()
     state = _state(scene, view_origin)
     clouds = runtime.cloud_gpu(settings.noise_seed)
-    clouds.update(state)
-    n = max(1, settings.viewport_scale)
-    size = (max(1, width // n), max(1, height // n))
-    if _offscreen["size"] != size:
-        if _offscreen["buffer"] is not None:
-            _offscreen["buffer"].free()
-        _offscreen["buffer"] = gpu.types.GPUOffScreen(*size, format="RGBA16F")
-        _offscreen["size"] = size
-    buffer = _offscreen["buffer"]
-    with buffer.bind():
-        gpu.state.active_framebuffer_get().clear(color=(0.0, 0.0, 0.0, 0.0))
-        gpu.state.blend_set("NONE")
-        gpu.state.depth_test_set("NONE")
-        eye = (*view_origin[:3], 1.0) if perspective else (0.0, 0.0, 0.0, 0.0)
-        engine.draw_clouds(clouds, inv_view_proj, eye)
-    sh, batch = _composite_shader()
+    eye = (*view_origin[:3], 1.0) if perspective else (0.0, 0.0, 0.0, 0.0)
+    view = temporal.View.of(np.array(inv_view_proj), eye, width, height)
+    tv = temporal_view(key)
+    tv.redraw(clouds, state, view, settings.viewport_resolution, settings.viewport_samples, depth, depth_key)
     with target.bind():
         gpu.state.blend_set("ALPHA_PREMULT")
         gpu.state.depth_test_set("LESS_EQUAL")
         gpu.state.depth_mask_set(False)
-        sh.bind()
-        sh.uniform_sampler("cloud_buffer", buffer.texture_color)
-        batch.draw(sh)
+        tv.upscale(clouds, settings.viewport_blur)
     # Leave Blender's default state behind: a disabled depth mask would also stop later depth clears.
     gpu.state.depth_mask_set(True)
     gpu.state.depth_test_set("NONE")
     gpu.state.blend_set("NONE")
+    return tv
+
+
+def _scene_depth(fb, width: int, height: int, key):
+    """The view's depth as a texture, read back only when the view or the scene changed (a CPU round
+    trip: Python has no handle on the viewport's depth texture)."""
+    cached = _depth_cache.get("key")
+    if cached == key and _depth_cache.get("texture") is not None:
+        return _depth_cache["texture"]
+    try:
+        depth = fb.read_depth(0, 0, width, height)
+        texture = gpu.types.GPUTexture((width, height), format="R32F", data=depth)
+    except (ValueError, TypeError, SystemError):
+        texture = None  # no depth attachment here: march everything
+    _depth_cache.update(key=key, texture=texture)
+    return texture
+
+
+def _converging_tick():
+    """While a 3D view is still converging, keep asking for redraws (Blender redraws only on events)."""
+    if not any(not tv.converged for tv in _views.values()):
+        return None
+    wm = getattr(bpy.context, "window_manager", None)
+    for window in wm.windows if wm else ():
+        for area in window.screen.areas:
+            if area.type == "VIEW_3D":
+                area.tag_redraw()
+    return 1.0 / 60.0
+
+
+def _keep_converging() -> None:
+    if not bpy.app.timers.is_registered(_converging_tick):
+        bpy.app.timers.register(_converging_tick, first_interval=1.0 / 60.0)
 
 
 def _draw_callback() -> None:
@@ -158,14 +184,22 @@ def _draw_callback() -> None:
     if region is None or rv3d is None:
         return
     try:
-        draw_view(
+        fb = gpu.state.active_framebuffer_get()
+        view_key = (tuple(map(tuple, rv3d.view_matrix)), tuple(map(tuple, rv3d.window_matrix)), _scene_updates[0])
+        depth = _scene_depth(fb, region.width, region.height, (region.as_pointer(), *view_key))
+        tv = draw_view(
             scene,
-            mathutils.Matrix(camera.ray_inverse_view_projection(rv3d.window_matrix, rv3d.view_matrix).tolist()),
+            camera.ray_inverse_view_projection(rv3d.window_matrix, rv3d.view_matrix),
             rv3d.view_matrix.inverted().translation,
             region.width,
             region.height,
             rv3d.is_perspective,
+            key=region.as_pointer(),
+            depth=depth,
+            depth_key=_scene_updates[0],
         )
+        if not tv.converged:
+            _keep_converging()
         _last_error.clear()
     except NubisError as err:
         # A draw callback cannot report; remember the message for the sidebar instead of spamming the console.
@@ -200,10 +234,12 @@ def unregister() -> None:
         bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
     if on_frame_change in bpy.app.handlers.frame_change_post:
         bpy.app.handlers.frame_change_post.remove(on_frame_change)
-    if _offscreen["buffer"] is not None:
-        _offscreen["buffer"].free()
-    _offscreen.update(size=None, buffer=None)
-    _composite.clear()
+    for tv in _views.values():
+        tv.free()
+    _views.clear()
+    _depth_cache.clear()
+    if bpy.app.timers.is_registered(_converging_tick):
+        bpy.app.timers.unregister(_converging_tick)
     _fields_cache.update(key=None, fields=None)
     _pending_images.clear()
     if bpy.app.timers.is_registered(_regenerate_after_paint):

@@ -42,6 +42,7 @@ class Stage:
     cloud_inputs: bool = True  # binds the cloud samplers (the libraries in CLOUD_LIBS read them)
     outputs: tuple[str, ...] = ("color",)
     blocks: tuple[tuple[str, str], ...] = ()  # extra uniform blocks (struct type, name) after P
+    vertex: str = "nubis_fullscreen_vert.glsl"
 
 
 _VIEW = (("MAT4", "inv_view_proj"), ("VEC4", "eye"))
@@ -66,11 +67,13 @@ STAGES: dict[str, Stage] = {
         outputs=("color", "attr", "flash"),
         blocks=(("NubisTemporal", "T"),),
     ),
+    # Drawn on the far plane, so a LESS_EQUAL depth test keeps the clouds behind the scene's objects.
     "upscale": Stage(
         (("VEC4", "filter_size"),),
         (("FLOAT_2D", "hist_color"), ("FLOAT_2D", "hist_flash")),
         libs=("nubis_common_lib.glsl",),
         cloud_inputs=False,
+        vertex="nubis_background_vert.glsl",
     ),
 }
 _shaders: dict[tuple, gpu.types.GPUShader] = {}
@@ -100,7 +103,7 @@ def _create_info(name: str, defines: dict[str, object]) -> GPUShaderCreateInfo:
     info.vertex_out(iface)
     for slot, out in enumerate(stage.outputs):
         info.fragment_out(slot, "VEC4", out)
-    info.vertex_source(read_shader("nubis_fullscreen_vert.glsl"))
+    info.vertex_source(read_shader(stage.vertex))
     info.fragment_source(assemble(*stage.libs, f"nubis_{name}_frag.glsl"))
     return info
 

@@ -1,0 +1,332 @@
+"""The real-time viewport headless: `preview` replays the 3D viewport's draw path from the scene camera,
+`benchmark` measures it against the naive march and EEVEE (docs/viewport.md)."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import statistics
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import bpy
+import mathutils
+import numpy as np
+
+from ..core import imageio, quality
+from ..core.bakeplan import comparison_voxel_size, view_footprint
+from ..core.errors import NubisError
+from ..core.fsutil import atomic_path, check_output_dir
+from ..render import engine, temporal
+from ..render.gpu_context import renderer_name
+from . import cycles_setup, pipeline, runtime, scene_io
+
+Progress = Callable[[float], None]
+MAX_FRAMES = 100000
+MAX_REDRAWS = 4096
+
+
+def parse_frames(text: str | None, current: int) -> list[int]:
+    """'A-B' or 'N' to the frames it names; None is the current frame."""
+    if text is None:
+        return [current]
+    m = re.fullmatch(r"\s*(-?\d+)\s*(?:-\s*(-?\d+)\s*)?", text)
+    if not m:
+        raise NubisError(f"--frames takes a frame or a range like 1-24, not '{text}'")
+    a = int(m.group(1))
+    b = int(m.group(2)) if m.group(2) is not None else a
+    if b < a:
+        raise NubisError(f"--frames {text}: the last frame comes before the first; write {b}-{a}")
+    if b - a + 1 > MAX_FRAMES:
+        raise NubisError(f"--frames {text} names {b - a + 1} frames: preview at most {MAX_FRAMES} at a time")
+    return list(range(a, b + 1))
+
+
+def apply_quality(scene, name: str | None) -> str:
+    """Write a quality row into the scene's settings; returns the name in effect ('custom' if none fits)."""
+    s = scene.nubis
+    if name:
+        for key, value in quality.quality(name).settings.items():
+            setattr(s, key, value)
+        s.viewport_quality = name
+        return name
+    params = {k: getattr(s, k) for k in quality.ROW_KEYS.values()}
+    for row in quality.qualities().values():
+        if row.matches(params):
+            return row.name
+    return "custom"
+
+
+def camera_view(scene, width: int, height: int) -> temporal.View:
+    inv = scene_io.camera_inv_view_proj(scene, width, height)
+    return temporal.View.of(np.array(inv), scene_io.camera_eye(scene), width, height)
+
+
+def orbit_camera(scene, degrees: float) -> None:
+    """Turn the camera about the vertical axis through its own position."""
+    cam = scene.camera
+    turn = mathutils.Matrix.Rotation(math.radians(degrees), 4, "Z")
+    loc = cam.matrix_world.translation.copy()
+    m = turn @ cam.matrix_world
+    m.translation = loc
+    cam.matrix_world = m
+    bpy.context.view_layer.update()
+
+
+def _naive(clouds: engine.CloudGPU, view: temporal.View) -> np.ndarray:
+    return engine.render_offscreen(
+        clouds, mathutils.Matrix(view.inv_view_proj), view.eye, view.width, view.height, NUBIS_NAIVE=1
+    )
+
+
+def _with_footprint(state, view: temporal.View):
+    from ..core import camera
+
+    angle, size = camera.pixel_footprint(np.array(view.inv_view_proj), view.width, view.height)
+    state.pixel_angle, state.pixel_size = angle, size
+    return state
+
+
+class Staging:
+    """Files of one run written into a hidden folder inside the destination, moved into place together
+    at the end: a failed run leaves the earlier outputs whole."""
+
+    def __init__(self, out: Path):
+        self.out = out
+        self.dir = Path(tempfile.mkdtemp(prefix=".nubis-stage-", dir=out))
+        self.names: list[str] = []
+
+    def path(self, name: str) -> Path:
+        self.names.append(name)
+        return self.dir / name
+
+    def commit(self) -> None:
+        for name in self.names:
+            os.replace(self.dir / name, self.out / name)
+        self.abort()
+
+    def abort(self) -> None:
+        for p in self.dir.glob("*"):
+            p.unlink(missing_ok=True)
+        self.dir.rmdir()
+
+
+@dataclass
+class PreviewResult:
+    frames: list[int]
+    redraw_ms: list[list[float]] = field(default_factory=list)
+    naive_ms: list[float] = field(default_factory=list)
+    quality: str = ""
+    size: tuple[int, int] = (0, 0)
+
+
+def preview(
+    scene,
+    out_dir,
+    width: int,
+    height: int,
+    frames: list[int],
+    redraws: int = 1,
+    orbit: float = 0.0,
+    naive: bool = False,
+    quality_name: str | None = None,
+    progress: Progress | None = None,
+) -> PreviewResult:
+    """Replay the viewport's draw path from the scene camera: for each frame, `redraws` redraws of the
+    temporal viewport (the draw handler's own code), the camera turned by `orbit` degrees per frame.
+    Writes NNNN.exr and NNNN.png per frame (and NNNN_naive.* with `naive`) and preview.json."""
+    if not 1 <= redraws <= MAX_REDRAWS:
+        raise NubisError(f"--redraws must be between 1 and {MAX_REDRAWS}, not {redraws}")
+    if not math.isfinite(orbit) or abs(orbit) > 360:
+        raise NubisError(f"--orbit must be a number of degrees between -360 and 360, not {orbit}")
+    out = check_output_dir(out_dir)
+    q = apply_quality(scene, quality_name)
+    s = scene.nubis
+    stage = Staging(out)
+    result = PreviewResult(frames, quality=q, size=(width, height))
+    tv = temporal.TemporalViewport()
+    clouds = runtime.cloud_gpu(s.noise_seed)
+    try:
+        for n, f in enumerate(frames):
+            scene.frame_set(f)
+            if n and orbit:
+                orbit_camera(scene, orbit)
+            view = camera_view(scene, width, height)
+            state = scene_io.state_from_scene(scene)
+            times = []
+            for _ in range(redraws):
+                t = time.perf_counter()
+                tv.redraw(clouds, state, view, s.viewport_resolution, s.viewport_samples)
+                tv.sync()
+                times.append((time.perf_counter() - t) * 1000.0)
+            result.redraw_ms.append(times)
+            rgba = temporal.render_view(tv, clouds, view, s.viewport_blur)
+            name = f"{f:04d}"
+            pipeline.save_render(scene, stage.path(f"{name}.exr"), rgba)
+            pipeline.save_render(scene, stage.path(f"{name}.png"), rgba)
+            if naive:
+                clouds.update(_with_footprint(state, view))
+                t = time.perf_counter()
+                ref = _naive(clouds, view)
+                result.naive_ms.append((time.perf_counter() - t) * 1000.0)
+                pipeline.save_render(scene, stage.path(f"{name}_naive.exr"), ref)
+                pipeline.save_render(scene, stage.path(f"{name}_naive.png"), ref)
+            if progress:
+                progress((n + 1) / len(frames))
+        report = {
+            "preset": s.preset,
+            "width": width,
+            "height": height,
+            "quality": q,
+            "redraws_per_frame": redraws,
+            "orbit_degrees_per_frame": orbit,
+            "renderer": renderer_name(),
+            "frames": [
+                {"frame": f, "redraw_ms": [round(x, 3) for x in ms]}
+                | ({"naive_ms": round(result.naive_ms[i], 3)} if naive else {})
+                for i, (f, ms) in enumerate(zip(frames, result.redraw_ms, strict=True))
+            ],
+        }
+        stage.path("preview.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+        stage.commit()
+    except BaseException:
+        stage.abort()
+        raise
+    finally:
+        tv.free()
+    return result
+
+
+def render_eevee(scene, width: int, height: int, vdb_path: str, samples: int = 16) -> tuple[np.ndarray, float]:
+    """EEVEE rendering a bake of the clouds from the scene camera: premultiplied RGBA and the seconds
+    the render took (the bake not included)."""
+    engines = {e.identifier for e in bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items}
+    eevee = "BLENDER_EEVEE_NEXT" if "BLENDER_EEVEE_NEXT" in engines else "BLENDER_EEVEE"
+    with tempfile.TemporaryDirectory(prefix="nubis-eevee-") as tmp:
+        cycles_setup.import_volume(scene, vdb_path)
+        try:
+            cycles_setup.configure_render(scene, width, height, None)
+            scene.render.engine = eevee
+            scene.eevee.taa_render_samples = samples
+            # Clouds sit kilometres away: EEVEE's volume range must reach them.
+            scene.eevee.volumetric_start = 1.0
+            scene.eevee.volumetric_end = scene.nubis.layer_draw_radius * 2.0
+            exr = Path(tmp) / "eevee.exr"
+            scene.render.filepath = str(exr)
+            t = time.perf_counter()
+            bpy.ops.render.render(write_still=True, scene=scene.name)
+            seconds = time.perf_counter() - t
+            if not exr.is_file():
+                raise NubisError("EEVEE wrote no image: check the console for errors")
+            rgba = imageio.read_image(exr)
+        finally:
+            cycles_setup.remove_volume(scene)
+    return rgba, seconds
+
+
+def benchmark(
+    scene, out_dir, width: int, height: int, quality_name: str | None = None, eevee: bool = True, log=print
+) -> dict:
+    """Naive march, temporal redraws and EEVEE on the same view in one run; writes benchmark.json,
+    naive.png and converged.png (after 16 redraws)."""
+    out = check_output_dir(out_dir)
+    q = apply_quality(scene, quality_name)
+    s = scene.nubis
+    clouds = runtime.cloud_gpu(s.noise_seed)
+    view = camera_view(scene, width, height)
+    state = _with_footprint(scene_io.state_from_scene(scene), view)
+    clouds.update(state)
+    stats = {}
+    for label, switches in (("coarse_to_fine", {}), ("naive", {"NUBIS_NAIVE": 1})):
+        px = engine.render_offscreen(
+            clouds, mathutils.Matrix(view.inv_view_proj), view.eye, width, height, NUBIS_FETCH_STATS=1, **switches
+        )
+        stats[label] = {
+            "fetches_3d_per_pixel": float(px[..., 0].mean()),
+            "view_samples_per_pixel": float(px[..., 1].mean()),
+            "density_samples_per_pixel": float(px[..., 2].mean()),
+        }
+    _naive(clouds, view)  # compiles the permutation
+    naive_runs = []
+    for _ in range(3):
+        t = time.perf_counter()
+        naive_img = _naive(clouds, view)
+        naive_runs.append((time.perf_counter() - t) * 1000.0)
+    tv = temporal.TemporalViewport()
+    tv.redraw(clouds, state, view, s.viewport_resolution, 64)  # compiles, then restarts
+    tv.restart()
+    redraws = []
+    for _ in range(temporal.REDRAWS_PER_SAMPLE):
+        t = time.perf_counter()
+        tv.redraw(clouds, state, view, s.viewport_resolution, 64)
+        tv.sync()
+        redraws.append((time.perf_counter() - t) * 1000.0)
+    converged = temporal.render_view(tv, clouds, view, s.viewport_blur)
+    tv.free()
+    result = {
+        "preset": s.preset,
+        "quality": q,
+        "width": width,
+        "height": height,
+        "renderer": renderer_name(),
+        "naive_ms": statistics.median(naive_runs),
+        "redraw_ms": statistics.median(redraws),
+        "redraw_ms_all": [round(x, 3) for x in redraws],
+        "fetches": stats,
+    }
+    result["naive_over_redraw"] = result["naive_ms"] / result["redraw_ms"]
+    c2f, nv = stats["coarse_to_fine"]["fetches_3d_per_pixel"], stats["naive"]["fetches_3d_per_pixel"]
+    result["fetch_saving"] = 1.0 - c2f / nv if nv else 0.0
+    display_naive = pipeline.display_image(scene, naive_img)
+    display_converged = pipeline.display_image(scene, converged)
+    result["converged_psnr_db"] = psnr(display_converged, display_naive)
+    if eevee:
+        with tempfile.TemporaryDirectory(prefix="nubis-bench-") as tmp:
+            st = scene_io.state_from_scene(scene)
+            region = view_footprint(st, np.array(view.inv_view_proj))
+            voxel = comparison_voxel_size(st, s.bake_voxel_size, region)
+            baked = pipeline.bake(scene, Path(tmp) / "clouds.vdb", voxel, camera_only=True, size=(width, height))
+            _rgba, seconds = render_eevee(scene, width, height, str(baked.path), 16)
+        result["eevee_ms"] = seconds * 1000.0
+        result["eevee_voxel_size"] = baked.plan.voxel_size
+        result["eevee_over_redraw"] = result["eevee_ms"] / result["redraw_ms"]
+    imageio.write_image(out / "naive.png", display_naive)
+    imageio.write_image(out / "converged.png", display_converged)
+    with atomic_path(out / "benchmark.json") as tmp:
+        tmp.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+    return result
+
+
+def psnr(a: np.ndarray, b: np.ndarray) -> float:
+    """PSNR in dB of two display images with values in [0, 1] (colour channels)."""
+    mse = float(np.mean((np.asarray(a[..., :3], np.float64) - np.asarray(b[..., :3], np.float64)) ** 2))
+    return float("inf") if mse == 0 else 10.0 * math.log10(1.0 / mse)
+
+
+def table(result: dict) -> str:
+    rows = [
+        ("naive march (every pixel, full samples)", f"{result['naive_ms']:.1f} ms"),
+        ("temporal redraw while converging (median of 16)", f"{result['redraw_ms']:.1f} ms"),
+        ("  naive / redraw", f"{result['naive_over_redraw']:.1f}x"),
+    ]
+    if "eevee_ms" in result:
+        rows += [
+            (f"EEVEE, 16 samples, bake of {result['eevee_voxel_size']:g} m voxels", f"{result['eevee_ms']:.0f} ms"),
+            ("  EEVEE / redraw", f"{result['eevee_over_redraw']:.0f}x"),
+        ]
+    f = result["fetches"]
+    rows += [
+        ("3D fetches per pixel, naive", f"{f['naive']['fetches_3d_per_pixel']:.1f}"),
+        ("3D fetches per pixel, coarse to fine", f"{f['coarse_to_fine']['fetches_3d_per_pixel']:.1f}"),
+        ("  saving", f"{result['fetch_saving'] * 100:.0f}%"),
+        ("converged (16 redraws) vs naive, PSNR", f"{result['converged_psnr_db']:.1f} dB"),
+    ]
+    width = max(len(r[0]) for r in rows)
+    head = f"{result['preset']} at {result['width']}x{result['height']}, quality {result['quality']}"
+    head += f", {result['renderer']}"
+    return "\n".join([head, *(f"{name:<{width}}  {value}" for name, value in rows)])

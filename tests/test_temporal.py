@@ -1,0 +1,159 @@
+"""The temporal viewport (render/temporal.py) at small sizes, on the GPU: convergence, restarts, the
+fill of pixels without history, and GDC22's flash mask."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+
+@pytest.fixture
+def shot(make_scene):
+    from nubis_addon.blender import pipeline
+
+    def make(name="default", w=64, h=36, **overrides):
+        scene = make_scene(name, **overrides)
+        return scene, pipeline.viewport_shot(scene, w, h)
+
+    return make
+
+
+def _view(shot):
+    from nubis_addon.render import temporal
+
+    return temporal.View.of(np.array(shot.inv_view_proj), shot.eye, shot.width, shot.height)
+
+
+def _redraws(tv, clouds, state, view, n, samples=8):
+    for _ in range(n):
+        tv.redraw(clouds, state, view, samples=samples)
+
+
+def test_still_view_converges_to_the_full_march_and_stops(shot):
+    from nubis_addon.blender import pipeline, runtime
+    from nubis_addon.render import temporal
+
+    scene, s = shot()
+    full = pipeline.render_shot(s)
+    clouds = runtime.cloud_gpu(s.noise_seed)
+    view = _view(s)
+    tv = temporal.TemporalViewport()
+    _redraws(tv, clouds, s.state, view, 1, samples=2)
+    first = tv.read_history()
+    # One pixel of every 4x4 block holds its own march; the rest is filled from the working buffer.
+    y, x = np.mgrid[0 : s.height, 0 : s.width]
+    # Bayer index 0 is each block's first pixel, counted from the bottom row (images here are top first).
+    marched = (x % 4 == 0) & ((s.height - 1 - y) % 4 == 0)
+    np.testing.assert_allclose(first[marched], full[marched], rtol=2e-3, atol=2e-3)
+    assert first[~marched][..., 3].max() > 0.1  # filled, not black
+    _redraws(tv, clouds, s.state, view, 15, samples=2)
+    np.testing.assert_allclose(tv.read_history(), full, rtol=2e-3, atol=2e-3)
+    # Then a second jittered pass averages in: the mean of the two passes of the offline render.
+    _redraws(tv, clouds, s.state, view, 16, samples=2)
+    two = pipeline.render_shot(s, passes=2)
+    np.testing.assert_allclose(tv.read_history(), two, rtol=3e-3, atol=3e-3)
+    assert tv.converged
+    # Converged: further redraws march nothing and leave the history alone.
+    assert tv.redraw(clouds, s.state, view, samples=2) is False
+    np.testing.assert_array_equal(tv.read_history(), tv.read_history())
+    tv.free()
+
+
+def test_any_change_restarts_the_convergence(shot):
+    from nubis_addon.blender import runtime
+    from nubis_addon.render import temporal
+
+    scene, s = shot()
+    clouds = runtime.cloud_gpu(s.noise_seed)
+    view = _view(s)
+    tv = temporal.TemporalViewport()
+    _redraws(tv, clouds, s.state, view, 20)
+    assert tv.since_change == 20
+    # A setting.
+    edited = dataclasses.replace(s.state, params={**s.state.params, "density_coverage": 0.8})
+    _redraws(tv, clouds, edited, view, 1)
+    assert tv.since_change == 1 and tv.last_restart_reason == "settings"
+    # The frame (wind time).
+    later = dataclasses.replace(edited, time=edited.time + 1.0)
+    _redraws(tv, clouds, later, view, 1)
+    assert tv.since_change == 1 and tv.last_restart_reason == "time"
+    # The camera.
+    moved = temporal.View.of(np.array(view.inv_view_proj) * 1.0001, view.eye, view.width, view.height)
+    _redraws(tv, clouds, later, moved, 1)
+    assert tv.since_change == 1 and tv.last_restart_reason == "view"
+    tv.free()
+
+
+def test_a_pan_fills_what_comes_in_from_off_screen(shot):
+    """After a converged view turns by 8 degrees, the strip that enters from off screen comes from the
+    working buffer (S15): no black or stale edge, close to the naive march of the new view."""
+    from nubis_addon.blender import pipeline, runtime, scene_io
+    from nubis_addon.blender.preview import orbit_camera
+    from nubis_addon.render import temporal
+
+    scene, s = shot("stratocumulus", w=96, h=54)
+    scene.camera.rotation_euler = (math.radians(80), 0.0, 0.0)  # mostly sky
+    s = pipeline.viewport_shot(scene, 96, 54)
+    clouds = runtime.cloud_gpu(s.noise_seed)
+    tv = temporal.TemporalViewport()
+    _redraws(tv, clouds, s.state, _view(s), 16)
+    orbit_camera(scene, 8.0)
+    s2 = pipeline.viewport_shot(scene, 96, 54)
+    _redraws(tv, clouds, s2.state, _view(s2), 1)
+    got = tv.read_history()
+    expected = pipeline.render_shot(s2)
+    # Turning left about +Z brings new sky in from the left edge: about 8 / fov of the width.
+    fov = 2 * math.atan(scene.camera.data.sensor_width / (2 * scene.camera.data.lens))
+    strip = max(4, int(96 * math.radians(8) / fov))
+    edge = slice(0, strip - 2)
+    assert expected[:, edge, 3].mean() > 0.1, "the test needs clouds entering the view"
+    assert abs(got[:, edge, 3].mean() - expected[:, edge, 3].mean()) < 0.08
+    assert np.abs(got[..., 3] - expected[..., 3]).mean() < 0.08
+    # Reprojection, not a smear of the old frame: the interior still matches the new view.
+    inner = slice(strip + 4, 96 - 4)
+    assert np.abs(got[:, inner, 3] - expected[:, inner, 3]).mean() < 0.06
+    assert scene_io.camera_eye(scene)[3] == 1.0
+    tv.free()
+
+
+def test_flash_mask_shows_a_flash_at_full_intensity_on_its_first_frame(shot):
+    """GDC22: flashes last 4-8 frames against a 16-frame build, so the renderer builds a mask of each
+    storm's flash at unit intensity before it fires and multiplies it by the flash of the frame shown.
+    The first frame of a flash, after a single redraw, is as bright as the full march with the flash."""
+    from nubis_addon.blender import pipeline, runtime, scene_io
+    from nubis_addon.render import temporal
+
+    scene, s = shot("superstorm", 64, 36)
+    storm = scene.nubis.storms[0]
+    cx, cy = scene_io.storm_centre(storm)
+    scene.camera.location = (cx - 2000.0, cy - 14000.0, 300.0)
+    scene.camera.rotation_euler = (math.radians(88), 0.0, 0.0)
+    s = pipeline.viewport_shot(scene, 64, 36)
+    dark = dataclasses.replace(
+        s.state, storms=tuple(dataclasses.replace(x, flash=0.0, flash_x=0.0, flash_y=0.0) for x in s.state.storms)
+    )
+    lit = dataclasses.replace(dark, storms=tuple(dataclasses.replace(x, flash=40.0) for x in dark.storms))
+    clouds = runtime.cloud_gpu(s.noise_seed)
+    view = _view(s)
+    tv = temporal.TemporalViewport()
+    _redraws(tv, clouds, dark, view, 16)  # the mask builds while nothing flashes
+    _redraws(tv, clouds, lit, view, 1)  # the flash's first frame: one redraw
+    shown_lit = temporal.render_view(tv, clouds, view)
+    clouds.update(dark)
+    shown_dark = temporal.render_view(tv, clouds, view)
+    s.state = dark
+    before = pipeline.render_shot(s)
+    s.state = lit
+    flashed = pipeline.render_shot(s)
+    gain = (flashed[..., :3] - before[..., :3]).sum()
+    assert gain > 1.0, "the test needs a visible flash"
+    # What the viewport adds for the flash, against what the full march with the flash adds.
+    shown = (shown_lit[..., :3] - shown_dark[..., :3]).sum()
+    assert shown == pytest.approx(gain, rel=0.05)
+    assert np.abs(shown_lit[..., 3] - flashed[..., 3]).mean() < 0.005
+    # A flash's intensity is not a change that restarts the convergence.
+    assert tv.since_change == 17
+    tv.free()
