@@ -41,7 +41,7 @@ struct NubisTemporal {
   vec4 eye;            /* this redraw's eye (w = 1: perspective) */
   vec4 size;           /* history width, height, working-buffer width, height */
   vec4 frame;          /* Bayer index marched now, redraws since the last change, weight of the new sample, dt */
-  vec4 flags;          /* history valid (0/1), -, -, - */
+  vec4 flags;          /* history valid (0/1), -, the pixel of each 4x4 block marched now (x, y) */
 };
 
 /* The motion stage's cameras: now and one timestep earlier (the same for a still camera). */

@@ -11,12 +11,41 @@
  *     res buffers"), so a pan shows no black or stale edges.
  * Outputs: colour, (cloud distance, valid, -, -), flash mask, as the march's. */
 
+/* Where history pixel centre `p` falls in the working buffer, in texels: texel (i, j) holds the pixel
+ * 4 (i, j) + the offset marched this redraw (T.flags.zw). */
+vec2 nubis_work_position(vec2 p)
+{
+  return (p - (T.flags.zw + 0.5)) / 4.0;
+}
+
 vec4 nubis_work_bilinear(sampler2D tex, vec2 history_pixel)
 {
-  /* Working-buffer texel (i, j) holds history pixel 4 (i, j) + the block's marched offset, which
-   * changes every redraw; the block centre is a fair estimate of where every texel sits. */
-  vec2 uv = history_pixel / (4.0 * T.size.zw);
-  return textureLod(tex, uv, 0.0);
+  return textureLod(tex, (nubis_work_position(history_pixel) + 0.5) / T.size.zw, 0.0);
+}
+
+/* The history at `uv` through a Catmull-Rom filter: a pan resamples the history every redraw, and the
+ * bilinear filter's blur would pile up over the frames. Five bilinear taps (the corner taps of the full
+ * 4x4 kernel carry little weight and are left out, then the weights renormalised). */
+vec4 nubis_history_cubic(sampler2D tex, vec2 uv, vec2 size)
+{
+  vec2 p = uv * size - 0.5;
+  vec2 f = fract(p);
+  vec2 centre = floor(p) + 0.5;
+  vec2 w0 = f * (-0.5 + f * (1.0 - 0.5 * f));
+  vec2 w1 = 1.0 + f * f * (-2.5 + 1.5 * f);
+  vec2 w2 = f * (0.5 + f * (2.0 - 1.5 * f));
+  vec2 w3 = f * f * (-0.5 + 0.5 * f);
+  vec2 w12 = w1 + w2;
+  vec2 t0 = (centre - 1.0) / size;
+  vec2 t3 = (centre + 2.0) / size;
+  vec2 t12 = (centre + w2 / w12) / size;
+  vec4 c = textureLod(tex, vec2(t12.x, t0.y), 0.0) * (w12.x * w0.y) +
+           textureLod(tex, vec2(t0.x, t12.y), 0.0) * (w0.x * w12.y) +
+           textureLod(tex, t12, 0.0) * (w12.x * w12.y) +
+           textureLod(tex, vec2(t3.x, t12.y), 0.0) * (w3.x * w12.y) +
+           textureLod(tex, vec2(t12.x, t3.y), 0.0) * (w12.x * w3.y);
+  float weight = w12.x * w0.y + w0.x * w12.y + w12.x * w12.y + w3.x * w12.y + w12.x * w3.y;
+  return c / weight;
 }
 
 void main()
@@ -45,14 +74,16 @@ void main()
     flash = hist_f;
     return;
   }
-  /* Reproject. The neighbourhood: the 3x3 working-buffer texels around this pixel's block. */
+  /* Reproject. The neighbourhood: the 3x3 new samples nearest this pixel (centred on it, so the
+   * clamp changes from pixel to pixel rather than block by block). */
   vec4 lo = vec4(1e30), hi = vec4(-1e30);
   vec4 lo_f = vec4(1e30), hi_f = vec4(-1e30);
   float near_depth = 0.0;
   ivec2 work_size = ivec2(T.size.zw);
+  ivec2 nearest = ivec2(floor(nubis_work_position(vec2(q) + 0.5) + 0.5));
   for (int dy = -1; dy <= 1; dy++) {
     for (int dx = -1; dx <= 1; dx++) {
-      ivec2 b = clamp(block + ivec2(dx, dy), ivec2(0), work_size - 1);
+      ivec2 b = clamp(nearest + ivec2(dx, dy), ivec2(0), work_size - 1);
       vec4 c = texelFetch(work_color, b, 0);
       vec4 f = texelFetch(work_flash, b, 0);
       lo = min(lo, c);
@@ -91,8 +122,8 @@ void main()
     attr = vec4(depth, 0.0, 0.0, 0.0);
     return;
   }
-  vec4 prev_c = textureLod(hist_color, prev_uv, 0.0);
-  vec4 prev_f = textureLod(hist_flash, prev_uv, 0.0);
+  vec4 prev_c = nubis_history_cubic(hist_color, prev_uv, T.size.xy);
+  vec4 prev_f = nubis_history_cubic(hist_flash, prev_uv, T.size.xy);
   color = clamp(prev_c, lo, hi);
   flash = clamp(prev_f, lo_f, hi_f);
   attr = vec4(depth, 0.0, 0.0, 0.0);

@@ -223,7 +223,7 @@ class TemporalViewport:
                 np.asarray(view.eye, np.float32),
                 np.array([*history_size, *work_size], np.float32),
                 np.array([bayer, min(self.since_change, 1 << 20), weight, dt], np.float32),
-                np.array([1.0 if self._valid else 0.0, 0.0, 0.0, 0.0], np.float32),
+                np.array([1.0 if self._valid else 0.0, 0.0, ox, oy], np.float32),
             ]
         ).astype(np.float32)
         temporal_ubo = gpu.types.GPUUniformBuf(block.tobytes())
