@@ -237,3 +237,25 @@ def test_lightning_sequence_rises_then_discharges():
     frames = [k["frame"] for k in keys]
     assert frames == sorted(frames) and frames[0] == 99
     assert keys == lightning_keys(100, 24.0, flashes=4, discharges=2, peak=50.0, seed=3)
+
+
+def test_lightning_positions_are_set_before_each_flash():
+    """The viewport builds each flash's mask over 16 redraws before it fires (GDC22), so every flash's
+    position is keyed at least that long before its light (or right after the previous flash)."""
+    from nubis_addon.core.storms import FLASH_MASK_LEAD, lightning_keys, lightning_position_keys
+
+    keys = lightning_keys(100, 24.0, flashes=4, discharges=2, seed=3)
+    where = lightning_position_keys(keys)
+    assert len(where) == 6
+    lit = [k for k in keys if k["flash"] > 0]
+    first_light = {}
+    for k in lit:
+        first_light.setdefault((k["x"], k["y"]), k["frame"])
+    for w in where:
+        assert w["frame"] <= first_light[(w["x"], w["y"])] - 1
+    assert where[0]["frame"] == keys[0]["frame"] - FLASH_MASK_LEAD
+    for before, after in zip(where, where[1:], strict=False):
+        gap = first_light[(after["x"], after["y"])] - after["frame"]
+        assert gap >= 10  # the pauses between flashes are 0.4-1.5 s at 24 fps
+        # No flash is still lit at a position key of the next one.
+        assert all(k["frame"] < after["frame"] for k in lit if (k["x"], k["y"]) == (before["x"], before["y"]))

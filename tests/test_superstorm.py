@@ -85,8 +85,11 @@ def test_lightning_keyframe_lights_its_frame_only(storm_scene, blender):
     scene.frame_set(100)
     assert storm.flash == pytest.approx(400.0 * 0.25)
     lit = pipeline.render_viewport(scene, 48, 27)
+    at_flash = (storm.flash_x, storm.flash_y)
     scene.frame_set(90)
     assert storm.flash == 0.0
+    # The position is set ahead of the flash, for the viewport's flash mask (GDC22).
+    assert (storm.flash_x, storm.flash_y) == at_flash
     dark = pipeline.render_viewport(scene, 48, 27)
     luminance = np.array([0.2126, 0.7152, 0.0722])
     assert (lit[..., :3] @ luminance).mean() > 1.1 * (dark[..., :3] @ luminance).mean()

@@ -157,3 +157,25 @@ def test_flash_mask_shows_a_flash_at_full_intensity_on_its_first_frame(shot):
     # A flash's intensity is not a change that restarts the convergence.
     assert tv.since_change == 17
     tv.free()
+
+
+def test_sidebar_quality_and_benchmark(make_scene, blender):
+    """The Viewport panel's Quality menu writes a row of presets/quality/quality.toml into the scene,
+    and its Benchmark button reports the benchmark's numbers without changing the artist's render
+    settings."""
+    from nubis_addon.blender import viewport
+
+    scene = make_scene("default")
+    assert blender.ops.nubis.viewport_quality(quality="draft") == {"FINISHED"}
+    s = scene.nubis
+    assert (s.viewport_resolution, s.march_light_samples, s.march_steps_min, s.march_steps_max) == (0.5, 6, 60, 90)
+    assert (s.viewport_blur, s.march_mip, s.storm_jittered_rings) == (2.0, 1, True)
+    assert blender.ops.nubis.viewport_quality(quality="high") == {"FINISHED"}
+    assert (s.march_light_samples, s.march_steps_min, s.march_steps_max) == (10, 96, 180)
+    scene.render.engine = "CYCLES"
+    scene.render.resolution_x, scene.render.resolution_y = 1234, 567
+    viewport.last_benchmark.clear()
+    assert blender.ops.nubis.benchmark(width=48, height=27) == {"FINISHED"}
+    assert any("naive / redraw" in line for line in viewport.last_benchmark)
+    assert any("EEVEE / redraw" in line for line in viewport.last_benchmark)
+    assert scene.render.engine == "CYCLES" and (scene.render.resolution_x, scene.render.resolution_y) == (1234, 567)

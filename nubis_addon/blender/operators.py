@@ -283,13 +283,16 @@ class NUBIS_OT_lightning_sequence(NeedsCloudscape, NubisOperator, bpy.types.Oper
         keys = storms.lightning_keys(scene.frame_current, fps, self.flashes, self.discharges, self.peak, self.seed)
         frames = [int(k["frame"]) for k in keys]
         _insert_keys(scene, storm, "flash", list(zip(frames, (k["flash"] for k in keys), strict=True)))
-        # Positions jump from flash to flash; only the intensity is interpolated.
+        # Positions jump from flash to flash, set well before each fires so the viewport's flash mask
+        # is built in time (GDC22); only the intensity is interpolated.
+        where = storms.lightning_position_keys(keys)
+        at = [int(k["frame"]) for k in where]
         for prop, values in (
-            ("flash_x", [k["x"] * storm.radius for k in keys]),
-            ("flash_y", [k["y"] * storm.radius for k in keys]),
-            ("flash_ground", [k["ground"] for k in keys]),
+            ("flash_x", [k["x"] * storm.radius for k in where]),
+            ("flash_y", [k["y"] * storm.radius for k in where]),
+            ("flash_ground", [k["ground"] for k in where]),
         ):
-            _insert_keys(scene, storm, prop, list(zip(frames, values, strict=True)), "CONSTANT")
+            _insert_keys(scene, storm, prop, list(zip(at, values, strict=True)), "CONSTANT")
         return f"{self.flashes} flashes and {self.discharges} discharges keyed from frame {int(keys[0]['frame'])}"
 
 
@@ -366,6 +369,65 @@ class NUBIS_OT_bake_frames(NeedsCloudscape, NubisOperator, bpy.types.Operator):
         return f"Baked {len(frames)} frames into {folder}"
 
 
+def _quality_items():
+    from ..core import quality
+
+    try:
+        rows = quality.qualities()
+    except NubisError as err:
+        return (("standard", "Standard", str(err)),)
+    return tuple((q.name, q.label, q.description) for q in rows.values())
+
+
+# Built once: Blender keeps pointers to these strings for as long as the enum exists.
+_QUALITY_ITEMS = _quality_items()
+
+
+class NUBIS_OT_viewport_quality(NeedsCloudscape, NubisOperator, bpy.types.Operator):
+    """Set the ray march and the viewport to a quality level (GDC22's PS4 and PS5 settings, or Horizon Zero Dawn's)"""
+
+    bl_idname = "nubis.viewport_quality"
+    bl_label = "Viewport Quality"
+    bl_options = {"REGISTER", "UNDO"}
+
+    quality: EnumProperty(name="Quality", items=_QUALITY_ITEMS)
+
+    def run(self, context):
+        from . import preview
+
+        preview.apply_quality(context.scene, self.quality)
+        return f"Quality '{self.quality}' applied"
+
+
+class NUBIS_OT_benchmark(NeedsCloudscape, NubisOperator, bpy.types.Operator):
+    """Time the viewport's redraw from the scene camera against the naive full march and EEVEE"""
+
+    bl_idname = "nubis.benchmark"
+    bl_label = "Benchmark"
+
+    width: IntProperty(name="Width", default=480, min=16, max=7680)
+    height: IntProperty(name="Height", default=270, min=16, max=4320)
+    eevee: BoolProperty(name="Include EEVEE", default=True, description="Also bake and render the view with EEVEE")
+
+    def run(self, context):
+        from . import preview, runtime
+
+        scene = context.scene
+        out = runtime.cache_dir() / "benchmark"
+        wm = context.window_manager
+        wm.progress_begin(0, 1)
+        try:
+            result = preview.benchmark(scene, out, self.width, self.height, eevee=self.eevee)
+        finally:
+            wm.progress_end()
+        viewport.last_benchmark[:] = preview.table(result).splitlines()
+        eevee = f", EEVEE {result['eevee_over_redraw']:.0f}x" if "eevee_ms" in result else ""
+        return (
+            f"Redraw {result['redraw_ms']:.1f} ms, naive {result['naive_ms']:.0f} ms "
+            f"({result['naive_over_redraw']:.1f}x){eevee}; details in {out}"
+        )
+
+
 CLASSES = (
     NUBIS_OT_new_cloudscape,
     NUBIS_OT_generate_field,
@@ -383,5 +445,7 @@ CLASSES = (
     NUBIS_OT_bake_frames,
 )
 
+
+CLASSES += (NUBIS_OT_viewport_quality, NUBIS_OT_benchmark)
 
 register, unregister = bpy.utils.register_classes_factory(CLASSES)

@@ -38,9 +38,7 @@ class NUBIS_PT_main(bpy.types.Panel):
         if settings is None or settings.field_a is None:
             layout.label(text="No cloudscape in this scene yet")
             return
-        row = layout.row()
-        row.prop(settings, "enabled")
-        row.prop(settings, "viewport_scale", text="1/N")
+        layout.prop(settings, "enabled")
         if viewport.last_error():
             layout.label(text=viewport.last_error(), icon="ERROR")
         layout.operator("nubis.render_image", icon="RENDER_STILL")
@@ -148,6 +146,36 @@ class NUBIS_PT_storms(NubisPanel, bpy.types.Panel):
         layout.prop(s, "storm_jittered_rings")
 
 
+class NUBIS_PT_viewport(NubisPanel, bpy.types.Panel):
+    """The temporal viewport (docs/viewport.md): quality, convergence and the benchmark."""
+
+    bl_label = "Viewport"
+    bl_parent_id = "NUBIS_PT_main"
+
+    def draw(self, context):
+        from ..core import quality
+
+        layout = self.layout
+        s = context.scene.nubis
+        params = {k: getattr(s, k) for k in quality.ROW_KEYS.values()}
+        current = next((q.label for q in quality.qualities().values() if q.matches(params)), "Custom")
+        layout.operator_menu_enum("nubis.viewport_quality", "quality", text=f"Quality: {current}")
+        layout.use_property_split = True
+        col = layout.column(align=True)
+        col.prop(s, "viewport_samples", text="Samples")
+        col.prop(s, "viewport_resolution", text="Resolution")
+        col.prop(s, "viewport_blur", text="Upscale Blur")
+        col = layout.column(align=True)
+        col.prop(s, "march_light_samples", text="Light Samples")
+        col.prop(s, "march_mip", text="Noise Mip")
+        layout.use_property_split = False
+        layout.operator("nubis.benchmark", icon="TIME")
+        if viewport.last_benchmark:
+            box = layout.box().column(align=True)
+            for line in viewport.last_benchmark:
+                box.label(text=line)
+
+
 class NUBIS_PT_bake(NubisPanel, bpy.types.Panel):
     bl_label = "Bake"
     bl_parent_id = "NUBIS_PT_main"
@@ -169,6 +197,7 @@ CLASSES = (
     NUBIS_PT_light,
     _section_panel("lighting", "Lighting"),
     _section_panel("march", "Ray March"),
+    NUBIS_PT_viewport,
     NUBIS_PT_bake,
 )
 

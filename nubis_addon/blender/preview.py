@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -202,12 +203,63 @@ def preview(
     return result
 
 
+# The render settings the EEVEE measurement changes, restored afterwards: the Benchmark button runs in
+# the artist's own scene.
+_RENDER_SETTINGS = (
+    "render.engine",
+    "render.resolution_x",
+    "render.resolution_y",
+    "render.resolution_percentage",
+    "render.film_transparent",
+    "render.filepath",
+    "render.image_settings.file_format",
+    "render.image_settings.color_depth",
+    "render.image_settings.color_mode",
+    "eevee.taa_render_samples",
+    "eevee.volumetric_start",
+    "eevee.volumetric_end",
+    "cycles.samples",
+    "cycles.device",
+    "cycles.use_denoising",
+    "cycles.pixel_filter_type",
+    "cycles.filter_width",
+    "cycles.max_bounces",
+    "cycles.volume_bounces",
+    "cycles.use_adaptive_sampling",
+    "camera.data.clip_end",
+)
+
+
+def _resolve(owner, path: str):
+    *parents, name = path.split(".")
+    for part in parents:
+        owner = getattr(owner, part, None)
+        if owner is None:
+            return None, name
+    return owner, name
+
+
+@contextlib.contextmanager
+def preserved(scene, paths=_RENDER_SETTINGS):
+    """Put the scene's `paths` back as they were, whatever happens inside."""
+    saved = []
+    for path in paths:
+        owner, name = _resolve(scene, path)
+        if owner is not None and hasattr(owner, name):
+            saved.append((owner, name, getattr(owner, name)))
+    try:
+        yield
+    finally:
+        for owner, name, value in saved:
+            setattr(owner, name, value)
+
+
 def render_eevee(scene, width: int, height: int, vdb_path: str, samples: int = 16) -> tuple[np.ndarray, float]:
     """EEVEE rendering a bake of the clouds from the scene camera: premultiplied RGBA and the seconds
-    the render took (the bake not included)."""
+    the render took (the bake not included). The scene's render settings are left as they were."""
     engines = {e.identifier for e in bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items}
     eevee = "BLENDER_EEVEE_NEXT" if "BLENDER_EEVEE_NEXT" in engines else "BLENDER_EEVEE"
-    with tempfile.TemporaryDirectory(prefix="nubis-eevee-") as tmp:
+    with tempfile.TemporaryDirectory(prefix="nubis-eevee-") as tmp, preserved(scene):
         cycles_setup.import_volume(scene, vdb_path)
         try:
             cycles_setup.configure_render(scene, width, height, None)

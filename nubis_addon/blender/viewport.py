@@ -17,6 +17,7 @@ _views: dict = {}  # region pointer -> TemporalViewport
 _depth_cache: dict = {}
 _scene_updates = [0]  # counts depsgraph updates: the scene's geometry (and so its depth) may have changed
 _last_error: list[str] = []
+last_benchmark: list[str] = []  # the sidebar's Benchmark button's table, line by line
 
 
 @bpy.app.handlers.persistent

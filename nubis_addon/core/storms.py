@@ -314,3 +314,27 @@ def lightning_keys(
         keys += [{"frame": frame + df, "flash": strength * v, "x": x, "y": y, "ground": g} for df, v in pulse]
         frame += pulse[-1][0] + 1 + int(round(fps * rng.uniform(0.4, 1.5)))
     return keys
+
+
+# How many frames before a flash its position is set: the temporal viewport needs 16 redraws to build
+# the flash mask at that position (GDC22: "generate a mask using position and radius data before each
+# flash"), so the mask is whole when the flash fires.
+FLASH_MASK_LEAD = 16
+
+
+def lightning_position_keys(keys: list[dict[str, float]]) -> list[dict[str, float]]:
+    """One key per flash for its position (x, y, ground), set as early as possible before it fires:
+    FLASH_MASK_LEAD frames ahead of the first flash, and right after the previous flash for the others.
+    Positions are held (constant interpolation) until the next flash's key."""
+    starts: list[dict[str, float]] = []
+    ends: list[float] = []
+    for k in keys:
+        if not starts or (k["x"], k["y"], k["ground"]) != (starts[-1]["x"], starts[-1]["y"], starts[-1]["ground"]):
+            starts.append(k)
+            ends.append(k["frame"])
+        ends[-1] = k["frame"]
+    out = []
+    for i, k in enumerate(starts):
+        frame = k["frame"] - FLASH_MASK_LEAD if i == 0 else min(ends[i - 1] + 1, k["frame"])
+        out.append({"frame": frame, "x": k["x"], "y": k["y"], "ground": k["ground"]})
+    return out
