@@ -349,11 +349,11 @@ float nubis_cirrus_optical_depth(vec3 p, vec3 dir, float lod)
   float slant = 1.0 / max(abs(dot(dir, up)), 0.05);
   /* lod >= 0 is the caller's fixed level; lod < 0 asks for the view's own: the pixel's footprint on
    * the layer (P.view: metres per metre of distance, plus a constant for orthographic views),
-   * stretched by the slant, in texels. */
+   * stretched by the slant, in texels, one level late as for the 3D noise (nubis_view_lod). */
   float level = lod;
   if (lod < 0.0) {
     float footprint = (P.view.x * t + P.view.y) * slant;
-    level = log2(max(footprint * P.cirrus.z * float(NUBIS_CIRRUS_SIZE), 1.0));
+    level = max(log2(max(footprint * P.cirrus.z * float(NUBIS_CIRRUS_SIZE), 1.0)) - 1.0, 0.0);
   }
   float density = nubis_cirrus_density(q.xy, level);
   return density * P.cirrus.w * slant;

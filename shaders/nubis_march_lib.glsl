@@ -45,10 +45,14 @@ vec4 nubis_cirrus(vec3 origin, vec3 dir)
  * metres per metre of distance, P.view.y for orthographic views) in texels of the base-shape noise,
  * plus the quality's base level (GDC22: PS4 reads MIP 1, PS5 MIP 0). The fractional part is dithered
  * per pixel, so neighbouring levels blend as the passes accumulate. */
+/* Averaging the noise before the erosion's non-linear remap flattens the detail, so a level is only
+ * dropped once a pixel covers two texels of it: measured against 8x supersampling, blurring sooner
+ * cost more than the aliasing it removed (docs/viewport.md). */
+#define NUBIS_LOD_BIAS 1.0
 float nubis_view_lod(float t, float dither)
 {
   float footprint = P.view.x * t + P.view.y;
-  float level = log2(max(footprint * float(NUBIS_LF_SIZE - 1) / P.noise.x, 1.0)) + P.view.z;
+  float level = log2(max(footprint * float(NUBIS_LF_SIZE - 1) / P.noise.x, 1.0)) - NUBIS_LOD_BIAS + P.view.z;
   return min(floor(level + dither), 2.0);
 }
 

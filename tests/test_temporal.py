@@ -179,3 +179,51 @@ def test_sidebar_quality_and_benchmark(make_scene, blender):
     assert any("naive / redraw" in line for line in viewport.last_benchmark)
     assert any("EEVEE / redraw" in line for line in viewport.last_benchmark)
     assert scene.render.engine == "CYCLES" and (scene.render.resolution_x, scene.render.resolution_y) == (1234, 567)
+
+
+def test_no_march_where_geometry_hides_the_sky(shot):
+    """With the scene's depth bound (the 3D view reads it back), pixels that geometry covers are not
+    marched (GDC22: "if objects render in front of the clouds, we do not march from those pixels")."""
+    import gpu
+
+    from nubis_addon.blender import pipeline, runtime
+    from nubis_addon.render import temporal
+
+    scene, s = shot()
+    full = pipeline.render_shot(s)
+    depth = np.ones((s.height, s.width), np.float32)
+    depth[:, : s.width // 2] = 0.5  # an object over the left half (rows bottom first, as GL reads them)
+    tex = gpu.types.GPUTexture(
+        (s.width, s.height), format="R32F", data=gpu.types.Buffer("FLOAT", depth.size, depth.ravel())
+    )
+    clouds = runtime.cloud_gpu(s.noise_seed)
+    tv = temporal.TemporalViewport()
+    _redraws(tv, clouds, s.state, _view(s), 16)
+    for _ in range(16):
+        tv.redraw(clouds, s.state, _view(s), depth=tex, depth_key=1)
+    got = tv.read_history()
+    half = s.width // 2
+    assert full[:, :half, 3].max() > 0.3, "the test needs clouds behind the object"
+    assert got[:, :half].max() == 0.0
+    np.testing.assert_allclose(got[:, half:], full[:, half:], rtol=2e-3, atol=2e-3)
+    tv.free()
+
+
+def test_cirrus_mip_atlas_holds_every_level():
+    """Python uploads no mip chains, so the cirrus levels share one atlas texture: level 0 on the left,
+    the others stacked on its right, each with its wrapped edge texel (nubis_cirrus_level reads it)."""
+    from nubis_addon.core import noise
+    from nubis_addon.render.textures import _pad_wrap, cirrus_atlas, cirrus_levels
+
+    rng = np.random.default_rng(1)
+    base = rng.integers(0, 256, (64, 64, 4), dtype=np.uint8)
+    atlas = cirrus_atlas(base)
+    levels = noise.mip_chain(base, cirrus_levels(64))
+    assert len(levels) == cirrus_levels(64) == 4  # 64, 32, 16, 8
+    assert atlas.shape == (65, 65 + 33, 4)
+    np.testing.assert_array_equal(atlas[:65, :65], _pad_wrap(base, 2))
+    y = 0
+    for level in levels[1:]:
+        n = level.shape[0] + 1
+        np.testing.assert_array_equal(atlas[y : y + n, 65 : 65 + n], _pad_wrap(level, 2))
+        y += n
