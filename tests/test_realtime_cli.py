@@ -72,4 +72,4 @@ def test_benchmark_prints_a_table_and_writes_its_report(tmp_path):
     # Coarse to fine reads fewer 3D textures than the naive march's full sample at every step.
     assert 0 < f["coarse_to_fine"]["fetches_3d_per_pixel"] < 0.8 * f["naive"]["fetches_3d_per_pixel"]
     assert report["converged_psnr_db"] > 30
-    assert {p.name for p in out.iterdir()} == {"benchmark.json", "naive.png", "converged.png"}
+    assert {p.name for p in out.iterdir()} == {"benchmark.json", "naive.png", "converged.png", "eevee.png"}

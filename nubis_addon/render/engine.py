@@ -43,6 +43,7 @@ class Stage:
     outputs: tuple[str, ...] = ("color",)
     blocks: tuple[tuple[str, str], ...] = ()  # extra uniform blocks (struct type, name) after P
     vertex: str = "nubis_fullscreen_vert.glsl"
+    fragment: str = ""  # default: shaders/nubis_<name>_frag.glsl
 
 
 _VIEW = (("MAT4", "inv_view_proj"), ("VEC4", "eye"))
@@ -66,6 +67,19 @@ STAGES: dict[str, Stage] = {
         cloud_inputs=False,
         outputs=("color", "attr", "flash"),
         blocks=(("NubisTemporal", "T"),),
+    ),
+    # The same resolve on one point per block, for redraws where only the marched pixels change.
+    "resolve_points": Stage(
+        (("VEC4", "points"),),
+        samplers=tuple(
+            ("FLOAT_2D", n) for n in ("work_color", "work_attr", "work_flash", "hist_color", "hist_attr", "hist_flash")
+        ),
+        libs=("nubis_common_lib.glsl", "nubis_motion_lib.glsl"),
+        cloud_inputs=False,
+        outputs=("color", "attr", "flash"),
+        blocks=(("NubisTemporal", "T"),),
+        vertex="nubis_points_vert.glsl",
+        fragment="nubis_resolve_frag.glsl",
     ),
     # Drawn on the far plane, so a LESS_EQUAL depth test keeps the clouds behind the scene's objects.
     "upscale": Stage(
@@ -104,7 +118,7 @@ def _create_info(name: str, defines: dict[str, object]) -> GPUShaderCreateInfo:
     for slot, out in enumerate(stage.outputs):
         info.fragment_out(slot, "VEC4", out)
     info.vertex_source(read_shader(stage.vertex))
-    info.fragment_source(assemble(*stage.libs, f"nubis_{name}_frag.glsl"))
+    info.fragment_source(assemble(*stage.libs, stage.fragment or f"nubis_{name}_frag.glsl"))
     return info
 
 

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import gpu
 import numpy as np
+from gpu_extras.batch import batch_for_shader
 
 from ..core import camera, march
 from ..core.state import CloudState
@@ -70,6 +71,7 @@ class TemporalViewport:
         self._time = None
         self._view_proj = None
         self._dummy_depth = None
+        self._points = None
         self.last_restart_reason = ""
 
     # ---- buffers ------------------------------------------------------------------------------------------
@@ -227,21 +229,41 @@ class TemporalViewport:
             ]
         ).astype(np.float32)
         temporal_ubo = gpu.types.GPUUniformBuf(block.tobytes())
+        # After a change every pixel is resolved; while still, only the pixels marched now change, so
+        # points update them and the ones the previous redraw wrote into the other buffer: both
+        # buffers then hold the whole history again (they differ only where the last redraw wrote).
+        everywhere = not self._valid or self.since_change < 2
+        stage = "resolve" if everywhere else "resolve_points"
         with dst["fb"].bind():
             gpu.state.blend_set("NONE")
             gpu.state.viewport_set(0, 0, *history_size)
-            sh = engine.shader("resolve", defines)
+            sh = engine.shader(stage, defines)
             clouds.bind(sh, cloud_inputs=False)
             sh.uniform_block("T", temporal_ubo)
             for name in ("color", "attr", "flash"):
                 sh.uniform_sampler(f"work_{name}", work[name])
                 sh.uniform_sampler(f"hist_{name}", src[name])
-            engine.fullscreen_batch("resolve", defines).draw(sh)
+            if everywhere:
+                engine.fullscreen_batch("resolve", defines).draw(sh)
+            else:
+                gpu.state.point_size_set(1.0)
+                batch = self._points_batch(sh, work_size)
+                previous = march.bayer_offset(bayer - 1)
+                for offset in ((ox, oy), previous):
+                    sh.uniform_float("points", (float(offset[0]), float(offset[1]), *map(float, history_size)))
+                    batch.draw(sh)
         self._history = [dst, src]
         self.redraw_index += 1
         self.since_change += 1
         self._valid = True
         return True
+
+    def _points_batch(self, sh, work_size: tuple[int, int]):
+        if self._points is None or self._points[0] != work_size:
+            i, j = np.meshgrid(np.arange(work_size[0]), np.arange(work_size[1]))
+            coords = np.stack([i.ravel(), j.ravel()], axis=1).astype(np.float32)
+            self._points = (work_size, batch_for_shader(sh, "POINTS", {"pos": coords}))
+        return self._points[1]
 
     # ---- showing it ---------------------------------------------------------------------------------------
     def upscale(self, clouds: engine.CloudGPU, blur: float = 1.0) -> None:
