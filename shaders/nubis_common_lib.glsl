@@ -4,7 +4,7 @@
 
 #define NUBIS_PI 3.14159265358979
 
-/* The colour of a lightning flash (SPEC 2.10.4). */
+/* The colour of a lightning flash (GDC22). */
 const vec3 NUBIS_FLASH_COLOUR = vec3(0.85, 0.9, 1.0);
 /* The flash mask is a radiance per unit flash intensity, far below half float's normal range (which
  * GPUs flush to zero): the temporal buffers store it scaled by this. */

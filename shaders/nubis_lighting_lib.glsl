@@ -80,7 +80,7 @@ float nubis_glow_energy(vec3 p, vec3 centre, float radius, float fine_density, f
   return potential * below * pseudo_attenuation;
 }
 
-/* Lightning (SPEC 2.10.4, GDC22): an intra-cloud flash is the internal glow at the flash's own position
+/* Lightning (GDC22, after Uman's *Lightning*): an intra-cloud flash is the internal glow at the flash's own position
  * with its animated intensity; a ground discharge adds the external flash that lights the underside
  * around the strike. This returns each storm's flash energy at unit intensity, so the temporal viewport
  * can accumulate it as GDC22's flash mask and scale it by the intensity of the frame being shown. */
@@ -117,7 +117,7 @@ vec4 nubis_flash_intensities()
   return vec4(P.storm_glow[0].w, P.storm_glow[1].w, P.storm_glow[2].w, P.storm_glow[3].w);
 }
 
-/* The constant red glow at each storm's centre, per unit scattering (SPEC 2.10.3). */
+/* The constant red glow at each storm's centre, per unit scattering (GDC22). */
 vec3 nubis_storm_steady_glow(vec3 p, float fine_density)
 {
   vec3 glow = vec3(0.0);
@@ -248,7 +248,7 @@ NubisRayLight nubis_ray_light(vec3 view_dir)
     }
     c *= P.scatter.w;
   }
-  /* SPEC 2.4 (GPU Pro 7 "Beer's powder", S15 view dependence): the in-scatter probability darkens
+  /* GPU Pro 7's "Beer's powder" with S15's view dependence: the in-scatter probability darkens
    * the edges facing the sun, visible only with the sun behind the viewer. */
   l.powder_weight = P.scatter2.x * clamp01(0.5 - 0.5 * l.cos_angle);
   return l;

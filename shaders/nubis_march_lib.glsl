@@ -56,8 +56,8 @@ float nubis_view_lod(float t, float dither)
   return min(floor(level + dither), 2.0);
 }
 
-/* The view-ray march (SPEC 2.12, 3.1, 3.3): premultiplied radiance and alpha. `cloud_depth` returns the
- * transmittance-weighted distance of what the ray saw (GDC22's cloud distance, SPEC 3.8), 0 where it
+/* The view-ray march (GPU Pro 7, S15, Hillaire 2016): premultiplied radiance and alpha. `cloud_depth` returns the
+ * transmittance-weighted distance of what the ray saw (GDC22's cloud distance), 0 where it
  * saw nothing; `flash_mask` each storm's lightning at unit intensity, integrated like the radiance
  * (GDC22's flash mask): the radiance leaves the flashes out, and callers add
  * NUBIS_FLASH_COLOUR * dot(flash_mask, nubis_flash_intensities()) when they show a frame.
@@ -188,7 +188,7 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out v
 #endif
     depth_sum += t * transmittance * (1.0 - step_t);
     transmittance *= step_t;
-    /* SPEC 3.5: stop once the ray is practically opaque. */
+    /* S15: stop once the ray is practically opaque. */
     if (transmittance < 0.005) {
       break;
     }

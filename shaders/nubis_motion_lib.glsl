@@ -26,7 +26,7 @@ float nubis_storm_turn_rate(vec2 xy, int i)
   return rate * fade;
 }
 
-/* SPEC 3.9.4 (GDC22): where the cloud seen at `world` was `dt` seconds ago. Scrolling clouds came from
+/* GDC22's motion vectors: where the cloud seen at `world` was `dt` seconds ago. Scrolling clouds came from
  * upwind (the scroll direction times the timestep); inside a superstorm the point is turned back by its
  * ring's rate, blended by GDC22's mask pow(1 - d / radius, 0.1). */
 vec3 nubis_previous_position(vec3 world, float dt)

@@ -63,7 +63,7 @@ def cirrus_levels(size: int) -> int:
 
 
 class NoiseTextures:
-    """The texture set of SPEC 1.4.1 on the GPU: 8 bits per channel, as Guerrilla shipped it, with the
+    """The noise texture set (S15, GPU Pro 7) on the GPU: 8 bits per channel, as Guerrilla shipped it, with the
     mip levels the march reads at a distance."""
 
     def __init__(self, noise_set: noise.NoiseSet):
