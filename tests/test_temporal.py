@@ -227,3 +227,26 @@ def test_cirrus_mip_atlas_holds_every_level():
         n = level.shape[0] + 1
         np.testing.assert_array_equal(atlas[y : y + n, 65 : 65 + n], _pad_wrap(level, 2))
         y += n
+
+
+def test_viewport_reads_the_depth_once_per_change(blender):
+    """The 3D view's depth reaches the march as a texture read back from the framebuffer, again only
+    when the view or the scene changed."""
+    import gpu
+
+    from nubis_addon.blender import viewport
+
+    off = gpu.types.GPUOffScreen(32, 16, format="RGBA16F")
+    try:
+        with off.bind():
+            fb = gpu.state.active_framebuffer_get()
+            fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=0.25)
+            tex = viewport._scene_depth(fb, 32, 16, ("view", 1))
+            assert (tex.width, tex.height, tex.format) == (32, 16, "R32F")
+            assert np.allclose(np.asarray(tex.read()), 0.25)
+            fb.clear(depth=1.0)
+            assert viewport._scene_depth(fb, 32, 16, ("view", 1)) is tex  # unchanged view: no read-back
+            fresh = viewport._scene_depth(fb, 32, 16, ("view", 2))
+            assert np.allclose(np.asarray(fresh.read()), 1.0)
+    finally:
+        off.free()

@@ -44,7 +44,7 @@ def main() -> None:
     rows.append(("noise volumes generated (LF 128^3, HF 32^3, curl, cirrus)", f"{time.perf_counter() - t:.2f} s"))
     textures = NoiseTextures(ns)
     rows.append(
-        ("GPU memory of the noise texture set (padded, RGBA8, LF mip 1)", f"{textures.gpu_bytes / 2**20:.2f} MiB")
+        ("GPU memory of the noise texture set (padded, RGBA8, with its mips)", f"{textures.gpu_bytes / 2**20:.2f} MiB")
     )
     rows.append(("  budget of the sources (S15, GPU Pro 7)", "20 MB"))
 
