@@ -146,8 +146,9 @@ vec3 nubis_storm_glow(vec3 p, float fine_density)
 }
 
 /* Reference optical depth (without sigma): the full-detail density along `dir` until the ray leaves
- * the cloud shell (or the draw radius ends the clouds). */
-float nubis_reference_depth(vec3 p, vec3 dir, int samples)
+ * the cloud shell (or the draw radius ends the clouds), with rain's and storms' absorption; `plain`
+ * returns the density alone, for the powder term. */
+float nubis_reference_depth(vec3 p, vec3 dir, int samples, out float plain)
 {
   float altitude = nubis_altitude(p, P.layer.x);
   vec2 top = nubis_ray_sphere(p, dir, P.layer.x, P.shell.y);
@@ -160,12 +161,15 @@ float nubis_reference_depth(vec3 p, vec3 dir, int samples)
   /* Samples crowd near the point (t = len u^2): the nearby cloud decides most of the shadowing,
    * while a horizontal ray may cross tens of kilometres of layer. */
   float depth = 0.0;
+  plain = 0.0;
   float n = float(samples);
   for (int i = 0; i < samples; i++) {
     float u = (float(i) + 0.5) / n;
     vec3 q = p + dir * (len * u * u);
     NubisDensity s = nubis_density(q, false, 0.0);
-    depth += s.fine * nubis_extinction_factor(q, s.precipitation) * (2.0 * len * u / n);
+    float w = s.fine * (2.0 * len * u / n);
+    plain += w;
+    depth += w * nubis_extinction_factor(q, s.precipitation);
   }
   return depth;
 }
@@ -209,7 +213,8 @@ float nubis_reference_sky_visibility(vec3 p, vec3 view_dir, vec2 pixel)
     float sin_t = sqrt(max(0.0, 1.0 - cos_t * cos_t));
     float phi = spin + float(i) * 2.39996323; /* the golden angle */
     vec3 dir = view_dir * cos_t + (side * cos(phi) + up * sin(phi)) * sin_t;
-    float tau = nubis_reference_depth(p, dir, 16) * P.density.x + nubis_cirrus_optical_depth(p, dir, 0.0);
+    float plain;
+    float tau = nubis_reference_depth(p, dir, 16, plain) * P.density.x + nubis_cirrus_optical_depth(p, dir, 0.0);
     if (in_silver) {
       silver_lobe += exp(-tau) / float(n);
     }
@@ -262,11 +267,12 @@ NubisRayLight nubis_ray_light(vec3 view_dir)
  * once the view ray is half opaque (S15: "2x faster"); the naive march of the benchmark keeps full
  * samples. The reference permutation marches many fine samples out of the
  * layer instead, for measuring the real-time one. */
-float nubis_light_optical_depth(vec3 p, float view_alpha, float lod)
+float nubis_light_optical_depth(vec3 p, float view_alpha, float lod, out float powder_depth)
 {
   float tau = 0.0;
+  powder_depth = 0.0;
 #if NUBIS_REFERENCE
-  tau = nubis_reference_depth(p, P.sun_dir.xyz, 48);
+  tau = nubis_reference_depth(p, P.sun_dir.xyz, 48, powder_depth);
 #else
 #  if NUBIS_NAIVE
   bool cheap = false;
@@ -281,13 +287,18 @@ float nubis_light_optical_depth(vec3 p, float view_alpha, float lod)
     vec4 tap = P.light_taps[i];
     vec3 q = p + tap.xyz;
     NubisDensity s = nubis_density(q, cheap, light_lod);
-    tau += (cheap ? s.coarse : s.fine) * nubis_extinction_factor(q, s.precipitation) * tap.w;
+    float w = (cheap ? s.coarse : s.fine) * tap.w;
+    powder_depth += w;
+    tau += w * nubis_extinction_factor(q, s.precipitation);
   }
   vec4 long_tap = P.light_taps[taps - 1];
   vec3 far_point = p + long_tap.xyz;
   NubisDensity far_sample = nubis_density(far_point, true, light_lod);
-  tau += far_sample.coarse * nubis_extinction_factor(far_point, far_sample.precipitation) * long_tap.w;
+  float w = far_sample.coarse * long_tap.w;
+  powder_depth += w;
+  tau += w * nubis_extinction_factor(far_point, far_sample.precipitation);
 #endif
+  powder_depth *= P.density.x;
   return tau * P.density.x;
 }
 
@@ -297,11 +308,11 @@ float nubis_light_optical_depth(vec3 p, float view_alpha, float lod)
 vec3 nubis_in_scattering(
     vec3 p, vec3 view_dir, NubisDensity d, NubisRayLight ray, float view_alpha, float extinction_factor, float lod, vec2 pixel)
 {
-  float tau = nubis_light_optical_depth(p, view_alpha, lod);
-#if NUBIS_CIRRUS
-  /* High cirrus dims the sun on the clouds below it, as its baked slab does in Cycles. */
-  tau += nubis_cirrus_optical_depth(p, P.sun_dir.xyz, 0.0);
-#endif
+  /* The octaves and the powder term see the cloud's own depth towards the sun (GPU Pro 7, GDC22),
+   * the powder the density alone: rain's and storms' absorption darken the light, not thin the
+   * dark sun-facing rim. */
+  float powder_depth;
+  float tau = nubis_light_optical_depth(p, view_alpha, lod, powder_depth);
   /* SPEC 2.9: NOT from the Guerrilla sources. Wrenninge's octaves (Oz, 2013) stand in for the light
    * that scatters more than once: each octave sees a thinner cloud and a flatter phase. Octave 1 alone
    * is plain single scattering (Beer-Lambert x phase). Octave i stands for light scattered once more
@@ -318,7 +329,12 @@ vec3 nubis_in_scattering(
     b *= P.scatter.z * albedo;
   }
   /* GPU Pro 7's factor 2 restores the energy where the powder term applies. */
-  direct_energy *= mix(1.0, 2.0 * (1.0 - exp(-2.0 * tau)), ray.powder_weight);
+  direct_energy *= mix(1.0, 2.0 * (1.0 - exp(-2.0 * powder_depth)), ray.powder_weight);
+#if NUBIS_CIRRUS
+  /* High cirrus dims the sun on the clouds below it by its own transmittance, as its baked slab does in
+   * Cycles: a separate factor, so it neither hides the powder rim nor thins the octaves. */
+  direct_energy *= exp(-nubis_cirrus_optical_depth(p, P.sun_dir.xyz, 0.0));
+#endif
   vec3 direct = P.sun_rad.rgb * direct_energy;
   /* SPEC 2.7: GDC22's ambient probability from the coarse density, growing with height (S15); the
    * reference permutation measures the sky's visibility instead. */
@@ -326,6 +342,10 @@ vec3 nubis_in_scattering(
   float ambient_probability = nubis_reference_sky_visibility(p, view_dir, pixel);
 #else
   float ambient_probability = sqrt(1.0 - clamp01(d.coarse)) * mix(P.ambient.w, 1.0, d.h);
+#  if NUBIS_CIRRUS
+  /* ... and the sky light by its transmittance overhead. */
+  ambient_probability *= exp(-nubis_cirrus_optical_depth(p, normalize(p + vec3(0.0, 0.0, P.layer.x)), 0.0));
+#  endif
 #endif
   ambient_probability *= nubis_storm_ambient(p, d.h);
   return direct + P.ambient.rgb * ambient_probability + nubis_storm_steady_glow(p, d.fine);

@@ -41,6 +41,18 @@ vec4 nubis_cirrus(vec3 origin, vec3 dir)
   return vec4(light, alpha);
 }
 
+/* The clouds and the cirrus layer together, in the order the camera sees them (GPU Pro 7 and S15 sample
+ * the high layer at the end of the march, behind the volume, as seen from the ground): from above
+ * the cirrus altitude the layer is in front of the clouds below it, the storm's anvil cirrus too. */
+vec4 nubis_with_cirrus(vec4 clouds, vec3 origin, vec3 dir)
+{
+  vec4 cirrus = nubis_cirrus(origin, dir);
+  if (nubis_altitude(origin, P.layer.x) > P.cirrus.x) {
+    return cirrus + (1.0 - cirrus.a) * clouds;
+  }
+  return clouds + (1.0 - clouds.a) * cirrus;
+}
+
 /* The mip level of the noise for a view sample at distance t: the pixel's footprint there (P.view.x
  * metres per metre of distance, P.view.y for orthographic views) in texels of the base-shape noise,
  * plus the quality's base level (GDC22: PS4 reads MIP 1, PS5 MIP 0). The fractional part is dithered

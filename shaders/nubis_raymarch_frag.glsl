@@ -1,5 +1,6 @@
 /* The full-resolution march: the headless render, the naive march of the benchmark and the offline
- * path. Every pixel is marched, flashes included; the clouds, then the cirrus layer behind them. */
+ * path. Every pixel is marched, flashes included, and the cirrus layer composited in the order the
+ * camera sees it. */
 void main()
 {
   vec3 origin, dir;
@@ -9,9 +10,7 @@ void main()
   vec4 clouds = nubis_march(origin, dir, gl_FragCoord.xy, cloud_depth, flash_mask);
   clouds.rgb += NUBIS_FLASH_COLOUR * dot(flash_mask, nubis_flash_intensities());
 #if NUBIS_CIRRUS
-  /* SPEC 1.8, GPU Pro 7: the high layer is sampled at the end of the march, behind the volume. */
-  vec4 cirrus = nubis_cirrus(origin, dir);
-  clouds += (1.0 - clouds.a) * cirrus;
+  clouds = nubis_with_cirrus(clouds, origin, dir);
 #endif
 #if NUBIS_FETCH_STATS
   color = vec4(float(nubis_fetches_3d), float(nubis_view_samples), float(nubis_density_calls), 1.0);
