@@ -196,6 +196,10 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
    * shell's top (the storm's tropopause), so the anvil is flat and reaches across the whole stencil,
    * with the storm coverage as its coverage. max() leaves storm-free clouds exactly as they were. */
   float storm = clamp01(f.b.r) * f.inside;
+  /* The anvil's own profile and coverage: it is a second shape beside the column's, and the density
+   * is the larger of the two (below), which has no step where one takes over from the other. */
+  float anvil = 0.0;
+  float anvil_coverage = 0.0;
 #if NUBIS_STORMS
   float band = 0.22 * (P.shell.y - P.layer.y);
   float anvil_h = (altitude - (P.shell.y - band)) / band;
@@ -205,19 +209,12 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
     vec2 upwind = p.xy - P.wind.xy * (P.storm_info.w * anvil_h);
     vec2 upwind_uv = (upwind - P.field.xy) * P.field.w + 0.5;
     float anvil_storm = clamp01(textureLod(field_b, clamp(upwind_uv, 0.0, 1.0), 0.0).r) * f.inside;
-    if (anvil_storm > 0.0) {
-      storm = anvil_storm;
-      float anvil = nubis_vertical_profile(1.0 - anvil_h, 0.3, 0.0) * storm;
-      if (anvil > profile) {
-        profile = anvil;
-        coverage = max(coverage, 0.85 * storm);
-        h = max(h, 0.9); /* billowy detail on the anvil, not the wisps of a cloud base */
-      }
-    }
+    anvil = nubis_vertical_profile(1.0 - anvil_h, 0.3, 0.0) * anvil_storm;
+    anvil_coverage = max(coverage, 0.85 * anvil_storm);
   }
 #endif
 #if !NUBIS_NAIVE
-  if (profile <= 0.0 || coverage <= 0.0) {
+  if ((profile <= 0.0 || coverage <= 0.0) && (anvil <= 0.0 || anvil_coverage <= 0.0)) {
     return d;
   }
 #endif
@@ -227,7 +224,8 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
    * downwind and rise; the coverage/type field itself never moves (GDC22, SPEC 1.3.1). */
   vec3 wind_dir = vec3(P.wind.xy, 0.0);
   vec3 drift = (wind_dir + vec3(0.0, 0.0, P.wind2.y)) * P.wind.z;
-  /* The anvil also leans downwind (GDC22: noises rotated and skewed for a wind-swept look). */
+  /* The anvil also leans downwind (GDC22: noises rotated and skewed for a wind-swept look), from the
+   * column's own height and storm coverage, which are smooth where the anvil takes over. */
   vec3 skewed = p - h * wind_dir * (P.wind2.x + storm * h * 4.0 * P.wind2.x);
   vec3 p_lf = skewed - drift;
 
@@ -245,11 +243,24 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
   }
   float lf_fbm = dot(lf.gba, NUBIS_FBM_WEIGHTS);
   /* SPEC 1.6.2, GPU Pro 7: the Worley fBm dilates the Perlin-Worley base shape. */
-  float base = remap(lf.r, -(1.0 - lf_fbm), 1.0, 0.0, 1.0) * profile;
-  /* SPEC 6 Q1: GDC22's 1 - coverage, so clouds inflate as coverage rises; GPU Pro 7's
-   * "smaller clouds are lighter" multiply is the option in P.density.w. */
-  float with_coverage = clamp01(remap(base, 1.0 - coverage, 1.0, 0.0, 1.0));
+  float shape = remap(lf.r, -(1.0 - lf_fbm), 1.0, 0.0, 1.0);
+  /* GDC22's 1 - coverage, so clouds inflate as coverage rises; GPU Pro 7's "smaller clouds are
+   * lighter" multiply is the option in P.density.w. */
+  float with_coverage = clamp01(remap(shape * profile, 1.0 - coverage, 1.0, 0.0, 1.0));
   with_coverage *= mix(1.0, coverage, P.density.w);
+  /* The height the detail noise is shaped by: where the anvil is the larger shape its detail turns
+   * to billows (not the wisps of a cloud base), in proportion, so nothing jumps. */
+  float detail_h = h;
+#if NUBIS_STORMS
+  float anvil_density = clamp01(remap(shape * anvil, 1.0 - anvil_coverage, 1.0, 0.0, 1.0));
+  /* Only where the anvil's profile reaches past the column's, as GDC22's max of the two profiles,
+   * faded in over a short range of profile instead of switched. */
+  anvil_density *= mix(1.0, anvil_coverage, P.density.w) * smoothstep(-0.1, 0.1, anvil - profile);
+  if (anvil_density > 0.0) {
+    detail_h = mix(h, max(h, 0.9), anvil_density / (anvil_density + with_coverage));
+    with_coverage = max(with_coverage, anvil_density);
+  }
+#endif
   float multiplier = max(f.b.a, 0.0);
   d.coarse = with_coverage * multiplier;
 #if NUBIS_NAIVE
@@ -270,14 +281,14 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
   float ring_weight;
   vec2 turned = nubis_vortex(p.xy, second, ring_weight);
   int hf_level = int(lod + 0.5);
-  float hf_fbm = nubis_detail_fbm(vec3(p_hf.xy + (turned - p.xy), p_hf.z), h, hf_level);
+  float hf_fbm = nubis_detail_fbm(vec3(p_hf.xy + (turned - p.xy), p_hf.z), detail_h, hf_level);
   if (ring_weight > 0.0) {
-    hf_fbm = mix(hf_fbm, nubis_detail_fbm(vec3(p_hf.xy + (second - p.xy), p_hf.z), h, hf_level), ring_weight);
+    hf_fbm = mix(hf_fbm, nubis_detail_fbm(vec3(p_hf.xy + (second - p.xy), p_hf.z), detail_h, hf_level), ring_weight);
   }
   /* GPU Pro 7: the stored (inverted) Worley fBm erodes the base into wisps, and flipped back it carves
    * billows above the lowest 10 %. SPEC 7.1: a
    * rising bottom type keeps the wisps higher up the cloud, for ragged undersides (GDC22). */
-  float billow = clamp01(h * mix(10.0, 2.0, clamp01(f.a.a)));
+  float billow = clamp01(detail_h * mix(10.0, 2.0, clamp01(f.a.a)));
   float hf_modifier = mix(hf_fbm, 1.0 - hf_fbm, billow);
   /* GPU Pro 7: erosion strength 0.2; the remap never raises a value, so fine <= coarse. */
   float eroded = clamp01(remap(with_coverage, hf_modifier * P.density.z, 1.0, 0.0, 1.0));

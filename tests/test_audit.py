@@ -65,3 +65,40 @@ def test_cirrus_dims_the_clouds_but_keeps_their_powder_edges(make_scene):
     assert edges > 0.02, "the test needs visible powder edges"
     assert abs(veiled_edges - edges) <= 0.1 * edges
     assert lum(veiled).mean() < 0.95 * lum(plain).mean()  # the cirrus still dims the clouds
+
+
+def test_the_anvil_takes_over_without_a_step(make_scene):
+    """Where a superstorm's anvil took over from the column's own profile (GDC22's flipped profile), the
+    coverage, the detail's height and the shape-noise skew jumped together, a crease in the storm top.
+    Through 300 vertical profiles of the superstorm's top, 2 m apart, no step in density may stand out
+    from the steps around it (the old takeover made steps over 4 times the largest of its neighbours;
+    the 8-bit noise's own filtering kinks stay near 2). Cloud edges, where the density falls to zero,
+    are sharp by design and left out."""
+    from nubis_addon.blender import runtime, scene_io
+    from nubis_addon.render.probe import probe_density
+
+    scene = make_scene("superstorm")
+    state = scene_io.state_from_scene(scene)
+    clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
+    clouds.update(state)
+    storm = state.storms[0]
+    _lo, hi = state.shell()
+    band_bottom = hi - 0.22 * (hi - state.params["layer_bottom"])
+    z = np.arange(band_bottom - 100.0, hi, 2.0)
+    rng = np.random.default_rng(11)
+    r = storm.radius * np.sqrt(rng.uniform(0.0, 1.0, 300))
+    a = rng.uniform(0.0, 2.0 * np.pi, 300)
+    columns = [(storm.x + ri * np.cos(ai), storm.y + ri * np.sin(ai)) for ri, ai in zip(r, a, strict=True)]
+    pts = np.concatenate([np.stack([np.full_like(z, x), np.full_like(z, y), z], axis=1) for x, y in columns])
+    density = probe_density(clouds, pts.astype(np.float32))[:, 0].astype(np.float64).reshape(len(columns), len(z))
+    assert (density.max(axis=1) > 0.05).sum() > 50, "the test needs the anvil in many columns"
+    steps = np.abs(np.diff(density, axis=1))
+    # A cloud's edge, where the erosion cuts the density to zero, is sharp by design: not a crease.
+    inside = (density[:, :-1] > 1e-4) & (density[:, 1:] > 1e-4)
+    steps = np.where(inside, steps, 0.0)
+    k = 8
+    worst = 0.0
+    for i in range(k, steps.shape[1] - k):
+        around = np.concatenate([steps[:, i - k : i - 1], steps[:, i + 2 : i + k + 1]], axis=1).max(axis=1)
+        worst = max(worst, float((steps[:, i] / (around + 2e-3)).max()))
+    assert worst < 3.0
