@@ -14,7 +14,7 @@ def test_cirrus_covers_the_clouds_seen_from_above(make_scene):
     from nubis_addon.blender import pipeline
 
     def render(**overrides):
-        scene = make_scene("default", **{"cirrus_opacity": 4.0, "cirrus_coverage": 3.0, **overrides})
+        scene = make_scene("default", **{"cirrus_opacity": 8.0, "cirrus_coverage": 3.0, **overrides})
         scene.camera.location = (0.0, 0.0, 20000.0)
         scene.camera.rotation_euler = (0.0, 0.0, 0.0)  # straight down
         shot = pipeline.viewport_shot(scene, 64, 64)
@@ -24,7 +24,7 @@ def test_cirrus_covers_the_clouds_seen_from_above(make_scene):
     full = render()
     clouds = render(cirrus_coverage=0.0)
     cirrus = render(density_coverage=0.0)
-    both = (cirrus[..., 3] > 0.5) & (clouds[..., 3] > 0.5)
+    both = (cirrus[..., 3] > 0.8) & (clouds[..., 3] > 0.5)
     assert both.sum() > 30, "the test needs thick cirrus over thick cloud"
     front = np.abs(full - _over(cirrus, clouds))[both].mean()
     behind = np.abs(full - _over(clouds, cirrus))[both].mean()
