@@ -88,7 +88,11 @@ float nubis_ring_angle(int ring, float u, float spin, float time)
 }
 
 /* Detail-noise sample position after every storm's vortex; `second` and `weight` return the
- * position in the neighbouring ring where two rings overlap (weight 0: one sample suffices). */
+ * position in the neighbouring ring where two rings overlap (weight 0: one sample suffices).
+ * The time is each storm's vortex time (render/uniforms.py): the lifecycle fade integrated over the
+ * animation, so a growing storm turns ever faster up to its spin and never sweeps an accumulated
+ * angle in. The angles are not faded: how much of the detail is turned at all is
+ * nubis_vortex_unturned's, so every angle stays whole turns apart across the vortex time's wrap. */
 vec2 nubis_vortex(vec2 xy, out vec2 second, out float weight)
 {
   second = xy;
@@ -102,10 +106,8 @@ vec2 nubis_vortex(vec2 xy, out vec2 second, out float weight)
       continue;
     }
     float u = 6.0 * dist / shape.z;
-    /* The rotation dies out over the outer rim so the storm's edge has no seam, and grows in with
-     * the lifecycle blend (GDC22: the storm transitions seamlessly from cloud). */
-    float fade = (1.0 - smoothstep(5.0, 6.0, u)) * smoothstep(0.0, 0.25, shape.w);
     float spin = P.storm_light[i].x;
+    float time = P.storm_flash[i].w;
     const float overlap = 0.3; /* in ring widths */
     float boundary = floor(u + 0.5);
     float e = u - boundary;
@@ -114,24 +116,46 @@ vec2 nubis_vortex(vec2 xy, out vec2 second, out float weight)
       /* PS4 quality (GDC22): one sample, the ring boundary jittered instead of blended. */
       float jitter = fract(sin(dot(xy, vec2(12.9898, 78.233))) * 43758.5453) - 0.5;
       ring = clamp(int(floor(u + jitter * overlap)), 0, 5);
-      float angle = nubis_ring_angle(ring, u, spin, P.storm_flash[i].w) * fade;
+      float angle = nubis_ring_angle(ring, u, spin, time);
       xy = nubis_rotate_about(xy, shape.xy, angle);
       second = nubis_rotate_about(second, shape.xy, angle); /* an earlier storm's second sample turns too */
     }
     else if (abs(e) < 0.5 * overlap && boundary >= 1.0 && boundary <= 5.0) {
       int inner = int(boundary) - 1;
       weight = smoothstep(-0.5 * overlap, 0.5 * overlap, e);
-      second = nubis_rotate_about(xy, shape.xy, nubis_ring_angle(inner + 1, u, spin, P.storm_flash[i].w) * fade);
-      xy = nubis_rotate_about(xy, shape.xy, nubis_ring_angle(inner, u, spin, P.storm_flash[i].w) * fade);
+      second = nubis_rotate_about(xy, shape.xy, nubis_ring_angle(inner + 1, u, spin, time));
+      xy = nubis_rotate_about(xy, shape.xy, nubis_ring_angle(inner, u, spin, time));
     }
     else {
-      float angle = nubis_ring_angle(ring, u, spin, P.storm_flash[i].w) * fade;
+      float angle = nubis_ring_angle(ring, u, spin, time);
       xy = nubis_rotate_about(xy, shape.xy, angle);
       second = nubis_rotate_about(second, shape.xy, angle);
     }
   }
 #endif
   return xy;
+}
+
+/* How much of the detail at world `xy` is not turned by any storm: the rotation dies out over each
+ * storm's outer rim, so its edge has no seam, and grows in with the lifecycle blend (GDC22: the storm
+ * transitions seamlessly from cloud). The turned and the unturned detail are blended by it rather
+ * than the angle faded, which would sweep the angle through the ramp and break the wrap. */
+float nubis_vortex_unturned(vec2 xy)
+{
+  float turned = 0.0;
+#if NUBIS_STORMS
+  int count = min(int(P.storm_info.x), NUBIS_MAX_STORMS);
+  for (int i = 0; i < count; i++) {
+    vec4 shape = P.storm_shape[i];
+    float dist = distance(xy, shape.xy);
+    if (shape.w <= 0.0 || dist >= shape.z) {
+      continue;
+    }
+    float share = (1.0 - smoothstep(5.0, 6.0, 6.0 * dist / shape.z)) * smoothstep(0.0, 0.25, shape.w);
+    turned = max(turned, share);
+  }
+#endif
+  return 1.0 - turned;
 }
 
 /* Detail fBm at a (wind-moved) position, with the curl twist at the base. */
@@ -285,6 +309,18 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
   if (ring_weight > 0.0) {
     hf_fbm = mix(hf_fbm, nubis_detail_fbm(vec3(p_hf.xy + (second - p.xy), p_hf.z), detail_h, hf_level), ring_weight);
   }
+#if NUBIS_STORMS
+  float unturned = nubis_vortex_unturned(p.xy);
+  if (P.options.y > 0.5) {
+    /* PS4 quality: one sample, the turned or the unturned detail by a hashed choice. */
+    if (fract(sin(dot(p.xy, vec2(39.3468, 11.135))) * 24634.6345) < unturned) {
+      hf_fbm = nubis_detail_fbm(p_hf, detail_h, hf_level);
+    }
+  }
+  else if (unturned > 0.0 && unturned < 1.0) {
+    hf_fbm = mix(hf_fbm, nubis_detail_fbm(p_hf, detail_h, hf_level), unturned);
+  }
+#endif
   /* GPU Pro 7: the stored (inverted) Worley fBm erodes the base into wisps, and flipped back it carves
    * billows above the lowest 10 %. SPEC 7.1: a
    * rising bottom type keeps the wisps higher up the cloud, for ragged undersides (GDC22). */

@@ -2,14 +2,17 @@
  * temporal resolve. Requires nubis_common_lib.glsl and the NubisParams block `P`; no textures. */
 
 /* The rate (radians per second) at which the detail noise at `xy` turns inside storm `i`: the same
- * rings, ring blend and fades as nubis_vortex, differentiated in time. The vortex reads the noise at
+ * rings and ring blend as nubis_vortex, differentiated in time, times the share of turned detail. The vortex reads the noise at
  * rotate(p, +angle(t)), so a feature seen at p now was at rotate(p, +rate * dt) dt seconds ago: the
  * visible vortex turns clockwise for a positive spin. */
 float nubis_storm_turn_rate(vec2 xy, int i)
 {
   vec4 shape = P.storm_shape[i];
   float u = 6.0 * distance(xy, shape.xy) / shape.z;
-  float fade = (1.0 - smoothstep(5.0, 6.0, u)) * smoothstep(0.0, 0.25, shape.w);
+  /* The vortex time runs at the lifecycle fade `grow`, and of the detail only the share `grow` x rim
+   * turns (nubis_vortex_unturned): what is seen moves at the turned detail's rate times its share. */
+  float grow = smoothstep(0.0, 0.25, shape.w);
+  float fade = (1.0 - smoothstep(5.0, 6.0, u)) * grow * grow;
   float spin = P.storm_light[i].x;
   const float overlap = 0.3; /* in ring widths, as nubis_vortex */
   float boundary = floor(u + 0.5);

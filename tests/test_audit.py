@@ -102,3 +102,76 @@ def test_the_anvil_takes_over_without_a_step(make_scene):
         around = np.concatenate([steps[:, i - k : i - 1], steps[:, i + 2 : i + k + 1]], axis=1).max(axis=1)
         worst = max(worst, float((steps[:, i] / (around + 2e-3)).max()))
     assert worst < 3.0
+
+
+def _vortex_angle(scene, frames, where):
+    """The angle (radians, unwrapped over `frames`) by which the vortex turns the detail noise at the
+    world points `where` (N, 2), the storm's blend, and the simulated time at each frame."""
+    from nubis_addon.blender import runtime, scene_io
+    from nubis_addon.render.probe import probe_vortex
+
+    storm = scene.nubis.storms[0]
+    cx, cy = scene_io.storm_centre(storm)
+    clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
+    angles, blends, times = [], [], []
+    for f in frames:
+        scene.frame_set(int(f))
+        state = scene_io.state_from_scene(scene)
+        clouds.update(state)
+        moved = probe_vortex(clouds, where)[:, :2]
+        angles.append(np.arctan2(moved[:, 1] - cy, moved[:, 0] - cx) - np.arctan2(where[:, 1] - cy, where[:, 0] - cx))
+        blends.append(storm.blend)
+        times.append(state.time)
+    return np.unwrap(np.array(angles), axis=0), np.array(blends), np.array(times)
+
+
+def _ring_points(scene, rings):
+    from nubis_addon.blender import scene_io
+
+    storm = scene.nubis.storms[0]
+    cx, cy = scene_io.storm_centre(storm)
+    u = np.asarray(rings, np.float64)
+    return np.stack([cx + u / 6.0 * storm.radius, np.full_like(u, cy)], axis=1).astype(np.float32)
+
+
+def test_a_lifecycle_ramp_turns_the_vortex_at_its_spin(make_scene, blender):
+    """A storm keyed to grow in over 4 s must turn at most at its spin while it grows: its angle used
+    to be faded as a whole, so the ramp swept the whole accumulated angle in, a whirl."""
+    scene = make_scene("superstorm", field_resolution=128)  # the field re-composites every frame
+    storm = scene.nubis.storms[0]
+    storm.spin = 0.5
+    scene.nubis.wind_time_offset = 600.0  # ten minutes into the simulation: a large accumulated angle
+    scene.frame_set(1)
+    scene.nubis.active_storm = 0
+    assert blender.ops.nubis.storm_lifecycle(ramp_in=4.0, hold=2.0, ramp_out=4.0) == {"FINISHED"}
+    angle, blends, times = _vortex_angle(scene, np.arange(2, 24 * 11, 2), _ring_points(scene, [0.5, 2.5]))
+    live = blends > 0
+    assert live.sum() > 50
+    angle, times = angle[live], times[live]
+    step = np.abs(np.diff(angle, axis=0))
+    dt = np.diff(times)[:, None]
+    ring_speed = storm.spin * np.array([1.0, 1.0 - 2 / 6])  # rings 0 and 2 turn at 6/6 and 4/6 of the spin
+    assert (step <= ring_speed * dt * 1.05 + 1e-5).all()
+    turned = np.abs(angle - angle[0])
+    assert (turned[:, 0] <= storm.spin * (times - times[0]) * 1.05 + 1e-5).all()
+    assert turned[-1, 0] > 0.3 * storm.spin * (times[-1] - times[0])  # and it does turn
+
+
+def test_the_vortex_has_no_jump_at_its_time_wrap(make_scene, blender):
+    """The vortex time is wrapped to whole turns for float precision. A storm under blend 0.25 (its
+    vortex faded) and the outer rim used to jump at every wrap: 12 pi / spin, 75 s at 0.5 rad/s."""
+    import math
+
+    from nubis_addon.core.storms import vortex_fade
+
+    scene = make_scene("superstorm", field_resolution=128)
+    storm = scene.nubis.storms[0]
+    storm.spin = 0.5
+    storm.blend = 0.1
+    s = scene.nubis
+    fps = scene.render.fps / scene.render.fps_base
+    wrap = 12.0 * math.pi / storm.spin / float(vortex_fade(storm.blend))  # simulated seconds
+    frame = int((wrap - s.wind_time_offset) / s.wind_time_scale * fps)
+    angle, _blends, times = _vortex_angle(scene, np.arange(frame - 3, frame + 4), _ring_points(scene, [0.5, 5.5]))
+    step = np.abs(np.diff(angle, axis=0))
+    assert (step <= storm.spin * np.diff(times)[:, None] * 1.05 + 1e-4).all()

@@ -259,3 +259,18 @@ def test_lightning_positions_are_set_before_each_flash():
         assert gap >= 10  # the pauses between flashes are 0.4-1.5 s at 24 fps
         # No flash is still lit at a position key of the next one.
         assert all(k["frame"] < after["frame"] for k in lit if (k["x"], k["y"]) == (before["x"], before["y"]))
+
+
+def test_vortex_time_integrates_the_lifecycle_fade():
+    from nubis_addon.core.storms import vortex_fade, vortex_time
+
+    assert float(vortex_fade(0.0)) == 0.0 and float(vortex_fade(0.25)) == 1.0 and float(vortex_fade(1.0)) == 1.0
+    t = np.linspace(0.0, 10.0, 11)
+    # A steady storm: the vortex time is the time itself, scaled by the fade.
+    assert vortex_time(t, np.full(11, 1.0), 7.5) == pytest.approx(7.5)
+    assert vortex_time(t, np.full(11, 0.1), 7.5) == pytest.approx(7.5 * float(vortex_fade(0.1)))
+    # Growing in from nothing: it never runs faster than time, and starts at zero.
+    ramp = np.clip(t / 10.0, 0.0, 1.0)
+    taus = [vortex_time(t, ramp, x) for x in np.linspace(0.0, 10.0, 41)]
+    assert taus[0] == 0.0
+    assert all(0.0 <= b - a <= 0.25 + 1e-9 for a, b in zip(taus, taus[1:], strict=False))

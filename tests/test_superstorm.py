@@ -182,13 +182,14 @@ def test_motion_vectors_follow_the_rendered_vortex(make_scene):
 
 
 def test_motion_vectors_fade_in_with_the_storm(make_scene):
-    """While a storm grows in (lifecycle blend under 0.25) its vortex turns slower by the same fade the
-    density applies, smoothstep(0, 0.25, blend); the motion vectors must slow down with it."""
+    """While a storm grows in (lifecycle blend under 0.25) its vortex turns slower by the density's
+    fade, smoothstep(0, 0.25, blend), and only that share of its detail turns at all: the motion
+    vectors slow down by the fade squared."""
     *_, full = _vortex_views(make_scene, 1.0)
     *_, young = _vortex_views(make_scene, 0.1)
     fade = 0.1 / 0.25
     fade = fade * fade * (3.0 - 2.0 * fade)
-    assert young / full == pytest.approx(fade, rel=0.05)
+    assert young / full == pytest.approx(fade * fade, rel=0.05)
 
 
 def test_removing_a_storm_keeps_the_others_animation(storm_scene, blender):

@@ -143,7 +143,38 @@ def storm_stencils(settings, params) -> list:
     return out
 
 
-def storm_lights(settings) -> tuple[StormLight, ...]:
+_vortex_cache: dict = {}
+
+
+def _vortex_time(scene, index: int, storm, time: float) -> float | None:
+    """The vortex time of storm `index` when its blend is animated: the lifecycle fade integrated over
+    the frames from 0 to now (core/storms.py), sampled once per frame and cached per F-curve."""
+    if scene is None:
+        return None
+    path = f"nubis.storms[{index}].blend"
+    curve = next((fc for fc in fcurves(scene) if fc.data_path == path), None)
+    if curve is None:
+        return None
+    s = scene.nubis
+    fps = scene.render.fps / scene.render.fps_base
+    offset = s.wind_time_offset
+    if time <= offset or s.wind_time_scale <= 0:
+        return float(time * stormgen.vortex_fade(storm.blend))
+    last = int(math.ceil(scene.frame_current + scene.frame_subframe)) + 1
+    keys = tuple((k.co[0], k.co[1], k.interpolation) for k in curve.keyframe_points)
+    key = (scene.as_pointer(), path, keys, fps, s.wind_time_scale, offset)
+    cached = _vortex_cache.get(key)
+    if cached is None or len(cached[0]) < last + 1:
+        frames = np.arange(0, max(last, 2 * len(cached[0]) if cached else 0) + 1, dtype=np.float64)
+        if len(_vortex_cache) > 64:
+            _vortex_cache.clear()
+        blends = np.array([curve.evaluate(f) for f in frames])
+        _vortex_cache[key] = cached = (frames / fps * s.wind_time_scale + offset, blends)
+    return float(stormgen.vortex_time(cached[0], cached[1], time))
+
+
+def storm_lights(settings, scene=None, time: float = 0.0) -> tuple[StormLight, ...]:
+    """The storms as the renderer needs them; given the scene, animated lifecycles get their vortex time."""
     return tuple(
         StormLight(
             *storm_centre(s),
@@ -158,8 +189,9 @@ def storm_lights(settings) -> tuple[StormLight, ...]:
             flash_x=s.flash_x,
             flash_y=s.flash_y,
             flash_ground=s.flash_ground,
+            vortex_time=_vortex_time(scene, i, s, time),
         )
-        for s in list(settings.storms)[:MAX_STORMS]
+        for i, s in enumerate(list(settings.storms)[:MAX_STORMS])
     )
 
 
@@ -379,7 +411,7 @@ def state_from_scene(scene, camera_location=None, fields: tuple | None = None) -
         ambient=world_ambient(scene) if settings.ambient_source == "WORLD" else tuple(settings.ambient_color),
         draw_center=(float(camera_location[0]), float(camera_location[1])),
         time=time,
-        storms=storm_lights(settings),
+        storms=storm_lights(settings, scene, time),
     )
 
 

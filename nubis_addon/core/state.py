@@ -30,6 +30,9 @@ class StormLight:
     flash_x: float = 0.0  # the flash's offset from the storm centre (m)
     flash_y: float = 0.0
     flash_ground: float = 0.0  # 1 for a ground discharge (adds the external flash)
+    # Seconds of vortex motion so far: the lifecycle fade integrated over time (core/storms.py,
+    # vortex_time); None when the blend is not animated, which makes it time x fade(blend).
+    vortex_time: float | None = None
 
 
 MAX_STORMS = 4

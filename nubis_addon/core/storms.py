@@ -338,3 +338,30 @@ def lightning_position_keys(keys: list[dict[str, float]]) -> list[dict[str, floa
         frame = k["frame"] - FLASH_MASK_LEAD if i == 0 else min(ends[i - 1] + 1, k["frame"])
         out.append({"frame": frame, "x": k["x"], "y": k["y"], "ground": k["ground"]})
     return out
+
+
+def vortex_fade(blend):
+    """How fast a storm's vortex turns at a lifecycle blend, relative to its spin: GLSL's
+    smoothstep(0, 0.25, blend), as the density fades the storm in (GDC22)."""
+    t = np.clip(np.asarray(blend, np.float64) / 0.25, 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def vortex_time(times: np.ndarray, blends: np.ndarray, t: float) -> float:
+    """The storm's vortex time at time `t`: vortex_fade(blend) integrated over time, from the first
+    sample (where it is that sample's time times its fade) to `t`, the fade linear between samples.
+    The vortex angle is vortex time x ring speed, so a ramp turns the storm at most at its spin."""
+    times = np.asarray(times, np.float64)
+    fades = vortex_fade(blends)
+    if len(times) == 0:
+        return 0.0
+    start = float(times[0] * fades[0])
+    if t <= times[0] or len(times) == 1:
+        return start + (t - float(times[0])) * float(fades[0])
+    cumulative = np.concatenate([[0.0], np.cumsum(0.5 * (fades[1:] + fades[:-1]) * np.diff(times))])
+    i = int(np.searchsorted(times, t, side="right")) - 1
+    if i >= len(times) - 1:
+        return start + float(cumulative[-1]) + (t - float(times[-1])) * float(fades[-1])
+    w = (t - times[i]) / (times[i + 1] - times[i])
+    fade_t = fades[i] + w * (fades[i + 1] - fades[i])
+    return start + float(cumulative[i]) + 0.5 * float(fades[i] + fade_t) * float(t - times[i])

@@ -11,7 +11,7 @@ from functools import cache
 
 import numpy as np
 
-from ..core import march
+from ..core import march, storms
 from ..core.errors import NubisError
 from ..core.state import CloudState, wind_vector
 from .sources import read_shader
@@ -84,7 +84,9 @@ def param_vectors(state: CloudState) -> dict[str, tuple[float, float, float, flo
         "storm_shape": [(s.x, s.y, s.radius, s.blend) for s in state.storms],
         "storm_light": [(s.spin, s.darkening, s.glow, s.ambient_boost) for s in state.storms],
         "storm_glow": [(*s.glow_color, s.flash) for s in state.storms],
-        "storm_flash": [(s.flash_x, s.flash_y, s.flash_ground, _storm_time(state.time, s.spin)) for s in state.storms],
+        "storm_flash": [
+            (s.flash_x, s.flash_y, s.flash_ground, _storm_time(_vortex_time(state, s), s.spin)) for s in state.storms
+        ],
         # motion_dt is already in simulated seconds (time scale included).
         "motion": (state.motion_dt, p["wind_speed"], 0.0, 0.0),
         "clip_box": state.clip_box or (1.0, 1.0, -1.0, -1.0),
@@ -123,6 +125,12 @@ def pack(state: CloudState) -> np.ndarray:
     if not np.all(np.isfinite(data)):
         raise NubisError("non-finite cloud settings: check the scene's Nubis values for NaN or infinity")
     return data
+
+
+def _vortex_time(state: CloudState, storm) -> float:
+    if storm.vortex_time is not None:
+        return storm.vortex_time
+    return state.time * float(storms.vortex_fade(storm.blend))
 
 
 def _storm_time(time: float, spin: float) -> float:
