@@ -268,9 +268,15 @@ def _execute(args, in_blender: bool, log: Path) -> str:
         if args.bounces is not None:
             scene.cycles.volume_bounces = args.bounces
         m = pipeline.compare(scene, out, w, h, args.samples, args.mode, voxel, args.noise_estimate)
+    capped = (
+        f" (reference march in {m['reference_view_steps']} of {scene.nubis.march_steps_max} view steps: "
+        "the shader loop limit)"
+        if m.get("reference_steps_capped")
+        else ""
+    )
     return (
         f"compared {label} ({args.mode}) at {w}x{h}: alpha RMSE {m['alpha_rmse']:.4f}, luminance error "
-        f"{m['luminance_rel_error'] * 100:.1f}%, silhouette IoU {m['silhouette_iou']:.3f} "
+        f"{m['luminance_rel_error'] * 100:.1f}%, silhouette IoU {m['silhouette_iou']:.3f}{capped} "
         f"in {time.perf_counter() - start:.1f} s -> {out}"
     )
 

@@ -175,3 +175,60 @@ def test_the_vortex_has_no_jump_at_its_time_wrap(make_scene, blender):
     angle, _blends, times = _vortex_angle(scene, np.arange(frame - 3, frame + 4), _ring_points(scene, [0.5, 5.5]))
     step = np.abs(np.diff(angle, axis=0))
     assert (step <= storm.spin * np.diff(times)[:, None] * 1.05 + 1e-4).all()
+
+
+def test_reference_marches_reach_the_end_of_the_ray(make_scene):
+    """llvmpipe stops a shader's loops after 65535 iterations in total; a reference march of 400 steps
+    through thin cloud (every step lit) was cut short there, its clouds thinner than the real-time
+    march's. It now takes longer steps within the limit, and sees the same clouds."""
+    from nubis_addon.blender import pipeline
+
+    scene = make_scene("default", density_sigma=0.002, density_coverage=1.0, march_steps_min=400, march_steps_max=400)
+    realtime = pipeline.render_viewport(scene, 32, 18, light_mode=0)
+    reference = pipeline.render_viewport(scene, 32, 18, light_mode=1)
+    assert realtime[..., 3].mean() > 0.03
+    assert np.abs(reference[..., 3] - realtime[..., 3]).max() < 0.01
+
+
+def test_every_march_the_settings_allow_fits_the_loop_limit():
+    from nubis_addon.core import march
+    from nubis_addon.core.params import PARAMS_BY_KEY
+
+    steps = int(PARAMS_BY_KEY["march_steps_max"].max)
+    # The real-time view loop (coarse-to-fine's switches at most double it) with every step lit.
+    assert 2 * steps + steps * (march.MAX_LIGHT_TAPS + 8) <= march.LOOP_LIMIT
+    assert march.REFERENCE_MAX_STEPS * march.REFERENCE_ITERATIONS_PER_STEP + 512 <= march.LOOP_LIMIT
+    assert march.reference_steps(128) == 128 and march.reference_steps(400) == march.REFERENCE_MAX_STEPS
+
+
+def test_compare_says_when_the_reference_march_takes_longer_steps(tmp_path):
+    import json
+
+    from conftest import ROOT, run_cli
+
+    preset = tmp_path / "long.toml"
+    text = (ROOT / "presets" / "default.toml").read_text()
+    assert "[march]" not in text
+    preset.write_text(text + "\n[march]\nsteps_min = 300\nsteps_max = 400\n")
+    out = tmp_path / "cmp"
+    r = run_cli(
+        "compare",
+        "--preset",
+        str(preset),
+        "--out",
+        str(out),
+        "--width",
+        "16",
+        "--height",
+        "9",
+        "--samples",
+        "2",
+        "--voxel-size",
+        "400",
+    )
+    assert r.returncode == 0, r.stderr
+    from nubis_addon.core.march import REFERENCE_MAX_STEPS
+
+    assert f"reference march in {REFERENCE_MAX_STEPS} of 400 view steps" in r.stdout
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["reference_view_steps"] == REFERENCE_MAX_STEPS and metrics["reference_steps_capped"] is True

@@ -13,7 +13,7 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from ..core import camera, imageio, metrics, vdbio
+from ..core import camera, imageio, march, metrics, vdbio
 from ..core.bakeplan import BakePlan, comparison_voxel_size, plan_bake, view_footprint
 from ..core.errors import NubisError
 from ..core.fsutil import atomic_path, check_output_dir, check_output_path
@@ -288,6 +288,10 @@ def compare(
         result["cone_march_vs_reference"] = {
             k: cone[k] for k in ("alpha_rmse", "luminance_rel_error", "luminance_bias")
         }
+    # The reference march keeps within the shader loop limit by taking longer steps (core/march.py).
+    steps_max = scene.nubis.march_steps_max
+    result["reference_view_steps"] = march.reference_steps(steps_max)
+    result["reference_steps_capped"] = result["reference_view_steps"] < steps_max
     result.update(
         mode=mode,
         viewport_supersampling=ss,

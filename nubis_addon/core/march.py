@@ -71,3 +71,22 @@ def bayer_offset(index: int) -> tuple[int, int]:
         if index in row:
             return row.index(index), y
     raise AssertionError("BAYER4 is a permutation of 0-15")
+
+
+# Mesa's llvmpipe stops a shader's loops after 65535 iterations in total (its loop limiter), which cut
+# long reference marches short without a word. A reference view sample that is lit costs 1 iteration
+# of the view loop, 48 of the reference light march, 12 x (16 + 1) of the sky visibility and up to 8
+# of the octaves; the per-ray set-up and the coarse search stay within the margin.
+LOOP_LIMIT = 65535
+REFERENCE_ITERATIONS_PER_STEP = 1 + 48 + 12 * 17 + 8
+REFERENCE_MAX_STEPS = (LOOP_LIMIT - 512) // REFERENCE_ITERATIONS_PER_STEP
+# The real-time march: the view loop (at most twice the steps with coarse-to-fine's switches), light
+# taps and octaves per lit step.
+REALTIME_ITERATIONS_PER_STEP = 1 + MAX_LIGHT_TAPS + 8
+
+
+def reference_steps(steps_max: int) -> int:
+    """The view steps the reference march takes at most: the scene's own, or fewer where the loop
+    limit would otherwise cut the march short (then each step is longer, and the ray still ends where
+    it should)."""
+    return min(int(steps_max), REFERENCE_MAX_STEPS)
