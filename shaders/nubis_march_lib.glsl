@@ -132,11 +132,9 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out v
   float thickness = P.shell.y - P.shell.x;
   float k = clamp01((seg - thickness) / max(P.layer.w - thickness, 1.0));
   int steps = int(mix(P.march.x, P.march.y, k));
-#if NUBIS_REFERENCE
-  /* Within the platform's loop limit (core/march.py, REFERENCE_MAX_STEPS): longer steps, never a ray
-   * cut short. */
-  steps = min(steps, NUBIS_REFERENCE_MAX_STEPS);
-#endif
+  /* Within the platform's loop limit (core/march.py, max_steps, in P.view.w): longer steps, never a
+   * ray cut short. */
+  steps = min(steps, int(P.view.w));
   float dt = seg / float(steps);
   /* Per-pixel start offset, hiding step banding as fine grain; each accumulation pass (options.z)
    * shifts it by the golden ratio so N passes cover the step evenly. */

@@ -30,7 +30,8 @@ struct NubisParams {
   vec4 motion;              /* timestep of the motion vectors in seconds, wind speed (m/s), -, - */
   vec4 clip_box;   /* x0, y0, x1, y1: no clouds outside (a comparison clips to the baked box); x1 < x0: off */
   vec4 options;    /* jitter (0/1), jittered storm rings (0/1), accumulation pass, - */
-  vec4 view;       /* pixel footprint: metres per metre of distance, metres (orthographic), base mip, - */
+  vec4 view;       /* pixel footprint: metres per metre of distance, metres (orthographic), base mip,
+                    * most view steps within the shader loop limit */
   vec4 light_taps[16]; /* the light march's taps (core/march.py): offset from the point, length it stands for */
 };
 

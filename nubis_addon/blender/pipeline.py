@@ -290,7 +290,8 @@ def compare(
         }
     # The reference march keeps within the shader loop limit by taking longer steps (core/march.py).
     steps_max = scene.nubis.march_steps_max
-    result["reference_view_steps"] = march.reference_steps(steps_max)
+    storms = len(scene_io.storm_lights(scene.nubis))
+    result["reference_view_steps"] = min(steps_max, march.max_steps(scene.nubis.march_light_samples, storms, True))
     result["reference_steps_capped"] = result["reference_view_steps"] < steps_max
     result.update(
         mode=mode,

@@ -74,19 +74,24 @@ def bayer_offset(index: int) -> tuple[int, int]:
 
 
 # Mesa's llvmpipe stops a shader's loops after 65535 iterations in total (its loop limiter), which cut
-# long reference marches short without a word. A reference view sample that is lit costs 1 iteration
-# of the view loop, 48 of the reference light march, 12 x (16 + 1) of the sky visibility and up to 8
-# of the octaves; the per-ray set-up and the coarse search stay within the margin.
+# long marches short without a word. What one view step costs in loop iterations, with n storms
+# (each density call turns through n vortices, each extinction call darkens by n storms, and the
+# storm glow, flash and ambient loop over them once per lit step):
+#   any step          1 + n                       (the view loop and its density call)
+#   a lit step adds   8 + 4n + the light march    (octaves; extinction, glow, flash, ambient)
+#   real-time light   taps x (1 + 2n)
+#   reference light   48 x (1 + 2n), and the sky: 12 x (1 + 16 x (1 + 2n))
 LOOP_LIMIT = 65535
-REFERENCE_ITERATIONS_PER_STEP = 1 + 48 + 12 * 17 + 8
-REFERENCE_MAX_STEPS = (LOOP_LIMIT - 512) // REFERENCE_ITERATIONS_PER_STEP
-# The real-time march: the view loop (at most twice the steps with coarse-to-fine's switches), light
-# taps and octaves per lit step.
-REALTIME_ITERATIONS_PER_STEP = 1 + MAX_LIGHT_TAPS + 8
+_MARGIN = 512  # per-ray set-up, the octaves' phases, the cirrus
 
 
-def reference_steps(steps_max: int) -> int:
-    """The view steps the reference march takes at most: the scene's own, or fewer where the loop
-    limit would otherwise cut the march short (then each step is longer, and the ray still ends where
-    it should)."""
-    return min(int(steps_max), REFERENCE_MAX_STEPS)
+def iterations_per_step(light_taps: int, storms: int, reference: bool) -> int:
+    n = int(storms)
+    light = 48 * (1 + 2 * n) + 12 * (1 + 16 * (1 + 2 * n)) if reference else int(light_taps) * (1 + 2 * n)
+    return (1 + n) + (8 + 4 * n + light)
+
+
+def max_steps(light_taps: int, storms: int, reference: bool) -> int:
+    """The most view steps a march can take within the loop limit, every step lit. Beyond it the march
+    takes longer steps (the ray still ends where it should) rather than being cut short."""
+    return max(8, (LOOP_LIMIT - _MARGIN) // iterations_per_step(light_taps, storms, reference))

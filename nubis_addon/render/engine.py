@@ -10,7 +10,7 @@ import numpy as np
 from gpu.types import GPUShaderCreateInfo, GPUStageInterfaceInfo
 from gpu_extras.batch import batch_for_shader
 
-from ..core import march, noise
+from ..core import noise
 from ..core.state import CloudState
 from . import uniforms
 from .sources import CLOUD_LIBS, assemble, read_shader
@@ -172,8 +172,7 @@ class CloudGPU:
 
     def defines(self, **switches: int) -> dict[str, object]:
         """The permutation for this state, with `switches` (e.g. NUBIS_NAIVE=1) on top."""
-        limits = {"NUBIS_COARSE_STRIDE": 2, "NUBIS_REFERENCE_MAX_STEPS": march.REFERENCE_MAX_STEPS}
-        return {**limits, **self.noise.defines, **self.switches, **switches}
+        return {"NUBIS_COARSE_STRIDE": 2, **self.noise.defines, **self.switches, **switches}
 
     def bind(self, sh: gpu.types.GPUShader, cloud_inputs: bool = True) -> None:
         sh.bind()

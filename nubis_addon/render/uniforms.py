@@ -96,7 +96,7 @@ def param_vectors(state: CloudState) -> dict[str, tuple[float, float, float, flo
             float(state.jitter_pass),
             0.0,
         ),
-        "view": (state.pixel_angle, state.pixel_size, float(p["march_mip"]), 0.0),
+        "view": (state.pixel_angle, state.pixel_size, float(p["march_mip"]), float(state_max_steps(state))),
         "light_taps": [
             tuple(t) for t in march.light_taps(state.sun_direction, p["march_light_step"], p["march_light_samples"])
         ],
@@ -125,6 +125,12 @@ def pack(state: CloudState) -> np.ndarray:
     if not np.all(np.isfinite(data)):
         raise NubisError("non-finite cloud settings: check the scene's Nubis values for NaN or infinity")
     return data
+
+
+def state_max_steps(state: CloudState) -> int:
+    """The view steps this state's march may take within the shader loop limit (core/march.py)."""
+    p = state.params
+    return march.max_steps(p["march_light_samples"], len(state.storms), state.light_mode == 1)
 
 
 def _vortex_time(state: CloudState, storm) -> float:
