@@ -1,0 +1,123 @@
+"""Interrupts: SIGINT and SIGTERM end a run at once, with one line, the conventional exit code
+(128 + signal: 130 and 143) and no temporary file left behind.
+
+Python runs a signal handler only between bytecodes of the main thread, so a Ctrl-C during a long
+Cycles render (C code, minutes) would otherwise wait for the render to finish. Instead the signal's
+number is written to a wake-up pipe by Python's C-level handler, and a watcher thread (Blender
+releases the GIL while it renders) removes every registered temporary path and leaves with
+``os._exit``: no teardown of Blender, which is what crashed after a KeyboardInterrupt.
+
+Commits of staged outputs run inside :func:`deferred`, so an interrupt waits until a set of files
+is either wholly in place or not at all (see ``staging.py``). No bpy here: every command can use it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import signal
+import threading
+from collections.abc import Iterator
+
+MESSAGE = "nubis: interrupted\n"
+SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+_lock = threading.Lock()  # held while dying and while committing outputs
+_paths: dict[str, None] = {}  # registered temporary files and folders, in registration order
+_installed: dict = {}
+
+
+def register(path: str | os.PathLike) -> None:
+    """Remove ``path`` (a file or a whole folder) if the run is interrupted."""
+    _paths[os.fspath(path)] = None
+
+
+def unregister(path: str | os.PathLike) -> None:
+    _paths.pop(os.fspath(path), None)
+
+
+def remove_registered() -> None:
+    """Remove every registered path, newest first (a staging folder may hold a nested one)."""
+    for path in reversed(list(_paths)):
+        remove_path(path)
+    _paths.clear()
+
+
+def remove_path(path: str | os.PathLike) -> None:
+    """Delete a file or a folder tree; a folder that gains a file while it is removed is retried."""
+    for _attempt in range(5):
+        try:
+            if os.path.isdir(path) and not os.path.islink(path):
+                shutil.rmtree(path)
+            else:
+                os.unlink(path)
+            return
+        except FileNotFoundError:
+            return
+        except OSError:
+            continue
+
+
+@contextlib.contextmanager
+def deferred() -> Iterator[None]:
+    """Run a short block (moving outputs into place) that an interrupt must not cut in half."""
+    with _lock:
+        yield
+
+
+def _die(signum: int) -> None:
+    _lock.acquire()  # never released: the process ends here
+    remove_registered()
+    fd = _installed.get("message_fd")
+    if fd is not None:
+        with contextlib.suppress(OSError):
+            os.write(fd, MESSAGE.encode())
+    os._exit(128 + signum)
+
+
+def _watch(read_fd: int) -> None:
+    while True:
+        try:
+            data = os.read(read_fd, 16)
+        except OSError:
+            return
+        if not data:
+            return
+        for signum in data:
+            if signum in SIGNALS:
+                _die(signum)
+
+
+def _ignore_in_main_thread(signum, frame) -> None:
+    """The watcher thread acts on the signal; the main thread only has to keep going."""
+
+
+@contextlib.contextmanager
+def handle_signals(message_fd: int | None = None) -> Iterator[None]:
+    """Within the block, SIGINT and SIGTERM print ``nubis: interrupted`` to ``message_fd`` (the
+    terminal, even while Blender's chatter is redirected to a log), remove the registered temporary
+    paths and exit with 130 or 143. Outside the main thread this does nothing (Python allows signal
+    handlers only there)."""
+    if _installed or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    read_fd, write_fd = os.pipe()
+    os.set_blocking(write_fd, False)
+    previous = {s: signal.getsignal(s) for s in SIGNALS}
+    old_wakeup = signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
+    for s in SIGNALS:
+        signal.signal(s, _ignore_in_main_thread)
+    _installed.update(message_fd=message_fd)
+    watcher = threading.Thread(target=_watch, args=(read_fd,), name="nubis-signals", daemon=True)
+    watcher.start()
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler if handler is not None else signal.SIG_DFL)
+        signal.set_wakeup_fd(old_wakeup)
+        _installed.clear()
+        os.close(write_fd)  # the watcher reads end-of-file and returns
+        watcher.join(timeout=1.0)
+        os.close(read_fd)
