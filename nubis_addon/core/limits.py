@@ -10,7 +10,6 @@ import math
 from collections.abc import Sequence
 
 from .errors import NubisError
-from .tomlfmt import toml_value
 
 # Blender's frame numbers (MAXFRAME in Blender's DNA_scene_types.h is 1048574).
 FRAME_RANGE = (-1048574, 1048574)
@@ -45,7 +44,7 @@ def check_position(what: str, xyz: Sequence[float], fix: str) -> None:
     """A position in metres: finite and within POSITION_MAX of the origin on every axis."""
     if all(math.isfinite(v) and abs(v) <= POSITION_MAX for v in xyz):
         return
-    where = toml_value([float(v) for v in xyz])
+    where = "[" + ", ".join(f"{float(v):g}" for v in xyz) + "]"  # float32 coordinates, shown as written
     raise NubisError(f"{what} is at {where} m, beyond the {POSITION_MAX:g} m from the origin Nubis can render: {fix}")
 
 
