@@ -5,6 +5,7 @@ import subprocess
 import sys
 import textwrap
 import zipfile
+from pathlib import Path
 
 from conftest import ROOT
 
@@ -68,3 +69,24 @@ def test_built_zip_installs_enables_and_unregisters_cleanly(tmp_path):
     env.pop("BLENDER_USER_RESOURCES", None)
     r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=600)
     assert "EXTENSION-OK" in r.stdout, r.stdout[-3000:] + r.stderr[-3000:]
+
+
+def test_ci_runs_readme_command_2_on_both_blender_lines():
+    """CI (`.ci/run`) runs exactly the README's test command, once per Blender line, each line with its
+    own pinned requirements and virtual environment."""
+    import re
+
+    root = Path(__file__).resolve().parents[1]
+    readme = (root / "README.md").read_text()
+    blocks = re.findall(r"```\n(.*?)```", readme, re.S)
+    command_2 = [ln for ln in blocks[1].splitlines() if ln.strip()]
+    assert command_2 == [
+        "./.ci/setup && .venv/bin/python -m pytest -q",
+        "./.ci/setup 4.5 && .venv-4.5/bin/python -m pytest -q",
+    ]
+    run = (root / ".ci" / "run").read_text()
+    assert all(f"{line} || status=1" in run for line in command_2)
+    assert "bpy==5.0.1" in (root / ".ci" / "requirements.txt").read_text().splitlines()
+    assert "bpy==4.5.15" in (root / ".ci" / "requirements-4.5.txt").read_text().splitlines()
+    manifest = (root / "blender_manifest.toml").read_text()
+    assert 'blender_version_min = "4.5.0"' in manifest
