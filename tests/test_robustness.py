@@ -296,3 +296,68 @@ def test_a_saved_scene_beyond_reach_is_refused(make_scene):
         scene_io.add_storm(scene, {"x": 1000.0 * i})
     with pytest.raises(NubisError, match="superstorms: 5 given, but a scene holds at most 4: remove 1 of them"):
         pipeline.check_scene(scene)
+
+
+def test_sigterm_while_the_bake_is_written_leaves_no_partial_file(tmp_path):
+    """SIGTERM while writing left a partial hidden `.x-XXXX.vdb` (mode 0600) beside the output."""
+    env = _tmp_env(tmp_path)
+    good = tmp_path / "clouds.vdb"
+    good.write_bytes(b"the previous good bake")
+    proc = _start(["bake", "--out", str(good)], env)
+    _wait_for(lambda: any(tmp_path.glob(".nubis-tmp-*")), timeout=120)  # the write has begun
+    proc.send_signal(signal.SIGTERM)
+    _, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 143 and stderr.strip() == "nubis: interrupted", stderr
+    assert good.read_bytes() == b"the previous good bake"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["clouds.vdb", "tmpdir"]
+    assert list(Path(env["TMPDIR"]).iterdir()) == []
+
+
+def test_output_sets_move_together_or_not_at_all(tmp_path):
+    from nubis_addon.core import staging
+
+    (tmp_path / "a.txt").write_text("old a")
+    (tmp_path / "b.txt").write_text("old b")
+    with pytest.raises(RuntimeError), staging.output_set() as outputs:
+        outputs.stage(tmp_path / "a.txt").write_text("new a")
+        raise RuntimeError("the second file failed")
+    assert (tmp_path / "a.txt").read_text() == "old a" and sorted(p.name for p in tmp_path.iterdir()) == [
+        "a.txt",
+        "b.txt",
+    ]
+    with staging.output_set() as outputs:
+        for name in ("a.txt", "b.txt", "c.txt"):
+            outputs.stage(tmp_path / name).write_text(f"new {name[0]}")
+    assert [(tmp_path / n).read_text() for n in ("a.txt", "b.txt", "c.txt")] == ["new a", "new b", "new c"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "b.txt", "c.txt"]
+    assert oct((tmp_path / "c.txt").stat().st_mode & 0o777) != oct(0o600)
+    # A staging folder of a process that no longer exists (SIGKILL) is swept by the next set.
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    stale = tmp_path / f"{staging.PREFIX}{dead.stdout.strip()}-abc"
+    stale.mkdir()
+    (stale / "a.txt").write_text("partial")
+    with staging.output_set() as outputs:
+        outputs.stage(tmp_path / "d.txt").write_text("d")
+    assert not stale.exists()
+
+
+def test_a_signal_during_the_writes_keeps_the_earlier_set(tmp_path):
+    """The signal arrives while the set is being written (a long C call holding the interpreter): the
+    commit that follows keeps the earlier files and the process ends with 143."""
+    script = f"""
+import os, signal, sys, time
+sys.path.insert(0, {str(ROOT)!r})
+from pathlib import Path
+from nubis_addon.core import interrupt, staging
+out = Path({str(tmp_path)!r})
+with interrupt.handle_signals(2):
+    with staging.output_set() as outputs:
+        outputs.stage(out / "a.txt").write_text("new a")
+        os.kill(os.getpid(), signal.SIGTERM)
+        outputs.stage(out / "b.txt").write_text("new b")
+print("committed")
+"""
+    (tmp_path / "a.txt").write_text("old a")
+    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 143 and r.stderr.strip() == "nubis: interrupted" and r.stdout == "", r
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt"] and (tmp_path / "a.txt").read_text() == "old a"

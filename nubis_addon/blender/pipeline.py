@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import tempfile
@@ -218,8 +219,7 @@ def render_cycles(
     exact_samples: bool = False,
 ) -> np.ndarray:
     """Bake (unless given a VDB), import it with the matched material, render with Cycles; premultiplied RGBA."""
-    with tempfile.TemporaryDirectory(prefix="nubis-cycles-") as tmp:
-        interrupt.register(tmp)
+    with tempfile.TemporaryDirectory(prefix="nubis-cycles-") as tmp, _removed_if_interrupted(tmp):
         if vdb_path is None:
             vdb_path = str(Path(tmp) / "clouds.vdb")
             bake(scene, vdb_path, voxel_size)
@@ -232,8 +232,16 @@ def render_cycles(
             raise NubisError("Cycles wrote no image: check the console for Cycles errors")
         rgba = imageio.read_image(exr)
         cycles_setup.remove_volume(scene)
-    interrupt.unregister(tmp)
     return rgba
+
+
+@contextlib.contextmanager
+def _removed_if_interrupted(path):
+    interrupt.register(path)
+    try:
+        yield
+    finally:
+        interrupt.unregister(path)
 
 
 def bake_clip_box(plan: BakePlan) -> tuple[float, float, float, float]:

@@ -24,6 +24,7 @@ MESSAGE = "nubis: interrupted\n"
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 _lock = threading.Lock()  # held while dying and while committing outputs
+_pending: list[int] = []  # signals received and not yet acted on
 _paths: dict[str, None] = {}  # registered temporary files and folders, in registration order
 _installed: dict = {}
 
@@ -59,11 +60,22 @@ def remove_path(path: str | os.PathLike) -> None:
             continue
 
 
+def pending() -> bool:
+    """True once SIGINT or SIGTERM has arrived: a commit then keeps the earlier outputs instead."""
+    return bool(_pending)
+
+
 @contextlib.contextmanager
 def deferred() -> Iterator[None]:
     """Run a short block (moving outputs into place) that an interrupt must not cut in half."""
     with _lock:
         yield
+
+
+def stop() -> None:
+    """End the process for the signal that arrived (see :func:`pending`), as the watcher would."""
+    if _pending:
+        _die(_pending[0])
 
 
 def _die(signum: int) -> None:
@@ -86,11 +98,15 @@ def _watch(read_fd: int) -> None:
             return
         for signum in data:
             if signum in SIGNALS:
+                _pending.append(signum)
                 _die(signum)
 
 
-def _ignore_in_main_thread(signum, frame) -> None:
-    """The watcher thread acts on the signal; the main thread only has to keep going."""
+def _note_in_main_thread(signum, frame) -> None:
+    """The watcher thread acts on the signal; the main thread only notes it, which it does as soon as
+    the C call it was in returns, possibly before the watcher gets to run: a commit about to start
+    then sees it."""
+    _pending.append(signum)
 
 
 @contextlib.contextmanager
@@ -107,7 +123,7 @@ def handle_signals(message_fd: int | None = None) -> Iterator[None]:
     previous = {s: signal.getsignal(s) for s in SIGNALS}
     old_wakeup = signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
     for s in SIGNALS:
-        signal.signal(s, _ignore_in_main_thread)
+        signal.signal(s, _note_in_main_thread)
     _installed.update(message_fd=message_fd)
     watcher = threading.Thread(target=_watch, args=(read_fd,), name="nubis-signals", daemon=True)
     watcher.start()
@@ -118,6 +134,7 @@ def handle_signals(message_fd: int | None = None) -> Iterator[None]:
             signal.signal(s, handler if handler is not None else signal.SIG_DFL)
         signal.set_wakeup_fd(old_wakeup)
         _installed.clear()
+        _pending.clear()
         os.close(write_fd)  # the watcher reads end-of-file and returns
         watcher.join(timeout=1.0)
         os.close(read_fd)

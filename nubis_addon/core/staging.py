@@ -92,12 +92,16 @@ class OutputSet:
             raise RuntimeError(f"staged outputs were never written: {', '.join(missing)}")
         mode = _file_mode()
         with interrupt.deferred():
-            for final, staged in self._files.items():
-                os.chmod(staged, mode)  # mkstemp-style 0600 files get a normal file's permissions
-                os.replace(staged, final)
+            interrupted = interrupt.pending()
+            if not interrupted:
+                for final, staged in self._files.items():
+                    os.chmod(staged, mode)  # mkstemp-style 0600 files get a normal file's permissions
+                    os.replace(staged, final)
             done = list(self._files)
             self._files.clear()
             self.discard()
+        if interrupted:  # the signal came while the files were written: keep the earlier ones, and stop
+            interrupt.stop()
         return done
 
     def discard(self) -> None:
