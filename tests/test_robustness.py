@@ -333,12 +333,14 @@ def test_output_sets_move_together_or_not_at_all(tmp_path):
     assert oct((tmp_path / "c.txt").stat().st_mode & 0o777) != oct(0o600)
     # A staging folder of a process that no longer exists (SIGKILL) is swept by the next set.
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
-    stale = tmp_path / f"{staging.PREFIX}{dead.stdout.strip()}-abc"
+    stale = tmp_path / f"{staging._prefix().rsplit('-', 2)[0]}-{dead.stdout.strip()}-abc"
     stale.mkdir()
     (stale / "a.txt").write_text("partial")
+    elsewhere = tmp_path / f"{staging.PREFIX}another-machine-{dead.stdout.strip()}-abc"  # a shared folder
+    elsewhere.mkdir()
     with staging.output_set() as outputs:
         outputs.stage(tmp_path / "d.txt").write_text("d")
-    assert not stale.exists()
+    assert not stale.exists() and elsewhere.exists()
 
 
 def test_a_signal_during_the_writes_keeps_the_earlier_set(tmp_path):

@@ -5,7 +5,8 @@ A failure before the commit (an error, a full disk, an interrupt) removes the st
 keeps the earlier set of outputs whole. The commit itself is a handful of renames inside the same
 folders (atomic each, on one file system) run with interrupts deferred, so SIGINT and SIGTERM
 cannot split a set. Staging folders are private (mode 0700): after a SIGKILL nothing readable sits
-under an output's name, and the next run into that folder removes folders whose process is gone.
+under an output's name, and the next run into that folder removes folders whose process is gone
+(only this machine's: a shared folder may hold another machine's run in progress).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import os
 import re
+import socket
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -20,7 +22,12 @@ from pathlib import Path
 from . import interrupt
 
 PREFIX = ".nubis-tmp-"
-_STALE = re.compile(re.escape(PREFIX) + r"(\d+)-")
+_HOST = re.sub(r"[^A-Za-z0-9.]", "_", socket.gethostname()) or "host"
+_STALE = re.compile(re.escape(f"{PREFIX}{_HOST}-") + r"(\d+)-")
+
+
+def _prefix() -> str:
+    return f"{PREFIX}{_HOST}-{os.getpid()}-"
 
 
 def _alive(pid: int) -> bool:
@@ -78,7 +85,7 @@ class OutputSet:
             return self._files[final]
         if folder not in self._dirs:
             sweep_stale(folder)
-            staging = Path(tempfile.mkdtemp(prefix=f"{PREFIX}{os.getpid()}-", dir=folder))
+            staging = Path(tempfile.mkdtemp(prefix=_prefix(), dir=folder))
             interrupt.register(staging)
             self._dirs[folder] = staging
         staged = self._dirs[folder] / final.name
