@@ -219,9 +219,11 @@ def run(argv: Sequence[str], in_blender: bool = False) -> int:
             try:
                 summary = _execute(args, in_blender, log)
             except NubisError as err:
+                interrupt.stop()  # a failure caused by an interrupt's clean-up ends as the interrupt
                 print(f"{PROG}: error: {err}", file=sys.stderr)
                 return 1
             except Exception as err:  # an unexpected fault: one line, the details in the log
+                interrupt.stop()
                 keep_log = True
                 with open(log, "a") as f:
                     traceback.print_exc(file=f)
@@ -229,6 +231,7 @@ def run(argv: Sequence[str], in_blender: bool = False) -> int:
                     traceback.print_exc()
                 print(f"{PROG}: internal error: {type(err).__name__}: {err} (details in {log})", file=sys.stderr)
                 return 3
+            interrupt.stop()
             print(summary)
             return 0
     finally:

@@ -299,13 +299,23 @@ def test_a_saved_scene_beyond_reach_is_refused(make_scene):
 
 
 def test_sigterm_while_the_bake_is_written_leaves_no_partial_file(tmp_path):
-    """SIGTERM while writing left a partial hidden `.x-XXXX.vdb` (mode 0600) beside the output."""
+    """SIGTERM while writing left a partial hidden `.x-XXXX.vdb` (mode 0600) beside the output.
+
+    The write takes about 0.2 s of a 17 s bake (60 m voxels): the run is frozen (SIGSTOP) as soon as
+    its staging folder appears, sent SIGTERM, and let go, so the signal lands inside the write."""
     env = _tmp_env(tmp_path)
     good = tmp_path / "clouds.vdb"
     good.write_bytes(b"the previous good bake")
-    proc = _start(["bake", "--out", str(good)], env)
-    _wait_for(lambda: any(tmp_path.glob(".nubis-tmp-*")), timeout=120)  # the write has begun
+    proc = _start(["bake", "--out", str(good), "--voxel-size", "60"], env)
+    end = time.monotonic() + 300
+    while not any(tmp_path.glob(".nubis-tmp-*")):
+        assert proc.poll() is None, "the bake ended before its write could be caught"
+        assert time.monotonic() < end
+        time.sleep(0.002)
+    proc.send_signal(signal.SIGSTOP)
+    assert any(tmp_path.glob(".nubis-tmp-*")), "the write was not caught in time"
     proc.send_signal(signal.SIGTERM)
+    proc.send_signal(signal.SIGCONT)
     _, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 143 and stderr.strip() == "nubis: interrupted", stderr
     assert good.read_bytes() == b"the previous good bake"

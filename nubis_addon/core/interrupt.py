@@ -18,6 +18,7 @@ import os
 import shutil
 import signal
 import threading
+import time
 from collections.abc import Iterator
 
 MESSAGE = "nubis: interrupted\n"
@@ -46,18 +47,26 @@ def remove_registered() -> None:
 
 
 def remove_path(path: str | os.PathLike) -> None:
-    """Delete a file or a folder tree; a folder that gains a file while it is removed is retried."""
-    for _attempt in range(5):
+    """Delete a file or a folder tree. A folder is first renamed away, so that a writer still working
+    in it (the main thread inside a C call, when an interrupt cleans up) can create nothing new under
+    its old path; then its tree is removed."""
+    path = os.fspath(path)
+    if os.path.isdir(path) and not os.path.islink(path):
+        doomed = f"{path}-x"
         try:
-            if os.path.isdir(path) and not os.path.islink(path):
-                shutil.rmtree(path)
-            else:
-                os.unlink(path)
-            return
+            os.rename(path, doomed)
         except FileNotFoundError:
             return
         except OSError:
-            continue
+            doomed = path
+        for _attempt in range(20):
+            shutil.rmtree(doomed, ignore_errors=True)
+            if not os.path.exists(doomed):
+                return
+            time.sleep(0.01)
+        return
+    with contextlib.suppress(FileNotFoundError, OSError):
+        os.unlink(path)
 
 
 def pending() -> bool:
@@ -73,7 +82,8 @@ def deferred() -> Iterator[None]:
 
 
 def stop() -> None:
-    """End the process for the signal that arrived (see :func:`pending`), as the watcher would."""
+    """If SIGINT or SIGTERM has arrived (see :func:`pending`), end the process as the watcher would;
+    otherwise return."""
     if _pending:
         _die(_pending[0])
 
@@ -133,8 +143,8 @@ def handle_signals(message_fd: int | None = None) -> Iterator[None]:
         for s, handler in previous.items():
             signal.signal(s, handler if handler is not None else signal.SIG_DFL)
         signal.set_wakeup_fd(old_wakeup)
-        _installed.clear()
-        _pending.clear()
-        os.close(write_fd)  # the watcher reads end-of-file and returns
+        os.close(write_fd)  # the watcher reads end-of-file and returns (or ends a late-interrupted run)
         watcher.join(timeout=1.0)
         os.close(read_fd)
+        _installed.clear()
+        _pending.clear()

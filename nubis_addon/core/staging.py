@@ -94,12 +94,12 @@ class OutputSet:
 
     def commit(self) -> list[Path]:
         """Move every staged file into place (in the order staged) and remove the staging folders."""
-        missing = [str(f) for f, s in self._files.items() if not s.is_file()]
-        if missing:
-            raise RuntimeError(f"staged outputs were never written: {', '.join(missing)}")
         mode = _file_mode()
         with interrupt.deferred():
             interrupted = interrupt.pending()
+            missing = [str(f) for f, s in self._files.items() if not s.is_file()]
+            if missing and not interrupted:
+                raise RuntimeError(f"staged outputs were never written: {', '.join(missing)}")
             if not interrupted:
                 for final, staged in self._files.items():
                     os.chmod(staged, mode)  # mkstemp-style 0600 files get a normal file's permissions
