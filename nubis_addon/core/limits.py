@@ -11,7 +11,7 @@ from collections.abc import Sequence
 
 from .errors import NubisError
 
-# Blender's frame numbers stop at -1048574 and 1048574 (its MAXFRAME); the frame property refuses more.
+# Blender's frame numbers stop at -1048574 and 1048574 (its MAXFRAME): frame_set clamps anything beyond.
 FRAME_RANGE = (-1048574, 1048574)
 SAMPLES_RANGE = (1, 65536)
 BOUNCES_RANGE = (0, 1024)  # Cycles' own limit on volume bounces
