@@ -9,7 +9,9 @@
     python -m nubis_addon benchmark [--preset NAME | --blend FILE] --out DIR [--width W --height H --quality Q]
 
 and the same as ``blender -b [FILE.blend] --command nubis ...``. Each command prints a one-line summary and
-exits 0, or prints a one-line error that says what to do and exits non-zero.
+exits 0, or prints a one-line error that says what to do and exits non-zero: 1 for a user error, 2 for a
+bad command line, 3 for an internal fault (its log named in the message), 130 and 143 for SIGINT and
+SIGTERM. A command's outputs appear together or not at all (core/staging.py).
 """
 
 from __future__ import annotations
@@ -17,7 +19,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
-import shutil
 import sys
 import tempfile
 import time
@@ -25,6 +26,8 @@ import traceback
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
+from .core import interrupt, limits, staging
+from .core.console import Console
 from .core.errors import NubisError
 from .core.fsutil import check_output_dir, check_output_path
 from .core.imageio import IMAGE_SUFFIXES
@@ -133,18 +136,58 @@ def _quiet(log: Path) -> Iterator[None]:
             os.close(saved[1])
 
 
+_console: list[Console] = []  # the running command's terminal (its stderr before any redirection)
+
+
+def _terminal() -> Console:
+    if not _console:
+        _console.append(Console())
+    return _console[-1]
+
+
 def _progress(label: str):
-    if not sys.__stderr__.isatty():
+    """A progress bar on the user's terminal (also while Blender's output goes to the log), or None."""
+    return _terminal().progress(label)
+
+
+# A field composite slower than this gets an estimate first, then a progress bar.
+SLOW_COMPOSITE_S = 5.0
+
+
+def _composite_progress(preset):
+    from .core import fields
+
+    seconds = fields.composite_seconds(preset.layers, preset.params["field_resolution"])
+    if seconds < SLOW_COMPOSITE_S:
         return None
+    res = preset.params["field_resolution"]
+    _terminal().line(
+        f"{PROG}: compositing {len(preset.layers)} field layers at {res}x{res} pixels, about {seconds:.0f} s"
+    )
+    return _progress("field")
 
-    def report(fraction: float) -> None:
-        bar = "#" * int(fraction * 30)
-        sys.__stderr__.write(f"\r{label} [{bar:<30}] {fraction * 100:5.1f}%")
-        if fraction >= 1.0:
-            sys.__stderr__.write("\n")
-        sys.__stderr__.flush()
 
-    return report
+_tracked: list[Path] = []
+
+
+def _track_blender_tempdir() -> None:
+    """Have an interrupt remove Blender's current session folder (it ends the process without Blender's
+    teardown)."""
+    if _tracked:
+        interrupt.unregister(_tracked.pop())
+    tmp = blender_tempdir()
+    if tmp is not None:
+        interrupt.register(tmp)
+        _tracked.append(tmp)
+
+
+def blender_tempdir() -> Path | None:
+    """Blender's per-session temporary folder (/tmp/blender_XXXXXX), which only Blender's own teardown
+    removes; the command line leaves without that teardown (__main__.py), so it removes it itself."""
+    if "bpy" not in sys.modules:
+        return None
+    tmp = Path(sys.modules["bpy"].app.tempdir or ".")
+    return tmp if tmp.name.startswith("blender_") and tmp.is_dir() else None
 
 
 def load_scene(args, in_blender: bool):
@@ -163,6 +206,7 @@ def load_scene(args, in_blender: bool):
         except RuntimeError as err:
             first = str(err).strip().splitlines()[-1] if str(err).strip() else "unreadable"
             raise NubisError(f"cannot open '{path}' ({first}): check that it is a Blender file") from None
+        _track_blender_tempdir()
         ensure_registered()
         scene = bpy.context.scene
         if getattr(scene.nubis, "field_a", None) is None:
@@ -172,9 +216,10 @@ def load_scene(args, in_blender: bool):
         return bpy.context.scene
     preset = load_preset(args.preset or "default")
     bpy.ops.wm.read_factory_settings(use_empty=True)
+    _track_blender_tempdir()  # factory settings start a new session folder
     ensure_registered()
     scene = bpy.context.scene
-    scene_io.apply_preset(scene, preset)
+    scene_io.apply_preset(scene, preset, progress=_composite_progress(preset))
     return scene
 
 
@@ -187,28 +232,48 @@ def run(argv: Sequence[str], in_blender: bool = False) -> int:
     except NubisError as err:
         print(f"{PROG}: error: {err}", file=sys.stderr)
         return 2
-    log_dir = tempfile.mkdtemp(prefix="nubis-log-")
-    log = Path(log_dir) / "blender.log"
+    # One log file for Blender's chatter, kept only when an internal fault needs it.
+    fd, log_name = tempfile.mkstemp(prefix="nubis-", suffix=".log")
+    os.close(fd)
+    log = Path(log_name)
+    console = Console()
+    _console.append(console)
+    interrupt.register(log)
+    keep_log = False
     try:
-        summary = _execute(args, in_blender, log)
-    except NubisError as err:
-        print(f"{PROG}: error: {err}", file=sys.stderr)
-        return 1
-    except Exception as err:  # an unexpected fault: one line, the details in the log
-        with open(log, "a") as f:
-            traceback.print_exc(file=f)
-        if os.environ.get("NUBIS_DEBUG"):
-            traceback.print_exc()
-        print(f"{PROG}: internal error: {type(err).__name__}: {err} (details in {log})", file=sys.stderr)
-        return 3
-    print(summary)
-    shutil.rmtree(log_dir, ignore_errors=True)  # kept only when something went wrong
-    return 0
+        with interrupt.handle_signals(console.fd):
+            try:
+                summary = _execute(args, in_blender, log)
+            except NubisError as err:
+                interrupt.stop()  # a failure caused by an interrupt's clean-up ends as the interrupt
+                print(f"{PROG}: error: {err}", file=sys.stderr)
+                return 1
+            except Exception as err:  # an unexpected fault: one line, the details in the log
+                interrupt.stop()
+                keep_log = True
+                with open(log, "a") as f:
+                    traceback.print_exc(file=f)
+                if os.environ.get("NUBIS_DEBUG"):
+                    traceback.print_exc()
+                print(f"{PROG}: internal error: {type(err).__name__}: {err} (details in {log})", file=sys.stderr)
+                return 3
+            interrupt.stop()
+            print(summary)
+            return 0
+    finally:
+        interrupt.unregister(log)
+        if not keep_log:
+            log.unlink(missing_ok=True)
+        if _tracked:
+            interrupt.unregister(_tracked.pop())
+        _console.remove(console)
+        console.close()
 
 
 def _execute(args, in_blender: bool, log: Path) -> str:
     start = time.perf_counter()
     cmd = args.command
+    check_arguments(args)
     # Check the destination before minutes of work, and never leave a partial file there.
     if cmd in ("compare", "preview", "benchmark"):
         out = check_output_dir(args.out)
@@ -216,35 +281,31 @@ def _execute(args, in_blender: bool, log: Path) -> str:
         out = check_output_path(args.out, (".vdb",))
     else:
         out = check_output_path(args.out, IMAGE_SUFFIXES)
-    for name in ("width", "height", "samples", "bounces", "passes"):
-        value = getattr(args, name, None)
-        if value is not None and value < (0 if name == "bounces" else 1):
-            raise NubisError(f"--{name} must be a positive whole number, not {value}")
     if getattr(args, "motion", None):
         args.motion = check_output_path(args.motion, (".exr",))
     voxel = getattr(args, "voxel_size", None)
-    if voxel is not None and not voxel > 0:
-        raise NubisError(f"--voxel-size must be a positive number of metres, not {voxel}")
 
     with _quiet(log):
         from .blender import pipeline
         from .render.gpu_context import ensure_gpu_context
 
+        _track_blender_tempdir()
         scene = load_scene(args, in_blender)
         if getattr(args, "frame", None) is not None:
             scene.frame_set(args.frame)
+        pipeline.check_scene(scene)
         ensure_gpu_context()
     label = scene.nubis.preset or "scene"
 
     if cmd == "render":
         w, h = pipeline.resolution(scene, args.width, args.height)
-        with _quiet(log):
+        with _quiet(log), staging.output_set() as outputs:  # the image and its motion vectors together
             rgba = pipeline.render_viewport(scene, w, h, passes=args.passes)
-            pipeline.save_render(scene, out, rgba)
+            pipeline.save_render(scene, outputs.stage(out), rgba)
             if args.motion:
                 from .core.imageio import write_image
 
-                write_image(args.motion, pipeline.render_motion(scene, w, h))
+                write_image(outputs.stage(args.motion), pipeline.render_motion(scene, w, h))
         cover = float((rgba[..., 3] > 0.05).mean()) * 100
         return f"rendered {label} at {w}x{h} ({cover:.0f}% cloud cover) in {time.perf_counter() - start:.1f} s -> {out}"
     if cmd == "bake":
@@ -306,6 +367,20 @@ def _realtime(cmd: str, args, scene, out: Path, w: int, h: int, log: Path, label
         f"{result['redraw_ms']:.1f} ms ({result['naive_over_redraw']:.1f}x), EEVEE {result['eevee_ms']:.0f} ms "
         f"({result['eevee_over_redraw']:.0f}x) in {time.perf_counter() - start:.1f} s -> {out}"
     )
+
+
+def check_arguments(args) -> None:
+    """Every numeric option within what the program can serve (core/limits.py), before any work."""
+    for name, (lo, hi) in (
+        ("width", limits.SIZE_RANGE),
+        ("height", limits.SIZE_RANGE),
+        ("samples", limits.SAMPLES_RANGE),
+        ("bounces", limits.BOUNCES_RANGE),
+        ("passes", limits.PASSES_RANGE),
+        ("frame", limits.FRAME_RANGE),
+    ):
+        limits.check_int(f"--{name}", getattr(args, name, None), lo, hi)
+    limits.check_voxel_size("--voxel-size", getattr(args, "voxel_size", None))
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -76,7 +76,15 @@ def test_cycles_mie_option_builds_a_mie_material(make_scene):
 
 
 def test_flash_renders_offline_through_the_glow_grid(make_scene, tmp_path):
-    """The storm glow bakes to the `glow` grid, which Cycles turns into emission: a flash shows offline."""
+    """The storm glow bakes to the `glow` grid, which Cycles turns into emission: a flash shows offline.
+
+    The flash is red (the storm's glow colour), the storm's scattered light is not, so the flash must
+    raise the red channel well beyond green and blue. Measured 2026-12-01 at 8 samples: red +32 to
+    +45 %, green and blue -6 to +9 % on Blender 5.0.1; red +25 %, green +1 % on 4.5.15. (The test used
+    to ask for +10 % of the whole frame's luminance: converged, the flash adds the same 3.5e-4 on both
+    lines, which is +6.8 % on 5.0.1 and +5.0 % on 4.5, whose ray-marched volume renders the unlit storm
+    30 % brighter; 5.0.1 passed only through noise, +14 % at 8 samples.) A glow grid Cycles ignores
+    raises every channel alike, by noise only, and fails."""
     import math
 
     from nubis_addon.blender import pipeline
@@ -86,14 +94,13 @@ def test_flash_renders_offline_through_the_glow_grid(make_scene, tmp_path):
     storm.glow = 0.0
     scene.camera.location = (0.0, 3000.0, 2.0)
     scene.camera.rotation_euler = (math.radians(150), 0.0, 0.0)
-    luminance = np.array([0.2126, 0.7152, 0.0722])
-    means = []
+    renders = []
     for flash in (0.0, 400.0):
         storm.flash = flash
         result = pipeline.bake(scene, tmp_path / f"f{int(flash)}.vdb", voxel_size=400.0, camera_only=True)
-        rgba = pipeline.render_cycles(scene, 32, 18, samples=8, vdb_path=str(result.path))
-        means.append(float((rgba[..., :3] @ luminance).mean()))
-    assert means[1] > 1.1 * means[0], means
+        renders.append(pipeline.render_cycles(scene, 32, 18, samples=8, vdb_path=str(result.path)))
+    gain = [float(renders[1][..., c].mean() / renders[0][..., c].mean()) - 1.0 for c in range(3)]
+    assert gain[0] > 0.15 and gain[0] > max(gain[1], gain[2]) + 0.15, gain
 
 
 def test_rain_absorbs_in_the_viewport_the_bake_and_cycles(make_scene, tmp_path):

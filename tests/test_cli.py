@@ -73,7 +73,7 @@ def test_bake_and_cycles_commands(tmp_path):
         (["render", "--blend", "{tmp}/missing.blend"], "does not exist"),
         (["bake", "--voxel-size", "0.5"], "use a voxel size of at least"),
         (["bake", "--voxel-size", "-3"], "--voxel-size must be a positive number"),
-        (["render", "--width", "0"], "--width must be a positive whole number"),
+        (["render", "--width", "0"], "--width 0 is out of range: use a whole number between 4 and 16384"),
         (["render", "--bogus"], "unrecognized arguments"),
     ],
 )

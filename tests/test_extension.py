@@ -5,6 +5,7 @@ import subprocess
 import sys
 import textwrap
 import zipfile
+from pathlib import Path
 
 from conftest import ROOT
 
@@ -38,7 +39,7 @@ def test_built_zip_installs_enables_and_unregisters_cleanly(tmp_path):
     names = zipfile.ZipFile(zip_path).namelist()
     assert "blender_manifest.toml" in names and "__init__.py" in names
     assert any(n.startswith("shaders/") for n in names) and any(n.startswith("presets/") for n in names)
-    assert not any(n.startswith(("tests/", ".ci/", ".venv/", ".git/")) for n in names), names
+    assert not any(n.startswith(("tests/", ".ci/", ".venv/", ".venv-4.5/", ".git/")) for n in names), names
     assert sum(zipfile.ZipFile(zip_path).getinfo(n).file_size for n in names) < 2_000_000
 
     script = textwrap.dedent(f"""
@@ -68,3 +69,24 @@ def test_built_zip_installs_enables_and_unregisters_cleanly(tmp_path):
     env.pop("BLENDER_USER_RESOURCES", None)
     r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=600)
     assert "EXTENSION-OK" in r.stdout, r.stdout[-3000:] + r.stderr[-3000:]
+
+
+def test_ci_runs_readme_command_2_on_both_blender_lines():
+    """CI (`.ci/run`) runs exactly the README's test command, which covers both Blender lines, each with
+    its own pinned requirements and virtual environment."""
+    import re
+
+    root = Path(__file__).resolve().parents[1]
+    readme = (root / "README.md").read_text()
+    blocks = re.findall(r"```\n(.*?)```", readme, re.S)
+    command_2 = [ln for ln in blocks[1].splitlines() if ln.strip()]
+    assert command_2 == [
+        "./.ci/setup && .venv/bin/python -m pytest -q && ./.ci/setup 4.5 && .venv-4.5/bin/python -m pytest -q"
+    ]
+    run = (root / ".ci" / "run").read_text()
+    assert command_2[0] in run.splitlines()
+    assert len(blocks[0].strip().splitlines()) == 1  # the README starts with exactly two commands
+    assert "bpy==5.0.1" in (root / ".ci" / "requirements.txt").read_text().splitlines()
+    assert "bpy==4.5.15" in (root / ".ci" / "requirements-4.5.txt").read_text().splitlines()
+    manifest = (root / "blender_manifest.toml").read_text()
+    assert 'blender_version_min = "4.5.0"' in manifest

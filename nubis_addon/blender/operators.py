@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
@@ -70,8 +72,20 @@ class NUBIS_OT_new_cloudscape(NubisOperator, bpy.types.Operator):
 
     def run(self, context):
         preset = presets.load_preset(self.preset)
-        scene_io.apply_preset(context.scene, preset)
+        with _field_progress(context) as progress:
+            scene_io.apply_preset(context.scene, preset, progress)
         return f"Cloudscape '{preset.name}' created"
+
+
+@contextlib.contextmanager
+def _field_progress(context):
+    """The window manager's progress indicator while a field composite runs (slow stacks take seconds)."""
+    wm = context.window_manager
+    wm.progress_begin(0, 100)
+    try:
+        yield lambda fraction: wm.progress_update(int(fraction * 100))
+    finally:
+        wm.progress_end()
 
 
 class NUBIS_OT_generate_field(NeedsCloudscape, NubisOperator, bpy.types.Operator):
@@ -82,7 +96,8 @@ class NUBIS_OT_generate_field(NeedsCloudscape, NubisOperator, bpy.types.Operator
     bl_options = {"REGISTER", "UNDO"}
 
     def run(self, context):
-        scene_io.generate_fields(context.scene)
+        with _field_progress(context) as progress:
+            scene_io.generate_fields(context.scene, progress)
         return "Data field generated"
 
 
@@ -94,7 +109,11 @@ class NUBIS_OT_layer_add(NeedsCloudscape, NubisOperator, bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     def run(self, context):
+        from ..core.limits import MAX_LAYERS
+
         s = context.scene.nubis
+        if len(s.layers) >= MAX_LAYERS:
+            raise NubisError(f"a scene holds at most {MAX_LAYERS} field layers: merge or remove one first")
         layer = s.layers.add()
         layer.name = f"Layer {len(s.layers)}"
         s.layers.move(len(s.layers) - 1, min(s.active_layer + 1, len(s.layers) - 1))

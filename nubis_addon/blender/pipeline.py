@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import tempfile
@@ -13,11 +14,12 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from ..core import camera, imageio, march, metrics, vdbio
+from ..core import camera, imageio, interrupt, limits, march, metrics, vdbio
 from ..core.bakeplan import BakePlan, comparison_voxel_size, plan_bake, view_footprint
 from ..core.errors import NubisError
-from ..core.fsutil import atomic_path, check_output_dir, check_output_path
-from ..core.state import CloudState
+from ..core.fsutil import check_output_dir, check_output_path
+from ..core.staging import output_set
+from ..core.state import MAX_STORMS, CloudState
 from ..render import bake as gpu_bake
 from ..render import engine
 from . import cycles_setup, runtime, scene_io
@@ -41,6 +43,27 @@ def save_render(scene, path: str | os.PathLike, rgba: np.ndarray) -> Path:
     if path.suffix.lower() == ".exr":
         return imageio.write_image(path, rgba)
     return imageio.write_image(path, display_image(scene, rgba))
+
+
+def check_scene(scene) -> None:
+    """What a saved scene may hold beyond what the renderer serves (presets are checked on load):
+    the camera and the storms within reach, at most four storms, at most 128 field layers."""
+    settings = scene.nubis
+    limits.check_count(
+        "superstorms", len(settings.storms), MAX_STORMS, f"remove {len(settings.storms) - MAX_STORMS} of them"
+    )
+    limits.check_count("field layers", len(settings.layers), limits.MAX_LAYERS, "merge or remove layers")
+    if scene.camera is not None:
+        limits.check_position(
+            f"the camera '{scene.camera.name}'",
+            scene_io.evaluated_matrix(scene.camera).translation,
+            "move it closer to the clouds",
+        )
+    for storm in settings.storms:
+        if storm.empty is not None:
+            limits.check_position(
+                f"the storm '{storm.empty.name}'", scene_io.evaluated_matrix(storm.empty).translation, "move it closer"
+            )
 
 
 def resolution(scene, width: int | None, height: int | None) -> tuple[int, int]:
@@ -198,7 +221,7 @@ def render_cycles(
     exact_samples: bool = False,
 ) -> np.ndarray:
     """Bake (unless given a VDB), import it with the matched material, render with Cycles; premultiplied RGBA."""
-    with tempfile.TemporaryDirectory(prefix="nubis-cycles-") as tmp:
+    with tempfile.TemporaryDirectory(prefix="nubis-cycles-") as tmp, _removed_if_interrupted(tmp):
         if vdb_path is None:
             vdb_path = str(Path(tmp) / "clouds.vdb")
             bake(scene, vdb_path, voxel_size)
@@ -212,6 +235,15 @@ def render_cycles(
         rgba = imageio.read_image(exr)
         cycles_setup.remove_volume(scene)
     return rgba
+
+
+@contextlib.contextmanager
+def _removed_if_interrupted(path):
+    interrupt.register(path)
+    try:
+        yield
+    finally:
+        interrupt.unregister(path)
 
 
 def bake_clip_box(plan: BakePlan) -> tuple[float, float, float, float]:
@@ -234,17 +266,23 @@ def compare(
     """Viewport and Cycles renders of the same shot, their side-by-side, a difference image and
     metrics.json (computed on the scene-linear EXR values); the bake Cycles rendered is kept as
     clouds.vdb. Only the part of the sky the camera sees is baked, at the finest voxel size (down to 20 m) that
-    fits 64 M voxels unless `voxel_size` is given."""
+    fits 64 M voxels unless `voxel_size` is given. The eight files replace an earlier comparison together
+    or not at all."""
     if mode not in COMPARE_MODES:
         raise NubisError(f"unknown comparison mode '{mode}': use single or full")
     out = check_output_dir(out_dir)
+    with output_set() as outputs:
+        return _compare(scene, out, outputs.stage, width, height, samples, mode, voxel_size, noise_estimate)
+
+
+def _compare(scene, out: Path, stage, width, height, samples, mode, voxel_size, noise_estimate) -> dict:
     timings = {}
     t = time.perf_counter()
     if voxel_size is None:
         state = scene_io.state_from_scene(scene)
         region = view_footprint(state, np.array(scene_io.camera_inv_view_proj(scene, width, height)))
         voxel_size = comparison_voxel_size(state, scene.nubis.bake_voxel_size, region)
-    baked = bake(scene, out / "clouds.vdb", voxel_size, camera_only=True, size=(width, height))
+    baked = bake(scene, stage(out / "clouds.vdb"), voxel_size, camera_only=True, size=(width, height))
     timings["bake_s"] = time.perf_counter() - t
     # The viewport keeps only the baked clouds: sky light from beyond the box would otherwise be
     # shadowed by clouds Cycles never sees.
@@ -306,14 +344,13 @@ def compare(
         clip_box=list(clip),
         seconds=timings,
     )
-    save_render(scene, out / "viewport.exr", viewport)
-    save_render(scene, out / "cycles.exr", cycles)
+    save_render(scene, stage(out / "viewport.exr"), viewport)
+    save_render(scene, stage(out / "cycles.exr"), cycles)
     view_png, cyc_png = display_image(scene, viewport), display_image(scene, cycles)
-    imageio.write_image(out / "viewport.png", view_png)
-    imageio.write_image(out / "cycles.png", cyc_png)
+    imageio.write_image(stage(out / "viewport.png"), view_png)
+    imageio.write_image(stage(out / "cycles.png"), cyc_png)
     diff = metrics.difference_image(viewport, cycles)
-    imageio.write_image(out / "difference.png", diff)
-    imageio.write_image(out / "side_by_side.png", metrics.side_by_side(view_png, cyc_png, diff))
-    with atomic_path(out / "metrics.json") as tmp:
-        tmp.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+    imageio.write_image(stage(out / "difference.png"), diff)
+    imageio.write_image(stage(out / "side_by_side.png"), metrics.side_by_side(view_png, cyc_png, diff))
+    stage(out / "metrics.json").write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")  # moved last
     return result

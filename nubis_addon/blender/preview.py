@@ -6,7 +6,6 @@ from __future__ import annotations
 import contextlib
 import json
 import math
-import os
 import re
 import statistics
 import tempfile
@@ -19,10 +18,10 @@ import bpy
 import mathutils
 import numpy as np
 
-from ..core import imageio, quality
+from ..core import imageio, quality, staging
 from ..core.bakeplan import comparison_voxel_size, view_footprint
 from ..core.errors import NubisError
-from ..core.fsutil import atomic_path, check_output_dir
+from ..core.fsutil import check_output_dir
 from ..render import engine, temporal
 from ..render.gpu_context import renderer_name
 from . import cycles_setup, pipeline, runtime, scene_io
@@ -93,30 +92,6 @@ def _with_footprint(state, view: temporal.View):
     return state
 
 
-class Staging:
-    """Files of one run written into a hidden folder inside the destination, moved into place together
-    at the end: a failed run leaves the earlier outputs whole."""
-
-    def __init__(self, out: Path):
-        self.out = out
-        self.dir = Path(tempfile.mkdtemp(prefix=".nubis-stage-", dir=out))
-        self.names: list[str] = []
-
-    def path(self, name: str) -> Path:
-        self.names.append(name)
-        return self.dir / name
-
-    def commit(self) -> None:
-        for name in self.names:
-            os.replace(self.dir / name, self.out / name)
-        self.abort()
-
-    def abort(self) -> None:
-        for p in self.dir.glob("*"):
-            p.unlink(missing_ok=True)
-        self.dir.rmdir()
-
-
 @dataclass
 class PreviewResult:
     frames: list[int]
@@ -148,37 +123,40 @@ def preview(
     out = check_output_dir(out_dir)
     q = apply_quality(scene, quality_name)
     s = scene.nubis
-    stage = Staging(out)
     result = PreviewResult(frames, quality=q, size=(width, height))
     tv = temporal.TemporalViewport()
     clouds = runtime.cloud_gpu(s.noise_seed)
-    try:
-        for n, f in enumerate(frames):
-            scene.frame_set(f)
-            if n and orbit:
-                orbit_camera(scene, orbit)
-            view = camera_view(scene, width, height)
-            state = scene_io.state_from_scene(scene)
-            times = []
-            for _ in range(redraws):
-                t = time.perf_counter()
-                tv.redraw(clouds, state, view, s.viewport_resolution, s.viewport_samples)
-                tv.sync()
-                times.append((time.perf_counter() - t) * 1000.0)
-            result.redraw_ms.append(times)
-            rgba = temporal.render_view(tv, clouds, view, s.viewport_blur)
-            name = f"{f:04d}"
-            pipeline.save_render(scene, stage.path(f"{name}.exr"), rgba)
-            pipeline.save_render(scene, stage.path(f"{name}.png"), rgba)
-            if naive:
-                clouds.update(_with_footprint(state, view))
-                t = time.perf_counter()
-                ref = _naive(clouds, view)
-                result.naive_ms.append((time.perf_counter() - t) * 1000.0)
-                pipeline.save_render(scene, stage.path(f"{name}_naive.exr"), ref)
-                pipeline.save_render(scene, stage.path(f"{name}_naive.png"), ref)
-            if progress:
-                progress((n + 1) / len(frames))
+    # Every file of the run appears together at the end, or none (core/staging.py).
+    with staging.output_set() as outputs:
+        try:
+            for n, f in enumerate(frames):
+                scene.frame_set(f)
+                if n and orbit:
+                    orbit_camera(scene, orbit)
+                view = camera_view(scene, width, height)
+                state = scene_io.state_from_scene(scene)
+                times = []
+                for _ in range(redraws):
+                    t = time.perf_counter()
+                    tv.redraw(clouds, state, view, s.viewport_resolution, s.viewport_samples)
+                    tv.sync()
+                    times.append((time.perf_counter() - t) * 1000.0)
+                result.redraw_ms.append(times)
+                rgba = temporal.render_view(tv, clouds, view, s.viewport_blur)
+                name = f"{f:04d}"
+                pipeline.save_render(scene, outputs.stage(out / f"{name}.exr"), rgba)
+                pipeline.save_render(scene, outputs.stage(out / f"{name}.png"), rgba)
+                if naive:
+                    clouds.update(_with_footprint(state, view))
+                    t = time.perf_counter()
+                    ref = _naive(clouds, view)
+                    result.naive_ms.append((time.perf_counter() - t) * 1000.0)
+                    pipeline.save_render(scene, outputs.stage(out / f"{name}_naive.exr"), ref)
+                    pipeline.save_render(scene, outputs.stage(out / f"{name}_naive.png"), ref)
+                if progress:
+                    progress((n + 1) / len(frames))
+        finally:
+            tv.free()
         report = {
             "preset": s.preset,
             "width": width,
@@ -193,13 +171,7 @@ def preview(
                 for i, (f, ms) in enumerate(zip(frames, result.redraw_ms, strict=True))
             ],
         }
-        stage.path("preview.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
-        stage.commit()
-    except BaseException:
-        stage.abort()
-        raise
-    finally:
-        tv.free()
+        outputs.stage(out / "preview.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
     return result
 
 
@@ -259,7 +231,11 @@ def render_eevee(scene, width: int, height: int, vdb_path: str, samples: int = 1
     the render took (the bake not included). The scene's render settings are left as they were."""
     engines = {e.identifier for e in bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items}
     eevee = "BLENDER_EEVEE_NEXT" if "BLENDER_EEVEE_NEXT" in engines else "BLENDER_EEVEE"
-    with tempfile.TemporaryDirectory(prefix="nubis-eevee-") as tmp, preserved(scene):
+    with (
+        tempfile.TemporaryDirectory(prefix="nubis-eevee-") as tmp,
+        pipeline._removed_if_interrupted(tmp),
+        preserved(scene),
+    ):
         cycles_setup.import_volume(scene, vdb_path)
         try:
             cycles_setup.configure_render(scene, width, height, None)
@@ -340,7 +316,7 @@ def benchmark(
     display_converged = pipeline.display_image(scene, converged)
     result["converged_psnr_db"] = psnr(display_converged, display_naive)
     if eevee:
-        with tempfile.TemporaryDirectory(prefix="nubis-bench-") as tmp:
+        with tempfile.TemporaryDirectory(prefix="nubis-bench-") as tmp, pipeline._removed_if_interrupted(tmp):
             st = scene_io.state_from_scene(scene)
             region = view_footprint(st, np.array(view.inv_view_proj))
             voxel = comparison_voxel_size(st, s.bake_voxel_size, region)
@@ -348,14 +324,15 @@ def benchmark(
             # Twice: the first render also compiles EEVEE's shaders; the faster one is EEVEE's own cost.
             runs = [render_eevee(scene, width, height, str(baked.path), 16) for _ in range(2)]
         eevee_img, seconds = min(runs, key=lambda r: r[1])
-        imageio.write_image(out / "eevee.png", pipeline.display_image(scene, eevee_img))
         result["eevee_ms"] = seconds * 1000.0
         result["eevee_voxel_size"] = baked.plan.voxel_size
         result["eevee_over_redraw"] = result["eevee_ms"] / result["redraw_ms"]
-    imageio.write_image(out / "naive.png", display_naive)
-    imageio.write_image(out / "converged.png", display_converged)
-    with atomic_path(out / "benchmark.json") as tmp:
-        tmp.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+    with staging.output_set() as outputs:
+        imageio.write_image(outputs.stage(out / "naive.png"), display_naive)
+        imageio.write_image(outputs.stage(out / "converged.png"), display_converged)
+        if eevee:
+            imageio.write_image(outputs.stage(out / "eevee.png"), pipeline.display_image(scene, eevee_img))
+        outputs.stage(out / "benchmark.json").write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
     return result
 
 

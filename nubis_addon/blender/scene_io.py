@@ -80,20 +80,25 @@ def image_arrays(settings) -> dict[str, np.ndarray]:
         img = layer.image
         if layer.kind == "IMAGE" and img is not None:
             w, h = img.size
-            if w and h:
-                buf = np.empty(w * h * img.channels, np.float32)
-                img.pixels.foreach_get(buf)
-                out[img.name] = buf.reshape(h, w, img.channels)
+            if not (w and h):
+                where = f" ('{bpy.path.abspath(img.filepath)}')" if img.filepath else ""
+                raise NubisError(
+                    f"the image '{img.name}'{where} of field layer '{layer.name}' has no readable pixels "
+                    "(damaged, or not an image format Blender reads): load a valid image or paint it"
+                )
+            buf = np.empty(w * h * img.channels, np.float32)
+            img.pixels.foreach_get(buf)
+            out[img.name] = buf.reshape(h, w, img.channels)
     return out
 
 
-def generate_fields(scene) -> None:
+def generate_fields(scene, progress=None) -> None:
     """Composite the layer stack into the field images (the Data Field Generator, GDC22), then apply
-    the weather rules the scene has switched on."""
+    the weather rules the scene has switched on. ``progress`` gets the fraction of layers done."""
     settings = scene.nubis
     params = params_from_scene(settings)
     layers = [layer_to_dict(layer) for layer in settings.layers]
-    result = fieldgen.composite(layers, params, image_arrays(settings))
+    result = fieldgen.composite(layers, params, image_arrays(settings), progress)
     if settings.rule_rain:
         fieldgen.apply_rain_rule(result, settings.rule_cumulonimbus_top)
     if settings.rule_horizon:
@@ -267,8 +272,9 @@ def layer_images(settings) -> set[str]:
 # ---- presets ---------------------------------------------------------------------------------------
 
 
-def apply_preset(scene, preset: Preset) -> None:
-    """Make `scene` the preset's cloudscape: settings, layer stack, field images, sun, world, camera."""
+def apply_preset(scene, preset: Preset, progress=None) -> None:
+    """Make `scene` the preset's cloudscape: settings, layer stack, field images, sun, world, camera;
+    ``progress`` follows the field composite."""
     settings = scene.nubis
     for key, value in preset.params.items():
         setattr(settings, key, value)
@@ -291,7 +297,7 @@ def apply_preset(scene, preset: Preset) -> None:
     settings.storms.clear()
     for data in preset.storms:
         add_storm(scene, data)
-    generate_fields(scene)  # after the camera and storms: the rules and stencils are placed by them
+    generate_fields(scene, progress)  # after the camera and storms: the rules and stencils are placed by them
     r = preset.extra["render"]
     scene.render.resolution_x, scene.render.resolution_y = r["width"], r["height"]
     scene.render.resolution_percentage = 100
@@ -310,9 +316,25 @@ def _load_layer_image(ref: str, preset_path: Path | None) -> str:
     if not path.is_file():
         raise NubisError(f"the image '{ref}' of a field layer was not found: put it beside the preset or fix the path")
     try:
+        size = path.stat().st_size
+    except OSError as err:
+        raise NubisError(f"cannot read the image '{path}' ({err.strerror}): check its permissions") from None
+    if size == 0:
+        raise NubisError(f"the image '{path}' of a field layer is an empty file (0 bytes): export it again")
+    try:
         img = bpy.data.images.load(str(path), check_existing=True)
     except RuntimeError as err:
         raise NubisError(f"cannot load the image '{path}' ({err}): check that it is a valid image") from None
+    # Blender loads pixels lazily: a file it cannot decode shows as a 0 x 0 image only now.
+    if not img.has_data:
+        img.reload()
+    w, h = img.size
+    if w == 0 or h == 0:
+        bpy.data.images.remove(img)
+        raise NubisError(
+            f"the image '{path}' of a field layer cannot be read as an image (damaged, or not an image format "
+            "Blender reads): export it again as PNG or EXR"
+        )
     img.colorspace_settings.name = "Non-Color"
     return img.name
 

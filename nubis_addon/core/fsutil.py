@@ -8,6 +8,7 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
+from . import staging
 from .errors import NubisError
 
 
@@ -45,21 +46,8 @@ def check_output_dir(folder: str | os.PathLike, create: bool = True) -> Path:
 
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; it replaces ``path`` only if the block succeeds.
-
-    A failed write therefore never leaves a half-written file where a good one was.
-    """
-    final = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=final.parent, prefix=f".{final.stem}-", suffix=final.suffix)
-    os.close(fd)
-    tmp_path = Path(tmp)
-    try:
-        yield tmp_path
-        # mkstemp creates 0600 files; give the result the permissions a normal file would get.
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp_path, 0o666 & ~umask)
-        os.replace(tmp_path, final)
-    finally:
-        with contextlib.suppress(FileNotFoundError):
-            tmp_path.unlink()
+    """Yield a temporary path (in a private staging folder beside ``path``); it replaces ``path`` only
+    if the block succeeds. A failed or interrupted write therefore never leaves a half-written file
+    where a good one was, nor a temporary file (staging.py)."""
+    with staging.output_set() as outputs:
+        yield outputs.stage(path)

@@ -1,4 +1,9 @@
-"""Image files: EXR holds scene-linear premultiplied RGBA; PNG is display-referred.
+"""Image files: EXR holds scene-linear premultiplied RGBA as 32-bit float; PNG is display-referred.
+
+EXR is written as float32, not half: half float ends at 65504, which a sky at the documented maximum
+strength (1e5) passes, and the overflow would be written as infinity. float32 holds every value the
+renderers produce, so nothing is clamped; a value that is still not finite (NaN from a fault) is
+refused with the count of such pixels rather than written.
 
 Both are written atomically. The PNG goes through Blender's own OCIO configuration so that a
 viewport render and a Cycles render of the same scene get the same view transform.
@@ -58,17 +63,21 @@ def to_display(rgba: np.ndarray, view_transform: str, ocio_config: str | None, l
 
 
 def write_image(path: str | os.PathLike, pixels: np.ndarray) -> Path:
-    """Write float pixels (H, W, C), top row first: EXR as half float, PNG as 8-bit. Atomic."""
+    """Write float pixels (H, W, C), top row first: EXR as 32-bit float, PNG as 8-bit. Atomic."""
     oiio = bundled.oiio()
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in IMAGE_SUFFIXES:
         raise NubisError(f"cannot write '{path}': image outputs must end in .png or .exr")
     pixels = np.ascontiguousarray(pixels, dtype=np.float32)
-    if not np.all(np.isfinite(pixels)):
-        raise NubisError(f"refusing to write '{path}': the image holds NaN or infinite values (a shader fault)")
+    bad = int(np.count_nonzero(~np.isfinite(pixels)))
+    if bad:
+        raise NubisError(
+            f"refusing to write '{path}': {bad} of its {pixels.size} values are NaN or infinite (an internal "
+            "fault, not a setting): run again with NUBIS_DEBUG=1 and report it"
+        )
     h, w, c = pixels.shape
-    fmt = oiio.HALF if suffix == ".exr" else oiio.UINT8
+    fmt = oiio.FLOAT if suffix == ".exr" else oiio.UINT8
     spec = oiio.ImageSpec(w, h, c, fmt)
     if suffix == ".exr":
         spec.attribute("compression", "zip")

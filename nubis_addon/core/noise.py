@@ -31,6 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
+from . import interrupt
+
 __all__ = [
     "NOISE_VERSION",
     "FBM_WEIGHTS",
@@ -771,6 +773,7 @@ def _write_cache(path: Path, ns: NoiseSet) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}-", suffix=".tmp")
     tmp = Path(tmp_name)
+    interrupt.register(tmp)  # an interrupted run leaves no partial cache file
     try:
         arrays = ns.arrays()
         with os.fdopen(fd, "wb") as f:
@@ -791,6 +794,7 @@ def _write_cache(path: Path, ns: NoiseSet) -> None:
     finally:
         with contextlib.suppress(OSError):
             tmp.unlink()
+        interrupt.unregister(tmp)
 
 
 def load_or_generate(cache_dir: str | os.PathLike, seed: int = 0) -> NoiseSet:

@@ -7,13 +7,17 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from . import limits
 from .errors import NubisError
 from .params import PARAMS, PARAMS_BY_KEY, defaults
+from .state import MAX_STORMS
+from .tomlfmt import toml_value
 
 FIELD_CHANNELS = (
     "coverage",
@@ -147,13 +151,25 @@ def find_preset(name: str, folder: Path | None = None) -> Path:
 def load_preset(name_or_path: str | os.PathLike, folder: Path | None = None) -> Preset:
     path = find_preset(str(name_or_path), folder)
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except UnicodeDecodeError:
-        raise NubisError(f"preset '{path}' is not UTF-8 text: restore it from the presets folder") from None
-    except tomllib.TOMLDecodeError as err:
-        raise NubisError(f"preset '{path}' is not valid TOML ({err}): fix the file or restore it") from None
+        raw = path.read_bytes()
     except OSError as err:
         raise NubisError(f"cannot read preset '{path}' ({err.strerror}): check its permissions") from None
+    return preset_from_bytes(raw, path)
+
+
+def preset_from_bytes(raw: bytes, path: Path | None = None) -> Preset:
+    """A preset from a file's bytes: a Preset, or a NubisError that names the file and what to fix."""
+    where = str(path) if path else "<preset>"
+    try:
+        data = tomllib.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError:
+        raise NubisError(f"preset '{where}' is not UTF-8 text: restore it from the presets folder") from None
+    except tomllib.TOMLDecodeError as err:
+        # tomllib quotes characters as Python does ('\x14'); name them as Unicode does (U+0014).
+        reason = re.sub(r"'\\[xuU]([0-9a-fA-F]+)'", lambda m: f"U+{int(m.group(1), 16):04X}", str(err))
+        raise NubisError(f"preset '{where}' is not valid TOML ({reason}): fix the file or restore it") from None
+    except RecursionError:
+        raise NubisError(f"preset '{where}' nests arrays or tables too deeply: fix the file or restore it") from None
     return parse_preset(data, path)
 
 
@@ -171,7 +187,7 @@ def parse_preset(data: dict[str, Any], path: Path | None = None) -> Preset:
             storms = _parse_storms(table, where)
             continue
         if not isinstance(table, dict):
-            raise NubisError(f"{where}: '{sec}' must be a table like [{sec}], not a single value")
+            raise NubisError(f"{where}: '{sec}' must be a table like [{sec}], not {toml_value(table)}")
         if sec not in sections and sec not in EXTRA_SCHEMA:
             known = ", ".join(sorted(sections | set(EXTRA_SCHEMA)))
             raise NubisError(f"{where}: unknown section [{sec}]; sections are {known}")
@@ -197,12 +213,15 @@ def parse_preset(data: dict[str, Any], path: Path | None = None) -> Preset:
         ("camera", "rotation", 3),
     ):
         _check_vector(extra[sec][key], n, f"{where}: {sec}.{key}")
+    _check_span(extra["camera"]["location"], f"{where}: camera.location")
     _check_masks(layers, where)
     meta = extra.pop("preset")
     return Preset(meta["name"], path, params, extra, layers, meta["description"], storms)
 
 
 def _parse_storms(value: Any, where: str) -> list[dict[str, Any]]:
+    if isinstance(value, list):
+        limits.check_count(f"{where}: storms", len(value), MAX_STORMS, f"remove {len(value) - MAX_STORMS} of them")
     storms = _parse_tables(value, where, "storms", STORM_SCHEMA)
     for i, storm in enumerate(storms):
         _check_vector(storm["glow_color"], 3, f"{where}: storms[{i}].glow_color")
@@ -217,7 +236,7 @@ def _parse_tables(value: Any, where: str, name: str, schema: dict[str, tuple]) -
     for i, raw in enumerate(value):
         here = f"{where}: {name}[{i}]"
         if not isinstance(raw, dict):
-            raise NubisError(f"{here} must be a table")
+            raise NubisError(f"{here} must be a table, not {toml_value(raw)}")
         table = {k: (list(spec[1]) if isinstance(spec[1], list) else spec[1]) for k, spec in schema.items()}
         for key, val in raw.items():
             if key not in schema:
@@ -227,56 +246,86 @@ def _parse_tables(value: Any, where: str, name: str, schema: dict[str, tuple]) -
     return tables
 
 
+_TYPE_NAMES = {str: "text in quotes", list: "a list like [1.0, 2.0]", bool: "true or false"}
+
+
+def _number(value: Any, where: str) -> float:
+    """A TOML integer or float as a finite float (a huge integer is out of range, not a crash)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise NubisError(f"{where} must be a number, not {toml_value(value)}")
+    try:
+        number = float(value)
+    except OverflowError:
+        number = math.inf
+    if not math.isfinite(number):
+        raise NubisError(f"{where} must be a finite number, not {toml_value(value)}")
+    return number
+
+
+def _check_range(value: Any, lo: float, hi: float, where: str) -> None:
+    if not lo <= value <= hi:
+        raise NubisError(f"{where} = {toml_value(value)} is out of range: use a value between {lo:g} and {hi:g}")
+
+
 def _check_param(p, value: Any, where: str) -> Any:
     if p.kind == "bool":
         if not isinstance(value, bool):
-            raise NubisError(f"{where} must be true or false, not {value!r}")
+            raise NubisError(f"{where} must be true or false, not {toml_value(value)}")
         return value
     if p.kind == "int":
         if isinstance(value, bool) or not isinstance(value, int):
-            raise NubisError(f"{where} must be a whole number, not {value!r}")
+            raise NubisError(f"{where} must be a whole number, not {toml_value(value)}")
     elif p.kind == "float":
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise NubisError(f"{where} must be a number, not {value!r}")
-        value = float(value)
-        if not math.isfinite(value):
-            raise NubisError(f"{where} must be a finite number, not {value!r}")
-    if p.min is not None and value < p.min or p.max is not None and value > p.max:
-        raise NubisError(f"{where} = {value!r} is out of range: use a value between {p.min:g} and {p.max:g}")
+        value = _number(value, where)
+    if p.min is not None and p.max is not None:
+        _check_range(value, p.min, p.max, where)
     return value
 
 
 def _check_value(spec: tuple, value: Any, where: str) -> Any:
     typ = spec[0]
     if typ is float:
-        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-            raise NubisError(f"{where} must be a finite number, not {value!r}")
-        value = float(value)
+        value = _number(value, where)
     elif typ is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise NubisError(f"{where} must be a whole number, not {value!r}")
+            raise NubisError(f"{where} must be a whole number, not {toml_value(value)}")
     elif not isinstance(value, typ):
-        raise NubisError(f"{where} must be a {typ.__name__}, not {value!r}")
+        raise NubisError(f"{where} must be {_TYPE_NAMES.get(typ, typ.__name__)}, not {toml_value(value)}")
     if len(spec) == 3 and isinstance(spec[2], tuple) and value not in spec[2]:
-        raise NubisError(f"{where} = {value!r} is not allowed: use one of {', '.join(spec[2])}")
-    if len(spec) == 4 and not spec[2] <= value <= spec[3]:
-        raise NubisError(f"{where} = {value!r} is out of range: use a value between {spec[2]:g} and {spec[3]:g}")
+        choices = ", ".join(toml_value(c) for c in spec[2])
+        raise NubisError(f"{where} = {toml_value(value)} is not allowed: use one of {choices}")
+    if len(spec) == 4:
+        _check_range(value, spec[2], spec[3], where)
     return value
 
 
 def _check_vector(value: list, n: int, where: str) -> None:
     if len(value) != n or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value):
-        raise NubisError(f"{where} must be a list of {n} numbers, not {value!r}")
-    if not all(math.isfinite(v) for v in value):
-        raise NubisError(f"{where} must hold finite numbers, not {value!r}")
+        raise NubisError(f"{where} must be a list of {n} numbers, not {toml_value(value)}")
+    for i, v in enumerate(value):
+        value[i] = _number(v, where)
+
+
+def _check_span(value: list, where: str) -> None:
+    """A position in metres the renderer can serve (core/limits.py)."""
+    if not all(abs(v) <= limits.POSITION_MAX for v in value):
+        raise NubisError(
+            f"{where} = {toml_value(value)} is out of range: keep each coordinate within "
+            f"{limits.POSITION_MAX:g} m of the origin"
+        )
 
 
 def _parse_layers(value: Any, where: str) -> list[dict[str, Any]]:
+    if isinstance(value, list):
+        limits.check_count(
+            f"{where}: field.layers", len(value), limits.MAX_LAYERS, "merge or remove layers (each costs a full pass)"
+        )
     layers = _parse_tables(value, where, "field.layers", LAYER_SCHEMA)
     for i, layer in enumerate(layers):
         here = f"{where}: field.layers[{i}]"
         _check_vector(layer["remap"], 4, f"{here}.remap")
         _check_vector(layer["center"], 2, f"{here}.center")
+        _check_span(layer["center"], f"{here}.center")
         if layer["remap"][0] == layer["remap"][1]:
             raise NubisError(f"{here}.remap: the input range is empty; make remap[0] and remap[1] differ")
         if layer["kind"] == "image" and not layer["image"]:
@@ -290,7 +339,7 @@ def _check_masks(layers: list[dict[str, Any]], where: str) -> None:
     for i, layer in enumerate(layers):
         if layer["mask"] and layer["mask"] not in seen:
             raise NubisError(
-                f"{where}: field.layers[{i}].mask names '{layer['mask']}', which is not an earlier layer: "
+                f"{where}: field.layers[{i}].mask names {toml_value(layer['mask'])}, which is not an earlier layer: "
                 "masks must refer to a layer above them"
             )
         seen.add(layer["name"])

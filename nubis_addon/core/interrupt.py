@@ -1,0 +1,150 @@
+"""Interrupts: SIGINT and SIGTERM end a run at once, with one line, the conventional exit code
+(128 + signal: 130 and 143) and no temporary file left behind.
+
+Python runs a signal handler only between bytecodes of the main thread, so a Ctrl-C during a long
+Cycles render (C code, minutes) would otherwise wait for the render to finish. Instead the signal's
+number is written to a wake-up pipe by Python's C-level handler, and a watcher thread (Blender
+releases the GIL while it renders) removes every registered temporary path and leaves with
+``os._exit``: no teardown of Blender, which is what crashed after a KeyboardInterrupt.
+
+Commits of staged outputs run inside :func:`deferred`, so an interrupt waits until a set of files
+is either wholly in place or not at all (see ``staging.py``). No bpy here: every command can use it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import signal
+import threading
+import time
+from collections.abc import Iterator
+
+MESSAGE = "nubis: interrupted\n"
+SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+_lock = threading.Lock()  # held while dying and while committing outputs
+_pending: list[int] = []  # signals received and not yet acted on
+_paths: dict[str, None] = {}  # registered temporary files and folders, in registration order
+_installed: dict = {}
+
+
+def register(path: str | os.PathLike) -> None:
+    """Remove ``path`` (a file or a whole folder) if the run is interrupted."""
+    _paths[os.fspath(path)] = None
+
+
+def unregister(path: str | os.PathLike) -> None:
+    _paths.pop(os.fspath(path), None)
+
+
+def remove_registered() -> None:
+    """Remove every registered path, newest first (a staging folder may hold a nested one)."""
+    for path in reversed(list(_paths)):
+        remove_path(path)
+    _paths.clear()
+
+
+def remove_path(path: str | os.PathLike) -> None:
+    """Delete a file or a folder tree. A folder is first renamed away, so that a writer still working
+    in it (the main thread inside a C call, when an interrupt cleans up) can create nothing new under
+    its old path; then its tree is removed."""
+    path = os.fspath(path)
+    if os.path.isdir(path) and not os.path.islink(path):
+        doomed = f"{path}-x"
+        try:
+            os.rename(path, doomed)
+        except FileNotFoundError:
+            return
+        except OSError:
+            doomed = path
+        for _attempt in range(20):
+            shutil.rmtree(doomed, ignore_errors=True)
+            if not os.path.exists(doomed):
+                return
+            time.sleep(0.01)
+        return
+    with contextlib.suppress(FileNotFoundError, OSError):
+        os.unlink(path)
+
+
+def pending() -> bool:
+    """True once SIGINT or SIGTERM has arrived: a commit then keeps the earlier outputs instead."""
+    return bool(_pending)
+
+
+@contextlib.contextmanager
+def deferred() -> Iterator[None]:
+    """Run a short block (moving outputs into place) that an interrupt must not cut in half."""
+    with _lock:
+        yield
+
+
+def stop() -> None:
+    """If SIGINT or SIGTERM has arrived (see :func:`pending`), end the process as the watcher would;
+    otherwise return."""
+    if _pending:
+        _die(_pending[0])
+
+
+def _die(signum: int) -> None:
+    _lock.acquire()  # never released: the process ends here
+    remove_registered()
+    fd = _installed.get("message_fd")
+    if fd is not None:
+        with contextlib.suppress(OSError):
+            os.write(fd, MESSAGE.encode())
+    os._exit(128 + signum)
+
+
+def _watch(read_fd: int) -> None:
+    while True:
+        try:
+            data = os.read(read_fd, 16)
+        except OSError:
+            return
+        if not data:
+            return
+        for signum in data:
+            if signum in SIGNALS:
+                _pending.append(signum)
+                _die(signum)
+
+
+def _note_in_main_thread(signum, frame) -> None:
+    """The watcher thread acts on the signal; the main thread only notes it, which it does as soon as
+    the C call it was in returns, possibly before the watcher gets to run: a commit about to start
+    then sees it."""
+    _pending.append(signum)
+
+
+@contextlib.contextmanager
+def handle_signals(message_fd: int | None = None) -> Iterator[None]:
+    """Within the block, SIGINT and SIGTERM print ``nubis: interrupted`` to ``message_fd`` (the
+    terminal, even while Blender's chatter is redirected to a log), remove the registered temporary
+    paths and exit with 130 or 143. Outside the main thread this does nothing (Python allows signal
+    handlers only there)."""
+    if _installed or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    read_fd, write_fd = os.pipe()
+    os.set_blocking(write_fd, False)
+    previous = {s: signal.getsignal(s) for s in SIGNALS}
+    old_wakeup = signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
+    for s in SIGNALS:
+        signal.signal(s, _note_in_main_thread)
+    _installed.update(message_fd=message_fd)
+    watcher = threading.Thread(target=_watch, args=(read_fd,), name="nubis-signals", daemon=True)
+    watcher.start()
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler if handler is not None else signal.SIG_DFL)
+        signal.set_wakeup_fd(old_wakeup)
+        os.close(write_fd)  # the watcher reads end-of-file and returns (or ends a late-interrupted run)
+        watcher.join(timeout=1.0)
+        os.close(read_fd)
+        _installed.clear()
+        _pending.clear()

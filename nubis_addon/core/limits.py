@@ -1,0 +1,53 @@
+"""The ranges the program can serve, checked before any work with a message that says what to do.
+
+One table for presets (presets.py), the command line and scenes loaded from .blend files, so the
+three agree. No bpy here.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+from .errors import NubisError
+
+# Blender's frame numbers stop at -1048574 and 1048574 (its MAXFRAME): frame_set clamps anything beyond.
+FRAME_RANGE = (-1048574, 1048574)
+SAMPLES_RANGE = (1, 65536)
+BOUNCES_RANGE = (0, 1024)  # Cycles' own limit on volume bounces
+SIZE_RANGE = (4, 16384)
+PASSES_RANGE = (1, 1024)
+VOXEL_MAX = 10000.0  # metres: the bake_voxel_size setting's maximum (params.py)
+# Positions (camera, storms, field centre) within 10,000 km of the origin: the GPU gets float32
+# offsets from the camera, and the view rays a float64 inverse that stays well conditioned there.
+POSITION_MAX = 1e7
+MAX_LAYERS = 128  # field layers per scene; each costs one full-resolution pass (estimate below)
+
+
+def check_int(flag: str, value: int | None, lo: int, hi: int, unit: str = "") -> None:
+    """A whole-number command-line option within [lo, hi]; ``flag`` is how the user wrote it."""
+    if value is None or lo <= value <= hi:
+        return
+    raise NubisError(f"{flag} {value} is out of range: use a whole number between {lo} and {hi}{unit}")
+
+
+def check_voxel_size(flag: str, value: float | None) -> None:
+    if value is None:
+        return
+    if not math.isfinite(value) or value <= 0:
+        raise NubisError(f"{flag} must be a positive number of metres, not {value:g}")
+    if value > VOXEL_MAX:
+        raise NubisError(f"{flag} {value:g} is out of range: use a voxel edge of at most {VOXEL_MAX:g} metres")
+
+
+def check_position(what: str, xyz: Sequence[float], fix: str) -> None:
+    """A position in metres: finite and within POSITION_MAX of the origin on every axis."""
+    if all(math.isfinite(v) and abs(v) <= POSITION_MAX for v in xyz):
+        return
+    where = "[" + ", ".join(f"{float(v):g}" for v in xyz) + "]"  # float32 coordinates, shown as written
+    raise NubisError(f"{what} is at {where} m, beyond the {POSITION_MAX:g} m from the origin Nubis can render: {fix}")
+
+
+def check_count(what: str, count: int, most: int, fix: str) -> None:
+    if count > most:
+        raise NubisError(f"{what}: {count} given, but a scene holds at most {most}: {fix}")

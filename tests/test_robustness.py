@@ -1,0 +1,376 @@
+"""Interrupted and failed runs, extreme values and litter: what a hostile but realistic user does.
+
+Each test runs the command line as a child process (`python -m nubis_addon`), with its own TMPDIR so
+that anything left in the temporary folder is seen.
+"""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import ROOT, run_cli
+
+DEFAULT = (ROOT / "presets" / "default.toml").read_text()
+
+
+def _one_line(text: str) -> str:
+    lines = [ln for ln in text.strip().splitlines() if ln.strip()]
+    assert len(lines) == 1, text
+    return lines[0]
+
+
+def _tmp_env(tmp_path: Path) -> dict:
+    tmpdir = tmp_path / "tmpdir"
+    tmpdir.mkdir(exist_ok=True)
+    return {"TMPDIR": str(tmpdir)}
+
+
+def _start(args, env) -> subprocess.Popen:
+    full = dict(os.environ)
+    full.update(env)
+    return subprocess.Popen(
+        [sys.executable, "-m", "nubis_addon", *args],
+        cwd=ROOT,
+        env=full,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def _wait_for(predicate, timeout: float = 120.0) -> None:
+    end = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < end, "timed out waiting for the run to get there"
+        time.sleep(0.05)
+
+
+def _staged(folder: Path, name: str) -> bool:
+    return any((d / name).is_file() for d in folder.glob(".nubis-tmp-*"))
+
+
+def _preset(tmp_path: Path, text: str, name: str = "p.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_interrupt_ends_with_one_line_its_exit_code_and_no_temp_files(tmp_path, sig, code):
+    """Ctrl-C used to print a KeyboardInterrupt traceback and then die with SIGSEGV; SIGTERM while
+    writing left a hidden partial file. Both now stop at once, even inside a Cycles render."""
+    env = _tmp_env(tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    good = out / "cycles.png"
+    good.write_bytes(b"the previous good output")
+    args = ["cycles", "--out", str(good), "--samples", "60000", "--width", "64", "--height", "36"]
+    proc = _start([*args, "--voxel-size", "500"], env)
+    # Signal once Cycles is rendering: the bake's VDB sits in Cycles' temporary folder by then.
+    _wait_for(lambda: any(Path(env["TMPDIR"]).glob("nubis-cycles-*/clouds.vdb")))
+    time.sleep(1.0)
+    t0 = time.monotonic()
+    proc.send_signal(sig)
+    stdout, stderr = proc.communicate(timeout=60)
+    assert time.monotonic() - t0 < 10, "the interrupt waited for the render to finish"
+    assert proc.returncode == code, stderr
+    assert stderr.strip() == "nubis: interrupted" and stdout == ""
+    assert good.read_bytes() == b"the previous good output"
+    assert sorted(p.name for p in out.iterdir()) == ["cycles.png"]
+    assert list(Path(env["TMPDIR"]).iterdir()) == []
+
+
+def test_interrupted_compare_keeps_the_earlier_comparison_whole(tmp_path):
+    """A failed compare replaced clouds.vdb and kept the other seven files, so metrics.json described
+    a bake that was no longer there. The eight files now move into place together."""
+    env = _tmp_env(tmp_path)
+    out = tmp_path / "cmp"
+    args = ["compare", "--out", str(out), "--width", "32", "--height", "18", "--voxel-size", "400"]
+    r = run_cli(*args, "--samples", "2", env=env)
+    assert r.returncode == 0, r.stderr
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert len(before) == 8
+    proc = _start([*args, "--samples", "60000", "--frame", "200"], env)
+    _wait_for(lambda: _staged(out, "clouds.vdb"))  # the new bake is done, Cycles has started
+    time.sleep(0.5)
+    proc.send_signal(signal.SIGTERM)
+    _, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 143, stderr
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert list(Path(env["TMPDIR"]).iterdir()) == []
+
+
+def test_sigkill_leaves_nothing_readable_and_the_next_run_sweeps_it(tmp_path):
+    env = _tmp_env(tmp_path)
+    out = tmp_path / "cmp"
+    proc = _start(["compare", "--out", str(out), "--width", "32", "--height", "18", "--samples", "60000"], env)
+    _wait_for(lambda: _staged(out, "clouds.vdb"))
+    proc.kill()
+    proc.communicate(timeout=60)
+    left = list(out.iterdir())
+    # Only the private staging folder, under no output's name and readable by nobody else.
+    assert len(left) == 1 and left[0].name.startswith(".nubis-tmp-"), left
+    assert left[0].stat().st_mode & 0o077 == 0
+    r = run_cli("render", "--out", str(out / "after.png"), "--width", "16", "--height", "9", env=env)
+    assert r.returncode == 0, r.stderr
+    assert [p.name for p in out.iterdir()] == ["after.png"]
+
+
+def test_a_successful_or_failed_run_leaves_nothing_in_the_temp_folder(tmp_path):
+    """Every run left an empty /tmp/blender_XXXXXX (the exit skips Blender's teardown), and every
+    failed run a nubis-log-* folder."""
+    env = _tmp_env(tmp_path)
+    r = run_cli("render", "--out", str(tmp_path / "a.png"), "--width", "16", "--height", "9", env=env)
+    assert r.returncode == 0, r.stderr
+    assert list(Path(env["TMPDIR"]).iterdir()) == []
+    r = run_cli("render", "--preset", "no_such_preset", "--out", str(tmp_path / "b.png"), env=env)
+    assert r.returncode == 1
+    assert list(Path(env["TMPDIR"]).iterdir()) == []
+
+
+def test_an_internal_fault_keeps_exactly_one_log_named_in_its_message(tmp_path, monkeypatch, capsys):
+    import tempfile
+
+    from nubis_addon import cli
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+
+    def fault(args, in_blender, log):
+        raise RuntimeError("a fault")
+
+    monkeypatch.setattr(cli, "_execute", fault)
+    assert cli.run(["render", "--out", str(tmp_path / "x.png")]) == 3
+    line = _one_line(capsys.readouterr().err)
+    logs = list(tmp_path.iterdir())
+    assert len(logs) == 1 and logs[0].is_file() and logs[0].suffix == ".log"
+    assert line.startswith("nubis: internal error: RuntimeError: a fault") and str(logs[0]) in line
+    assert "RuntimeError: a fault" in logs[0].read_text()
+
+
+def test_world_at_its_maximum_strength_writes_finite_float_exr(tmp_path):
+    """[world] strength = 100000 (the documented maximum) overflowed the half-float EXR past 65504 into
+    infinity, and the run still exited 0. EXRs are float32 now: nothing clamped, nothing infinite."""
+    from nubis_addon.core.imageio import read_image
+
+    # The sun at its documented maximum too, so the clouds' light passes half float's range whatever
+    # the cirrus takes from the sky light.
+    text = DEFAULT.replace(
+        "[world]\ncolor = [0.25, 0.45, 0.85]\nstrength = 1.0",
+        "[world]\ncolor = [0.25, 0.45, 0.85]\nstrength = 100000.0",
+    ).replace("color = [1.0, 0.93, 0.82]\nstrength = 5.0", "color = [1.0, 0.93, 0.82]\nstrength = 100000.0")
+    assert "strength = 5.0" not in text
+    preset = _preset(tmp_path, text)
+    out = tmp_path / "bright.exr"
+    r = run_cli("render", "--preset", str(preset), "--out", str(out), "--width", "32", "--height", "18")
+    assert r.returncode == 0, r.stderr
+    img = read_image(out)
+    assert np.isfinite(img).all()
+    assert img[..., :3].max() > 65504.0  # beyond half float: kept, not clamped
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["render", "--frame", "99999999999999999999"], "--frame 99999999999999999999 is out of range: use a whole"),
+        (["cycles", "--samples", "99999999999999"], "--samples 99999999999999 is out of range: use a whole number"),
+        (["cycles", "--bounces", "99999999999"], "--bounces 99999999999 is out of range: use a whole number"),
+        (["compare", "--samples", "99999999999999"], "--samples 99999999999999 is out of range"),
+        (["bake", "--voxel-size", "1e300"], "--voxel-size 1e+300 is out of range: use a voxel edge of at most"),
+        (["render", "--passes", "100000000"], "--passes 100000000 is out of range"),
+    ],
+)
+def test_ranges_are_refused_before_any_work_with_what_to_do(tmp_path, args, message):
+    """These were `nubis: internal error: ...` with a log path (or blamed on NaN in the scene)."""
+    env = _tmp_env(tmp_path)
+    out = tmp_path / ("cmp" if args[0] == "compare" else "x.vdb" if args[0] == "bake" else "x.png")
+    t0 = time.monotonic()
+    r = run_cli(*args, "--out", str(out), env=env)
+    assert r.returncode == 1, r.stderr
+    line = _one_line(r.stderr)
+    assert line.startswith("nubis: error:") and message in line, line
+    assert "NaN" not in line and "internal" not in line
+    assert time.monotonic() - t0 < 15  # no rendering happened
+    assert not out.exists()
+    assert list(Path(env["TMPDIR"]).iterdir()) == []
+
+
+def _layers(n: int) -> str:  # default.toml has four layers of its own
+    return "".join(
+        f'\n[[field.layers]]\nname = "n{i}"\nkind = "perlin"\nchannel = "none"\noctaves = 10\n' for i in range(n)
+    )
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (
+            DEFAULT.replace("location = [0.0, -6000.0, 2.0]", "location = [0.0, 0.0, 1e30]"),
+            "camera.location = [0.0, 0.0, 1e+30] is out of range: keep each coordinate within",
+        ),
+        (
+            DEFAULT + "".join(f"\n[[storms]]\nx = {i * 10.0}\n" for i in range(100)),
+            "storms: 100 given, but a scene holds at most 4: remove 96 of them",
+        ),
+        (DEFAULT + _layers(296), "field.layers: 300 given, but a scene holds at most 128"),
+        ("[density]\nsigma = true\n", "density.sigma must be a number, not true"),
+        ("[density]\nsigma = 1979-05-27\n", "density.sigma must be a number, not 1979-05-27"),
+        ("[preset]\nname = 3\n", "preset.name must be text in quotes, not 3"),
+        ("[density]\nsigma = 100000000000000000000000000000\n", "density.sigma = 1e+29 is out of range"),
+    ],
+)
+def test_preset_values_the_renderer_cannot_serve_are_refused_as_toml(tmp_path, text, message):
+    """A camera at 1e30 m ended in `LinAlgError: Singular matrix`; 100 storms rendered as 4, silently;
+    300 layers took minutes; values were quoted as Python reprs (True, datetime.date(...))."""
+    preset = _preset(tmp_path, text)
+    t0 = time.monotonic()
+    r = run_cli("render", "--preset", str(preset), "--out", str(tmp_path / "x.png"))
+    assert r.returncode == 1, r.stderr
+    line = _one_line(r.stderr)
+    assert line.startswith("nubis: error:") and message in line, line
+    assert time.monotonic() - t0 < 15
+
+
+def test_a_slow_field_composite_is_estimated_before_it_starts(tmp_path):
+    env = _tmp_env(tmp_path)
+    preset = _preset(tmp_path, DEFAULT.replace("resolution = 512", "resolution = 2048", 1) + _layers(96))
+    proc = _start(["render", "--preset", str(preset), "--out", str(tmp_path / "x.png")], env)
+    first = proc.stderr.readline()
+    proc.send_signal(signal.SIGINT)  # no need to wait minutes for the composite
+    _, rest = proc.communicate(timeout=60)
+    assert first.startswith("nubis: compositing 100 field layers at 2048x2048 pixels, about "), first
+    assert float(first.split("about ")[1].split(" s")[0]) > 60
+    assert proc.returncode == 130 and rest.strip() == "nubis: interrupted"
+    assert list(Path(env["TMPDIR"]).iterdir()) == []
+
+
+def test_composite_reports_progress_and_estimates_by_cost():
+    from nubis_addon.core import fields
+    from nubis_addon.core.params import defaults
+    from nubis_addon.core.presets import LAYER_SCHEMA
+
+    base = {k: (list(v[1]) if isinstance(v[1], list) else v[1]) for k, v in LAYER_SCHEMA.items()}
+    layers = [dict(base, name=f"l{i}", kind=k) for i, k in enumerate(("perlin", "constant", "worley"))]
+    params = defaults()
+    params["field_resolution"] = 64
+    seen = []
+    fields.composite(layers, params, progress=seen.append)
+    assert seen == sorted(seen) and seen[-1] == 1.0 and len(seen) == 3
+    cheap = fields.composite_seconds([dict(base, kind="constant")] * 10, 512)
+    dear = fields.composite_seconds([dict(base, kind="perlin_worley", octaves=10)] * 10, 512)
+    assert dear > 20 * cheap and fields.composite_seconds(layers, 1024) > 3.5 * fields.composite_seconds(layers, 512)
+
+
+@pytest.mark.parametrize("content", [b"", b"this is a text file, not an image\n"])
+def test_an_unreadable_image_layer_is_not_reported_missing(make_scene, tmp_path, content):
+    from nubis_addon.blender import scene_io
+    from nubis_addon.core.errors import NubisError
+    from nubis_addon.core.presets import load_preset
+
+    (tmp_path / "paint.png").write_bytes(content)
+    layer = '\n[[field.layers]]\nname = "painted"\nkind = "image"\nimage = "paint.png"\n'
+    preset = load_preset(_preset(tmp_path, DEFAULT + layer))
+    scene = make_scene("default")
+    with pytest.raises(NubisError) as err:
+        scene_io.apply_preset(scene, preset)
+    text = str(err.value)
+    assert "missing" not in text and "not found" not in text and str(tmp_path / "paint.png") in text
+    assert ("empty file (0 bytes)" if not content else "cannot be read as an image") in text
+
+
+def test_a_saved_scene_beyond_reach_is_refused(make_scene):
+    """A .blend may hold what no preset can: a camera at 1e30 m, five storms."""
+    from nubis_addon.blender import pipeline, scene_io
+    from nubis_addon.core.errors import NubisError
+
+    scene = make_scene("default")
+    pipeline.check_scene(scene)
+    scene.camera.location = (0.0, 0.0, 1e30)
+    with pytest.raises(NubisError, match="the camera .* is at \\[0, 0, 1e\\+30\\] m, beyond"):
+        pipeline.check_scene(scene)
+    scene.camera.location = (0.0, 0.0, 2.0)
+    for i in range(5):
+        scene_io.add_storm(scene, {"x": 1000.0 * i})
+    with pytest.raises(NubisError, match="superstorms: 5 given, but a scene holds at most 4: remove 1 of them"):
+        pipeline.check_scene(scene)
+
+
+def test_sigterm_while_the_bake_is_written_leaves_no_partial_file(tmp_path):
+    """SIGTERM while writing left a partial hidden `.x-XXXX.vdb` (mode 0600) beside the output.
+
+    The write takes about 0.2 s of a 17 s bake (60 m voxels): the run is frozen (SIGSTOP) as soon as
+    its staging folder appears, sent SIGTERM, and let go, so the signal lands inside the write."""
+    env = _tmp_env(tmp_path)
+    good = tmp_path / "clouds.vdb"
+    good.write_bytes(b"the previous good bake")
+    proc = _start(["bake", "--out", str(good), "--voxel-size", "60"], env)
+    end = time.monotonic() + 300
+    while not any(tmp_path.glob(".nubis-tmp-*")):
+        assert proc.poll() is None, "the bake ended before its write could be caught"
+        assert time.monotonic() < end
+        time.sleep(0.002)
+    proc.send_signal(signal.SIGSTOP)
+    assert any(tmp_path.glob(".nubis-tmp-*")), "the write was not caught in time"
+    proc.send_signal(signal.SIGTERM)
+    proc.send_signal(signal.SIGCONT)
+    _, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 143 and stderr.strip() == "nubis: interrupted", stderr
+    assert good.read_bytes() == b"the previous good bake"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["clouds.vdb", "tmpdir"]
+    assert list(Path(env["TMPDIR"]).iterdir()) == []
+
+
+def test_output_sets_move_together_or_not_at_all(tmp_path):
+    from nubis_addon.core import staging
+
+    (tmp_path / "a.txt").write_text("old a")
+    (tmp_path / "b.txt").write_text("old b")
+    with pytest.raises(RuntimeError), staging.output_set() as outputs:
+        outputs.stage(tmp_path / "a.txt").write_text("new a")
+        raise RuntimeError("the second file failed")
+    assert (tmp_path / "a.txt").read_text() == "old a" and sorted(p.name for p in tmp_path.iterdir()) == [
+        "a.txt",
+        "b.txt",
+    ]
+    with staging.output_set() as outputs:
+        for name in ("a.txt", "b.txt", "c.txt"):
+            outputs.stage(tmp_path / name).write_text(f"new {name[0]}")
+    assert [(tmp_path / n).read_text() for n in ("a.txt", "b.txt", "c.txt")] == ["new a", "new b", "new c"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "b.txt", "c.txt"]
+    assert oct((tmp_path / "c.txt").stat().st_mode & 0o777) != oct(0o600)
+    # A staging folder of a process that no longer exists (SIGKILL) is swept by the next set.
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    stale = tmp_path / f"{staging._prefix().rsplit('-', 2)[0]}-{dead.stdout.strip()}-abc"
+    stale.mkdir()
+    (stale / "a.txt").write_text("partial")
+    elsewhere = tmp_path / f"{staging.PREFIX}another-machine-{dead.stdout.strip()}-abc"  # a shared folder
+    elsewhere.mkdir()
+    with staging.output_set() as outputs:
+        outputs.stage(tmp_path / "d.txt").write_text("d")
+    assert not stale.exists() and elsewhere.exists()
+
+
+def test_a_signal_during_the_writes_keeps_the_earlier_set(tmp_path):
+    """The signal arrives while the set is being written (a long C call holding the interpreter): the
+    commit that follows keeps the earlier files and the process ends with 143."""
+    script = f"""
+import os, signal, sys, time
+sys.path.insert(0, {str(ROOT)!r})
+from pathlib import Path
+from nubis_addon.core import interrupt, staging
+out = Path({str(tmp_path)!r})
+with interrupt.handle_signals(2):
+    with staging.output_set() as outputs:
+        outputs.stage(out / "a.txt").write_text("new a")
+        os.kill(os.getpid(), signal.SIGTERM)
+        outputs.stage(out / "b.txt").write_text("new b")
+print("committed")
+"""
+    (tmp_path / "a.txt").write_text("old a")
+    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 143 and r.stderr.strip() == "nubis: interrupted" and r.stdout == "", r
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt"] and (tmp_path / "a.txt").read_text() == "old a"
