@@ -47,6 +47,15 @@ class Stage:
 
 
 _VIEW = (("MAT4", "inv_view_proj"), ("VEC4", "eye"))
+# The temporal resolve reads the working buffer and the previous history, and writes the new history.
+_TEMPORAL_TARGETS = ("color", "attr", "flash")
+_RESOLVE = {
+    "samplers": tuple(("FLOAT_2D", f"{src}_{t}") for src in ("work", "hist") for t in _TEMPORAL_TARGETS),
+    "libs": ("nubis_common_lib.glsl", "nubis_motion_lib.glsl"),
+    "cloud_inputs": False,
+    "outputs": _TEMPORAL_TARGETS,
+    "blocks": (("NubisTemporal", "T"),),
+}
 # The bake reads the lighting library too, for the glow grid.
 STAGES: dict[str, Stage] = {
     "raymarch": Stage(_VIEW),
@@ -57,29 +66,12 @@ STAGES: dict[str, Stage] = {
     "temporal_march": Stage(
         (*_VIEW, ("VEC4", "block"), ("VEC4", "cull")),
         (("FLOAT_2D", "scene_depth"),),
-        outputs=("color", "attr", "flash"),
+        outputs=_TEMPORAL_TARGETS,
     ),
-    "resolve": Stage(
-        samplers=tuple(
-            ("FLOAT_2D", n) for n in ("work_color", "work_attr", "work_flash", "hist_color", "hist_attr", "hist_flash")
-        ),
-        libs=("nubis_common_lib.glsl", "nubis_motion_lib.glsl"),
-        cloud_inputs=False,
-        outputs=("color", "attr", "flash"),
-        blocks=(("NubisTemporal", "T"),),
-    ),
+    "resolve": Stage(**_RESOLVE),
     # The same resolve on one point per block, for redraws where only the marched pixels change.
     "resolve_points": Stage(
-        (("VEC4", "points"),),
-        samplers=tuple(
-            ("FLOAT_2D", n) for n in ("work_color", "work_attr", "work_flash", "hist_color", "hist_attr", "hist_flash")
-        ),
-        libs=("nubis_common_lib.glsl", "nubis_motion_lib.glsl"),
-        cloud_inputs=False,
-        outputs=("color", "attr", "flash"),
-        blocks=(("NubisTemporal", "T"),),
-        vertex="nubis_points_vert.glsl",
-        fragment="nubis_resolve_frag.glsl",
+        (("VEC4", "points"),), vertex="nubis_points_vert.glsl", fragment="nubis_resolve_frag.glsl", **_RESOLVE
     ),
     # Drawn on the far plane, so a LESS_EQUAL depth test keeps the clouds behind the scene's objects.
     "upscale": Stage(
