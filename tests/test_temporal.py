@@ -250,3 +250,52 @@ def test_viewport_reads_the_depth_once_per_change(blender):
             assert np.allclose(np.asarray(fresh.read()), 1.0)
     finally:
         off.free()
+
+
+def test_a_3d_view_region_draws_converges_and_culls(make_scene, blender):
+    """The draw handler's path for one 3D view, with a region and view stand-in: it reads the view's
+    depth, converges to the offscreen render where nothing covers the sky, keeps asking for redraws
+    until it has converged, and marches nothing behind geometry."""
+    from types import SimpleNamespace
+
+    import gpu
+
+    from nubis_addon.blender import pipeline, runtime, scene_io, viewport
+    from nubis_addon.render.engine import read_pixels
+
+    scene = make_scene("default")
+    w, h = 64, 36
+    expected = pipeline.render_viewport(scene, w, h)
+    depsgraph = blender.context.evaluated_depsgraph_get()
+    cam = scene.camera.evaluated_get(depsgraph)
+    rv3d = SimpleNamespace(
+        window_matrix=cam.calc_matrix_camera(depsgraph, x=w, y=h, scale_x=1.0, scale_y=1.0),
+        view_matrix=scene_io.evaluated_matrix(scene.camera).inverted(),
+        is_perspective=True,
+    )
+    region = SimpleNamespace(width=w, height=h, as_pointer=lambda: 4242)
+    scene.nubis.viewport_samples = 1
+    offscreen = gpu.types.GPUOffScreen(w, h, format="RGBA32F")
+    try:
+        with offscreen.bind():
+            fb = gpu.state.active_framebuffer_get()
+            for i in range(18):  # the first draw's depsgraph evaluation counts as a scene change
+                fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+                tv = viewport.draw_region(scene, region, rv3d)
+                if i == 0:
+                    assert blender.app.timers.is_registered(viewport._converging_tick)
+            got = read_pixels(fb, w, h)[::-1]
+            assert tv.converged  # one sample per pixel was asked for
+            np.testing.assert_allclose(got, expected, rtol=2e-3, atol=2e-3)
+            # Geometry over the whole view (a new scene update): nothing is marched or shown.
+            viewport._scene_updates[0] += 1
+            for _ in range(16):
+                fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=0.5)
+                viewport.draw_region(scene, region, rv3d)
+            fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+            tv.upscale(runtime.cloud_gpu(scene.nubis.noise_seed))
+            assert read_pixels(fb, w, h)[..., 3].max() == 0.0
+    finally:
+        offscreen.free()
+        if blender.app.timers.is_registered(viewport._converging_tick):
+            blender.app.timers.unregister(viewport._converging_tick)

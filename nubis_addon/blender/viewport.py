@@ -185,27 +185,38 @@ def _draw_callback() -> None:
     if region is None or rv3d is None:
         return
     try:
-        fb = gpu.state.active_framebuffer_get()
-        view_key = (tuple(map(tuple, rv3d.view_matrix)), tuple(map(tuple, rv3d.window_matrix)), _scene_updates[0])
-        depth = _scene_depth(fb, region.width, region.height, (region.as_pointer(), *view_key))
-        tv = draw_view(
-            scene,
-            camera.ray_inverse_view_projection(rv3d.window_matrix, rv3d.view_matrix),
-            rv3d.view_matrix.inverted().translation,
-            region.width,
-            region.height,
-            rv3d.is_perspective,
-            key=region.as_pointer(),
-            depth=depth,
-            depth_key=_scene_updates[0],
-        )
-        if not tv.converged:
-            _keep_converging()
+        draw_region(scene, region, rv3d)
         _last_error.clear()
     except NubisError as err:
         # A draw callback cannot report; remember the message for the sidebar instead of spamming the console.
         if not _last_error or _last_error[0] != str(err):
             _last_error[:] = [str(err)]
+
+
+def draw_region(scene, region, rv3d) -> temporal.TemporalViewport:
+    """One redraw of a 3D view's region (`region`: width, height, as_pointer(); `rv3d`: view_matrix,
+    window_matrix, is_perspective) over the bound framebuffer, its depth culling the march; asks for
+    more redraws while the view converges."""
+    fb = gpu.state.active_framebuffer_get()
+    view_key = (tuple(map(tuple, rv3d.view_matrix)), tuple(map(tuple, rv3d.window_matrix)), _scene_updates[0])
+    depth = _scene_depth(fb, region.width, region.height, (region.as_pointer(), *view_key))
+    # The eye from the same float64 inverse the rays use: mathutils inverts in float32, which puts the
+    # eye millimetres off the rays' own origin and turns rays that are only metres long by 0.04 degrees.
+    eye = np.linalg.inv(np.array(rv3d.view_matrix, dtype=np.float64))[:3, 3]
+    tv = draw_view(
+        scene,
+        camera.ray_inverse_view_projection(rv3d.window_matrix, rv3d.view_matrix),
+        eye,
+        region.width,
+        region.height,
+        rv3d.is_perspective,
+        key=region.as_pointer(),
+        depth=depth,
+        depth_key=_scene_updates[0],
+    )
+    if not tv.converged:
+        _keep_converging()
+    return tv
 
 
 def last_error() -> str:
