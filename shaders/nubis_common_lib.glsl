@@ -22,8 +22,10 @@ vec2 nubis_rotate_about(vec2 xy, vec2 centre, float angle)
  * block and a partly converged image is evenly spread. */
 int nubis_bayer4(ivec2 pixel)
 {
-  const int order[16] = int[16](0, 8, 2, 10, 12, 4, 14, 6, 3, 11, 1, 9, 15, 7, 13, 5);
-  return order[(pixel.y & 3) * 4 + (pixel.x & 3)];
+  /* The matrix 0 8 2 10 / 12 4 14 6 / 3 11 1 9 / 15 7 13 5 by its bits (no array constructor, which
+   * not every backend's translation accepts). */
+  int x = pixel.x & 3, y = pixel.y & 3, a = x ^ y;
+  return ((a & 1) << 3) | ((y & 1) << 2) | (a & 2) | ((y & 2) >> 1);
 }
 
 float clamp01(float x)

@@ -44,12 +44,15 @@ vec4 nubis_cirrus(vec3 origin, vec3 dir)
 /* The clouds and the cirrus layer together, in the order the camera sees them (GPU Pro 7 and S15 sample
  * the high layer at the end of the march, behind the volume, as seen from the ground): from above
  * the cirrus altitude the layer is in front of the clouds below it, the storm's anvil cirrus too. */
-vec4 nubis_with_cirrus(vec4 clouds, vec3 origin, vec3 dir)
+vec4 nubis_with_cirrus(vec4 clouds, vec3 origin, vec3 dir, out float behind)
 {
   vec4 cirrus = nubis_cirrus(origin, dir);
+  /* `behind`: what the layer lets through of the clouds' own light (their flashes too). */
   if (nubis_altitude(origin, P.layer.x) > P.cirrus.x) {
-    return cirrus + (1.0 - cirrus.a) * clouds;
+    behind = 1.0 - cirrus.a;
+    return cirrus + behind * clouds;
   }
+  behind = 1.0;
   return clouds + (1.0 - clouds.a) * cirrus;
 }
 

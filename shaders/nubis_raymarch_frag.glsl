@@ -10,7 +10,8 @@ void main()
   vec4 clouds = nubis_march(origin, dir, gl_FragCoord.xy, cloud_depth, flash_mask);
   clouds.rgb += NUBIS_FLASH_COLOUR * dot(flash_mask, nubis_flash_intensities());
 #if NUBIS_CIRRUS
-  clouds = nubis_with_cirrus(clouds, origin, dir);
+  float behind;
+  clouds = nubis_with_cirrus(clouds, origin, dir, behind);
 #endif
 #if NUBIS_FETCH_STATS
   color = vec4(float(nubis_fetches_3d), float(nubis_view_samples), float(nubis_density_calls), 1.0);

@@ -18,9 +18,17 @@ vec2 nubis_work_position(vec2 p)
   return (p - (T.flags.zw + 0.5)) / 4.0;
 }
 
+/* The last working-buffer texel in each axis that holds a marched pixel (sizes need not be multiples of
+ * 4: beyond it the buffer holds nothing). */
+vec2 nubis_work_last()
+{
+  return floor((T.size.xy - 1.0 - T.flags.zw) / 4.0);
+}
+
 vec4 nubis_work_bilinear(sampler2D tex, vec2 history_pixel)
 {
-  return textureLod(tex, (nubis_work_position(history_pixel) + 0.5) / T.size.zw, 0.0);
+  vec2 at = clamp(nubis_work_position(history_pixel), vec2(0.0), nubis_work_last());
+  return textureLod(tex, (at + 0.5) / T.size.zw, 0.0);
 }
 
 /* The history at `uv` through a Catmull-Rom filter: a pan resamples the history every redraw, and the
@@ -79,11 +87,11 @@ void main()
   vec4 lo = vec4(1e30), hi = vec4(-1e30);
   vec4 lo_f = vec4(1e30), hi_f = vec4(-1e30);
   float near_depth = 0.0;
-  ivec2 work_size = ivec2(T.size.zw);
+  ivec2 last = ivec2(nubis_work_last());
   ivec2 nearest = ivec2(floor(nubis_work_position(vec2(q) + 0.5) + 0.5));
   for (int dy = -1; dy <= 1; dy++) {
     for (int dx = -1; dx <= 1; dx++) {
-      ivec2 b = clamp(nearest + ivec2(dx, dy), ivec2(0), work_size - 1);
+      ivec2 b = clamp(nearest + ivec2(dx, dy), ivec2(0), last);
       vec4 c = texelFetch(work_color, b, 0);
       vec4 f = texelFetch(work_flash, b, 0);
       lo = min(lo, c);

@@ -28,7 +28,9 @@ void main()
   vec4 flash_mask;
   vec4 clouds = nubis_march(origin, dir, centre, cloud_depth, flash_mask);
 #if NUBIS_CIRRUS
-  clouds = nubis_with_cirrus(clouds, origin, dir);
+  float behind;
+  clouds = nubis_with_cirrus(clouds, origin, dir, behind);
+  flash_mask *= behind;
 #endif
 #if NUBIS_FETCH_STATS
   clouds = vec4(float(nubis_fetches_3d), float(nubis_view_samples), float(nubis_density_calls), 1.0);

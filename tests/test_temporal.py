@@ -299,3 +299,22 @@ def test_a_3d_view_region_draws_converges_and_culls(make_scene, blender):
         offscreen.free()
         if blender.app.timers.is_registered(viewport._converging_tick):
             blender.app.timers.unregister(viewport._converging_tick)
+
+
+def test_sizes_that_are_not_multiples_of_four_have_no_dark_edge(shot):
+    """Where the view's size is not a multiple of 4 the last working-buffer column holds no marched
+    pixel for most of the 16 offsets; filling pixels without history must not blend that empty
+    column in (it darkened the right edge)."""
+    from nubis_addon.blender import pipeline, runtime
+    from nubis_addon.render import temporal
+
+    scene, s = shot("stratocumulus", w=65, h=37)
+    full = pipeline.render_shot(s)
+    clouds = runtime.cloud_gpu(s.noise_seed)
+    tv = temporal.TemporalViewport()
+    tv.redraw_index = 6  # the first redraw marches offset (2, 1) of each block: column 64 is empty
+    _redraws(tv, clouds, s.state, _view(s), 1)
+    first = tv.read_history()
+    assert full[:, -1, 3].mean() > 0.3, "the test needs clouds at the right edge"
+    assert first[:, -1, 3].mean() > 0.8 * full[:, -1, 3].mean()
+    tv.free()

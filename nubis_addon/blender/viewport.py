@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import bpy
 import gpu
 import numpy as np
@@ -12,7 +14,7 @@ from ..render import temporal
 from . import runtime, scene_io
 
 _handle = None
-_fields_cache: dict = {"key": None, "fields": None}
+_fields_cache: dict = {}  # scene pointer -> (key, field arrays)
 _views: dict = {}  # region pointer -> TemporalViewport
 _depth_cache: dict = {}
 _scene_updates = [0]  # counts depsgraph updates: the scene's geometry (and so its depth) may have changed
@@ -23,7 +25,7 @@ last_benchmark: list[str] = []  # the sidebar's Benchmark button's table, line b
 @bpy.app.handlers.persistent
 def mark_dirty(*_args) -> None:
     """Forget the cached field pixels (on file loads and setting edits)."""
-    _fields_cache["key"] = None
+    _fields_cache.clear()
 
 
 _pending_images: set[str] = set()
@@ -90,21 +92,33 @@ def _state(scene, view_origin):
     key = (scene.as_pointer(), s.field_resolution, scene_io.field_generation()) + tuple(
         img.as_pointer() if img else 0 for img in images
     )
-    if _fields_cache["key"] != key:
-        _fields_cache["fields"] = scene_io.read_fields(s)
-        _fields_cache["key"] = key
-    return scene_io.state_from_scene(scene, camera_location=view_origin, fields=_fields_cache["fields"])
+    # One entry per scene: two windows on two cloudscapes must not re-read each other's fields.
+    cached = _fields_cache.get(scene.as_pointer())
+    if cached is None or cached[0] != key:
+        if len(_fields_cache) >= _MAX_VIEWS:
+            _fields_cache.clear()
+        cached = _fields_cache[scene.as_pointer()] = (key, scene_io.read_fields(s))
+    return scene_io.state_from_scene(scene, camera_location=view_origin, fields=cached[1])
 
 
 _MAX_VIEWS = 8  # 3D views with a history of their own; the least recently drawn is freed beyond this
+_IDLE_SECONDS = 1.0  # a view not drawn for this long no longer asks for redraws
+_FORGET_SECONDS = 60.0  # ... and is freed after this long (a closed area, a hidden workspace)
 
 
 def temporal_view(key) -> temporal.TemporalViewport:
     """The temporal state of one 3D view (keyed by its region), created on first use."""
+    now = time.monotonic()
     tv = _views.pop(key, None) or temporal.TemporalViewport()
+    tv.last_drawn = now
     _views[key] = tv  # most recently used last
+    for old in [k for k, v in _views.items() if now - getattr(v, "last_drawn", now) > _FORGET_SECONDS]:
+        _views.pop(old).free()
+        _depth_cache.pop(old, None)
     while len(_views) > _MAX_VIEWS:
-        _views.pop(next(iter(_views))).free()
+        old = next(iter(_views))
+        _views.pop(old).free()
+        _depth_cache.pop(old, None)
     return tv
 
 
@@ -143,24 +157,26 @@ def draw_view(
     return tv
 
 
-def _scene_depth(fb, width: int, height: int, key):
+def _scene_depth(fb, width: int, height: int, key, view=None):
     """The view's depth as a texture, read back only when the view or the scene changed (a CPU round
-    trip: Python has no handle on the viewport's depth texture)."""
-    cached = _depth_cache.get("key")
-    if cached == key and _depth_cache.get("texture") is not None:
-        return _depth_cache["texture"]
+    trip: Python has no handle on the viewport's depth texture); one entry per 3D view."""
+    cached = _depth_cache.get(view)
+    if cached is not None and cached[0] == key and cached[1] is not None:
+        return cached[1]
     try:
         depth = fb.read_depth(0, 0, width, height)
         texture = gpu.types.GPUTexture((width, height), format="R32F", data=depth)
     except (ValueError, TypeError, SystemError):
         texture = None  # no depth attachment here: march everything
-    _depth_cache.update(key=key, texture=texture)
+    _depth_cache[view] = (key, texture)
     return texture
 
 
 def _converging_tick():
-    """While a 3D view is still converging, keep asking for redraws (Blender redraws only on events)."""
-    if not any(not tv.converged for tv in _views.values()):
+    """While a 3D view that is being drawn is still converging, keep asking for redraws (Blender redraws
+    only on events); views that stopped drawing (closed, hidden, switched off) do not keep it going."""
+    now = time.monotonic()
+    if not any(not tv.converged and now - getattr(tv, "last_drawn", 0.0) < _IDLE_SECONDS for tv in _views.values()):
         return None
     wm = getattr(bpy.context, "window_manager", None)
     for window in wm.windows if wm else ():
@@ -199,7 +215,7 @@ def draw_region(scene, region, rv3d) -> temporal.TemporalViewport:
     more redraws while the view converges."""
     fb = gpu.state.active_framebuffer_get()
     view_key = (tuple(map(tuple, rv3d.view_matrix)), tuple(map(tuple, rv3d.window_matrix)), _scene_updates[0])
-    depth = _scene_depth(fb, region.width, region.height, (region.as_pointer(), *view_key))
+    depth = _scene_depth(fb, region.width, region.height, view_key, region.as_pointer())
     # The eye from the same float64 inverse the rays use: mathutils inverts in float32, which puts the
     # eye millimetres off the rays' own origin and turns rays that are only metres long by 0.04 degrees.
     eye = np.linalg.inv(np.array(rv3d.view_matrix, dtype=np.float64))[:3, 3]
@@ -252,7 +268,7 @@ def unregister() -> None:
     _depth_cache.clear()
     if bpy.app.timers.is_registered(_converging_tick):
         bpy.app.timers.unregister(_converging_tick)
-    _fields_cache.update(key=None, fields=None)
+    _fields_cache.clear()
     _pending_images.clear()
     if bpy.app.timers.is_registered(_regenerate_after_paint):
         bpy.app.timers.unregister(_regenerate_after_paint)

@@ -69,10 +69,6 @@ STAGES: dict[str, Stage] = {
         outputs=_TEMPORAL_TARGETS,
     ),
     "resolve": Stage(**_RESOLVE),
-    # The same resolve on one point per block, for redraws where only the marched pixels change.
-    "resolve_points": Stage(
-        (("VEC4", "points"),), vertex="nubis_points_vert.glsl", fragment="nubis_resolve_frag.glsl", **_RESOLVE
-    ),
     # Drawn on the far plane, so a LESS_EQUAL depth test keeps the clouds behind the scene's objects.
     "upscale": Stage(
         (("VEC4", "filter_size"),),

@@ -19,7 +19,6 @@ from dataclasses import dataclass
 
 import gpu
 import numpy as np
-from gpu_extras.batch import batch_for_shader
 
 from ..core import camera, march
 from ..core.state import CloudState
@@ -71,7 +70,6 @@ class TemporalViewport:
         self._time = None
         self._view_proj = None
         self._dummy_depth = None
-        self._points = None
         self.last_restart_reason = ""
 
     # ---- buffers ------------------------------------------------------------------------------------------
@@ -102,6 +100,7 @@ class TemporalViewport:
         self._work = target(work)
         self._sizes = (history, work)
         self._valid = False
+        self.since_change = 0
         for t in self._history:
             with t["fb"].bind():
                 t["fb"].clear(color=(0.0, 0.0, 0.0, 0.0))
@@ -109,6 +108,7 @@ class TemporalViewport:
     def free(self) -> None:
         self._history = []
         self._work = {}
+        self._dummy_depth = None
         self._sizes = None
         self._valid = False
         self._key = None
@@ -183,6 +183,7 @@ class TemporalViewport:
             prev_view_proj = view_proj
         self._view_proj = view_proj
         if self.converged:
+            clouds.update(state)  # the upscale reads this frame's flash intensities from the block
             return False
 
         sample_pass = self.since_change // REDRAWS_PER_SAMPLE if self._valid else 0
@@ -229,41 +230,21 @@ class TemporalViewport:
             ]
         ).astype(np.float32)
         temporal_ubo = gpu.types.GPUUniformBuf(block.tobytes())
-        # After a change every pixel is resolved; while still, only the pixels marched now change, so
-        # points update them and the ones the previous redraw wrote into the other buffer: both
-        # buffers then hold the whole history again (they differ only where the last redraw wrote).
-        everywhere = not self._valid or self.since_change < 2
-        stage = "resolve" if everywhere else "resolve_points"
         with dst["fb"].bind():
             gpu.state.blend_set("NONE")
             gpu.state.viewport_set(0, 0, *history_size)
-            sh = engine.shader(stage, defines)
+            sh = engine.shader("resolve", defines)
             clouds.bind(sh, cloud_inputs=False)
             sh.uniform_block("T", temporal_ubo)
             for name in ("color", "attr", "flash"):
                 sh.uniform_sampler(f"work_{name}", work[name])
                 sh.uniform_sampler(f"hist_{name}", src[name])
-            if everywhere:
-                engine.fullscreen_batch("resolve", defines).draw(sh)
-            else:
-                gpu.state.point_size_set(1.0)
-                batch = self._points_batch(sh, work_size)
-                previous = march.bayer_offset(bayer - 1)
-                for offset in ((ox, oy), previous):
-                    sh.uniform_float("points", (float(offset[0]), float(offset[1]), *map(float, history_size)))
-                    batch.draw(sh)
+            engine.fullscreen_batch("resolve", defines).draw(sh)
         self._history = [dst, src]
         self.redraw_index += 1
         self.since_change += 1
         self._valid = True
         return True
-
-    def _points_batch(self, sh, work_size: tuple[int, int]):
-        if self._points is None or self._points[0] != work_size:
-            i, j = np.meshgrid(np.arange(work_size[0]), np.arange(work_size[1]))
-            coords = np.stack([i.ravel(), j.ravel()], axis=1).astype(np.float32)
-            self._points = (work_size, batch_for_shader(sh, "POINTS", {"pos": coords}))
-        return self._points[1]
 
     # ---- showing it ---------------------------------------------------------------------------------------
     def upscale(self, clouds: engine.CloudGPU, blur: float = 1.0) -> None:
