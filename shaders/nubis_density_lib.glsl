@@ -91,12 +91,15 @@ float nubis_ring_angle(int ring, float u, float spin, float time)
  * position in the neighbouring ring where two rings overlap (weight 0: one sample suffices).
  * The time is each storm's vortex time (render/uniforms.py): the lifecycle fade integrated over the
  * animation, so a growing storm turns ever faster up to its spin and never sweeps an accumulated
- * angle in. The angles are not faded: how much of the detail is turned at all is
- * nubis_vortex_unturned's, so every angle stays whole turns apart across the vortex time's wrap. */
-vec2 nubis_vortex(vec2 xy, out vec2 second, out float weight)
+ * angle in. The angles are not faded, so they stay whole turns apart across the vortex time's wrap:
+ * instead `unturned` returns how much of the detail is not turned by any storm. The rotation dies out
+ * over each storm's outer rim, so its edge has no seam, and grows in with the lifecycle blend (GDC22:
+ * the storm transitions seamlessly from cloud); the caller blends turned and unturned detail by it. */
+vec2 nubis_vortex(vec2 xy, out vec2 second, out float weight, out float unturned)
 {
   second = xy;
   weight = 0.0;
+  float turned_share = 0.0;
 #if NUBIS_STORMS
   int count = min(int(P.storm_info.x), NUBIS_MAX_STORMS);
   for (int i = 0; i < count; i++) {
@@ -106,6 +109,7 @@ vec2 nubis_vortex(vec2 xy, out vec2 second, out float weight)
       continue;
     }
     float u = 6.0 * dist / shape.z;
+    turned_share = max(turned_share, (1.0 - smoothstep(5.0, 6.0, u)) * smoothstep(0.0, 0.25, shape.w));
     float spin = P.storm_light[i].x;
     float time = P.storm_flash[i].w;
     const float overlap = 0.3; /* in ring widths */
@@ -133,29 +137,9 @@ vec2 nubis_vortex(vec2 xy, out vec2 second, out float weight)
     }
   }
 #endif
+  /* Outside every storm nothing turned, and the turned sample is the unturned one. */
+  unturned = turned_share > 0.0 ? 1.0 - turned_share : 0.0;
   return xy;
-}
-
-/* How much of the detail at world `xy` is not turned by any storm: the rotation dies out over each
- * storm's outer rim, so its edge has no seam, and grows in with the lifecycle blend (GDC22: the storm
- * transitions seamlessly from cloud). The turned and the unturned detail are blended by it rather
- * than the angle faded, which would sweep the angle through the ramp and break the wrap. */
-float nubis_vortex_unturned(vec2 xy)
-{
-  float turned = 0.0;
-#if NUBIS_STORMS
-  int count = min(int(P.storm_info.x), NUBIS_MAX_STORMS);
-  for (int i = 0; i < count; i++) {
-    vec4 shape = P.storm_shape[i];
-    float dist = distance(xy, shape.xy);
-    if (shape.w <= 0.0 || dist >= shape.z) {
-      continue;
-    }
-    float share = (1.0 - smoothstep(5.0, 6.0, 6.0 * dist / shape.z)) * smoothstep(0.0, 0.25, shape.w);
-    turned = max(turned, share);
-  }
-#endif
-  return 1.0 - turned;
 }
 
 /* Detail fBm at a (wind-moved) position, with the curl twist at the base. */
@@ -302,23 +286,22 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
   /* The rings are decided by where the sample is, not by where the wind has carried its noise, so
    * nothing outside a storm's radius ever turns. */
   vec2 second;
-  float ring_weight;
-  vec2 turned = nubis_vortex(p.xy, second, ring_weight);
+  float ring_weight, unturned;
+  vec2 turned = nubis_vortex(p.xy, second, ring_weight, unturned);
   int hf_level = int(lod + 0.5);
   float hf_fbm = nubis_detail_fbm(vec3(p_hf.xy + (turned - p.xy), p_hf.z), detail_h, hf_level);
   if (ring_weight > 0.0) {
     hf_fbm = mix(hf_fbm, nubis_detail_fbm(vec3(p_hf.xy + (second - p.xy), p_hf.z), detail_h, hf_level), ring_weight);
   }
 #if NUBIS_STORMS
-  float unturned = nubis_vortex_unturned(p.xy);
-  if (P.options.y > 0.5) {
-    /* PS4 quality: one sample, the turned or the unturned detail by a hashed choice. */
-    if (fract(sin(dot(p.xy, vec2(39.3468, 11.135))) * 24634.6345) < unturned) {
+  if (unturned > 0.0) {
+    if (P.options.y < 0.5) {
+      hf_fbm = mix(hf_fbm, nubis_detail_fbm(p_hf, detail_h, hf_level), unturned);
+    }
+    else if (fract(sin(dot(p.xy, vec2(39.3468, 11.135))) * 24634.6345) < unturned) {
+      /* PS4 quality: one sample, the turned or the unturned detail by a hashed choice. */
       hf_fbm = nubis_detail_fbm(p_hf, detail_h, hf_level);
     }
-  }
-  else if (unturned > 0.0 && unturned < 1.0) {
-    hf_fbm = mix(hf_fbm, nubis_detail_fbm(p_hf, detail_h, hf_level), unturned);
   }
 #endif
   /* GPU Pro 7: the stored (inverted) Worley fBm erodes the base into wisps, and flipped back it carves

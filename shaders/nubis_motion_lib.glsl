@@ -10,7 +10,7 @@ float nubis_storm_turn_rate(vec2 xy, int i)
   vec4 shape = P.storm_shape[i];
   float u = 6.0 * distance(xy, shape.xy) / shape.z;
   /* The vortex time runs at the lifecycle fade `grow`, and of the detail only the share `grow` x rim
-   * turns (nubis_vortex_unturned): what is seen moves at the turned detail's rate times its share. */
+   * turns (nubis_vortex's `unturned`): what is seen moves at the turned detail's rate times its share. */
   float grow = smoothstep(0.0, 0.25, shape.w);
   float fade = (1.0 - smoothstep(5.0, 6.0, u)) * grow * grow;
   float spin = P.storm_light[i].x;

@@ -17,7 +17,8 @@ void main()
   if (probe_mode.x > 2.5) {
     vec2 second;
     float weight;
-    vec2 moved = nubis_vortex(t.xy, second, weight);
+    float unturned;
+    vec2 moved = nubis_vortex(t.xy, second, weight, unturned);
     color = vec4(moved, second);
     return;
   }

@@ -123,10 +123,6 @@ class TemporalViewport:
     def converged(self) -> bool:
         return self._valid and self.since_change >= REDRAWS_PER_SAMPLE * self.samples
 
-    @property
-    def history_size(self) -> tuple[int, int] | None:
-        return self._sizes[0] if self._sizes else None
-
     def _state_key(self, state: CloudState, clouds: engine.CloudGPU) -> tuple:
         """What the image depends on, but the camera and time (which reproject) and the flash
         intensities (which the flash mask applies at full rate without restarting)."""
