@@ -1,17 +1,22 @@
 """Nubis for Blender: real-time volumetric cloudscapes after Guerrilla Games' Nubis.
 
-Layers: core/ (pure Python + numpy), render/ (the gpu module), blender/ (bpy glue), cli.py.
-Importing this package does not import bpy, so core/ tests run without Blender.
+Layers, each importing only those below it: cli.py (argument parsing and exit codes) over blender/
+(bpy glue) over render/ (the gpu module) over core/ (pure Python and numpy). Importing this package
+does not import bpy, so core/ tests run without Blender.
 """
 
 
 def register() -> None:
-    from . import blender
+    from . import blender, cli
+    from .blender import cli_command
 
     blender.register()
+    cli_command.register(cli.run)
 
 
 def unregister() -> None:
     from . import blender
+    from .blender import cli_command
 
+    cli_command.unregister()
     blender.unregister()

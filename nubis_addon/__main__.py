@@ -4,7 +4,8 @@ import os
 import shutil
 import sys
 
-from .cli import blender_tempdir, main
+from .cli import main
+from .core.interrupt import blender_tempdir
 
 if __name__ == "__main__":
     code = main()

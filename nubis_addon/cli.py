@@ -17,20 +17,20 @@ SIGTERM. A command's outputs appear together or not at all (core/staging.py).
 from __future__ import annotations
 
 import argparse
-import contextlib
 import os
 import sys
 import tempfile
-import time
 import traceback
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
-from .core import interrupt, limits, staging
+from .core import console as terminal
+from .core import interrupt, limits
 from .core.console import Console
 from .core.errors import NubisError
 from .core.fsutil import check_output_dir, check_output_path
 from .core.imageio import IMAGE_SUFFIXES
+from .core.quality import qualities
 
 PROG = "nubis"
 
@@ -93,8 +93,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _realtime_commands(sub, common, size) -> None:
     """The real-time viewport headless (docs/viewport.md): `preview` and `benchmark`."""
-    from .core.quality import qualities
-
     levels = tuple(qualities())
     p = sub.add_parser("preview", help="replay the 3D viewport's temporal draw path from the scene camera")
     common(p, frame=False)
@@ -112,117 +110,6 @@ def _realtime_commands(sub, common, size) -> None:
     p.add_argument("--quality", choices=levels, help="quality level (default: the scene's settings)")
 
 
-@contextlib.contextmanager
-def _quiet(log: Path) -> Iterator[None]:
-    """Send Blender's and Mesa's own chatter (render progress, EGL notices) to a log file so the user
-    sees one summary line; with NUBIS_VERBOSE=1 everything stays on the terminal."""
-    if os.environ.get("NUBIS_VERBOSE"):
-        yield
-        return
-    sys.stdout.flush()
-    sys.stderr.flush()
-    saved = os.dup(1), os.dup(2)
-    with open(log, "ab") as f:
-        os.dup2(f.fileno(), 1)
-        os.dup2(f.fileno(), 2)
-        try:
-            yield
-        finally:
-            sys.stdout.flush()
-            sys.stderr.flush()
-            os.dup2(saved[0], 1)
-            os.dup2(saved[1], 2)
-            os.close(saved[0])
-            os.close(saved[1])
-
-
-_console: list[Console] = []  # the running command's terminal (its stderr before any redirection)
-
-
-def _terminal() -> Console:
-    if not _console:
-        _console.append(Console())
-    return _console[-1]
-
-
-def _progress(label: str):
-    """A progress bar on the user's terminal (also while Blender's output goes to the log), or None."""
-    return _terminal().progress(label)
-
-
-# A field composite slower than this gets an estimate first, then a progress bar.
-SLOW_COMPOSITE_S = 5.0
-
-
-def _composite_progress(preset):
-    from .core import fields
-
-    seconds = fields.composite_seconds(preset.layers, preset.params["field_resolution"])
-    if seconds < SLOW_COMPOSITE_S:
-        return None
-    res = preset.params["field_resolution"]
-    _terminal().line(
-        f"{PROG}: compositing {len(preset.layers)} field layers at {res}x{res} pixels, about {seconds:.0f} s"
-    )
-    return _progress("field")
-
-
-_tracked: list[Path] = []
-
-
-def _track_blender_tempdir() -> None:
-    """Have an interrupt remove Blender's current session folder (it ends the process without Blender's
-    teardown)."""
-    if _tracked:
-        interrupt.unregister(_tracked.pop())
-    tmp = blender_tempdir()
-    if tmp is not None:
-        interrupt.register(tmp)
-        _tracked.append(tmp)
-
-
-def blender_tempdir() -> Path | None:
-    """Blender's per-session temporary folder (/tmp/blender_XXXXXX), which only Blender's own teardown
-    removes; the command line leaves without that teardown (__main__.py), so it removes it itself."""
-    if "bpy" not in sys.modules:
-        return None
-    tmp = Path(sys.modules["bpy"].app.tempdir or ".")
-    return tmp if tmp.name.startswith("blender_") and tmp.is_dir() else None
-
-
-def load_scene(args, in_blender: bool):
-    """The scene to work on: a saved .blend, a preset, or (inside Blender) the open file's cloudscape."""
-    import bpy
-
-    from .blender import ensure_registered, scene_io
-    from .core.presets import load_preset
-
-    if args.blend:
-        path = Path(args.blend).expanduser()
-        if not path.is_file():
-            raise NubisError(f"the .blend file '{path}' does not exist: check the path")
-        try:
-            bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False)
-        except RuntimeError as err:
-            first = str(err).strip().splitlines()[-1] if str(err).strip() else "unreadable"
-            raise NubisError(f"cannot open '{path}' ({first}): check that it is a Blender file") from None
-        _track_blender_tempdir()
-        ensure_registered()
-        scene = bpy.context.scene
-        if getattr(scene.nubis, "field_a", None) is None:
-            raise NubisError(f"'{path}' holds no Nubis cloudscape: add one with New Cloudscape and save the file")
-        return scene
-    if in_blender and not args.preset and bpy.data.filepath and bpy.context.scene.nubis.field_a is not None:
-        return bpy.context.scene
-    preset = load_preset(args.preset or "default")
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    _track_blender_tempdir()  # factory settings start a new session folder
-    ensure_registered()
-    scene = bpy.context.scene
-    scene_io.apply_preset(scene, preset, progress=_composite_progress(preset))
-    return scene
-
-
 def run(argv: Sequence[str], in_blender: bool = False) -> int:
     """Run one command; returns the exit code. Never raises for user errors."""
     try:
@@ -237,7 +124,7 @@ def run(argv: Sequence[str], in_blender: bool = False) -> int:
     os.close(fd)
     log = Path(log_name)
     console = Console()
-    _console.append(console)
+    terminal.push(console)
     interrupt.register(log)
     keep_log = False
     try:
@@ -264,109 +151,26 @@ def run(argv: Sequence[str], in_blender: bool = False) -> int:
         interrupt.unregister(log)
         if not keep_log:
             log.unlink(missing_ok=True)
-        if _tracked:
-            interrupt.unregister(_tracked.pop())
-        _console.remove(console)
+        interrupt.untrack_blender_tempdir()
+        terminal.pop(console)
         console.close()
 
 
 def _execute(args, in_blender: bool, log: Path) -> str:
-    start = time.perf_counter()
-    cmd = args.command
+    """Check the command line and the destination before minutes of work, then run the command
+    (blender/commands.py): it never leaves a partial file there."""
     check_arguments(args)
-    # Check the destination before minutes of work, and never leave a partial file there.
-    if cmd in ("compare", "preview", "benchmark"):
+    if args.command in ("compare", "preview", "benchmark"):
         out = check_output_dir(args.out)
-    elif cmd == "bake":
+    elif args.command == "bake":
         out = check_output_path(args.out, (".vdb",))
     else:
         out = check_output_path(args.out, IMAGE_SUFFIXES)
     if getattr(args, "motion", None):
         args.motion = check_output_path(args.motion, (".exr",))
-    voxel = getattr(args, "voxel_size", None)
+    from .blender import commands  # bpy loads only now: `--help` and argument errors stay fast
 
-    with _quiet(log):
-        from .blender import pipeline
-        from .render.gpu_context import ensure_gpu_context
-
-        _track_blender_tempdir()
-        scene = load_scene(args, in_blender)
-        if getattr(args, "frame", None) is not None:
-            scene.frame_set(args.frame)
-        pipeline.check_scene(scene)
-        ensure_gpu_context()
-    label = scene.nubis.preset or "scene"
-
-    if cmd == "render":
-        w, h = pipeline.resolution(scene, args.width, args.height)
-        with _quiet(log), staging.output_set() as outputs:  # the image and its motion vectors together
-            rgba = pipeline.render_viewport(scene, w, h, passes=args.passes)
-            pipeline.save_render(scene, outputs.stage(out), rgba)
-            if args.motion:
-                from .core.imageio import write_image
-
-                write_image(outputs.stage(args.motion), pipeline.render_motion(scene, w, h))
-        cover = float((rgba[..., 3] > 0.05).mean()) * 100
-        return f"rendered {label} at {w}x{h} ({cover:.0f}% cloud cover) in {time.perf_counter() - start:.1f} s -> {out}"
-    if cmd == "bake":
-        progress = _progress("baking")
-        with _quiet(log):
-            result = pipeline.bake(scene, out, voxel, progress, camera_only=args.camera_only)
-        nx, ny, nz = result.plan.dims
-        return (
-            f"baked {label}: {nx}x{ny}x{nz} voxels of {result.plan.voxel_size:g} m, "
-            f"{result.active_voxels} active, in {result.seconds:.1f} s -> {out}"
-        )
-    w, h = pipeline.resolution(scene, args.width, args.height)
-    if cmd in ("preview", "benchmark"):
-        return _realtime(cmd, args, scene, out, w, h, log, label, start)
-    if cmd == "cycles":
-        with _quiet(log):
-            rgba = pipeline.render_cycles(scene, w, h, args.samples, voxel_size=voxel, bounces=args.bounces)
-            pipeline.save_render(scene, out, rgba)
-        return f"rendered {label} with Cycles at {w}x{h} in {time.perf_counter() - start:.1f} s -> {out}"
-    with _quiet(log):
-        if args.bounces is not None:
-            scene.cycles.volume_bounces = args.bounces
-        m = pipeline.compare(scene, out, w, h, args.samples, args.mode, voxel, args.noise_estimate)
-    capped = (
-        f" (reference march in {m['reference_view_steps']} of {scene.nubis.march_steps_max} view steps: "
-        "the shader loop limit)"
-        if m.get("reference_steps_capped")
-        else ""
-    )
-    return (
-        f"compared {label} ({args.mode}) at {w}x{h}: alpha RMSE {m['alpha_rmse']:.4f}, luminance error "
-        f"{m['luminance_rel_error'] * 100:.1f}%, silhouette IoU {m['silhouette_iou']:.3f}{capped} "
-        f"in {time.perf_counter() - start:.1f} s -> {out}"
-    )
-
-
-def _realtime(cmd: str, args, scene, out: Path, w: int, h: int, log: Path, label: str, start: float) -> str:
-    from .blender import preview
-
-    if cmd == "preview":
-        frames = preview.parse_frames(args.frames, scene.frame_current)
-        progress = _progress("preview")
-        with _quiet(log):
-            r = preview.preview(
-                scene, out, w, h, frames, args.redraws, args.orbit, args.naive, args.quality, progress=progress
-            )
-        ms = sorted(x for frame in r.redraw_ms for x in frame)
-        median = ms[len(ms) // 2]
-        naive = f", naive {sorted(r.naive_ms)[len(r.naive_ms) // 2]:.0f} ms" if r.naive_ms else ""
-        return (
-            f"previewed {label} at {w}x{h} ({r.quality}): {len(frames)} frame(s) x {args.redraws} redraw(s), "
-            f"median redraw {median:.1f} ms{naive}, in {time.perf_counter() - start:.1f} s -> {out}"
-        )
-    with _quiet(log):
-        result = preview.benchmark(scene, out, w, h, args.quality)
-    print(preview.table(result))
-    return (
-        f"benchmarked {label} at {w}x{h} ({result['quality']}): naive {result['naive_ms']:.0f} ms, redraw "
-        f"{result['redraw_ms']:.1f} ms ({result['naive_over_redraw']:.1f}x), EEVEE {result['eevee_ms']:.0f} ms "
-        f"({result['eevee_over_redraw']:.0f}x) in {time.perf_counter() - start:.1f} s -> {out}"
-    )
+    return commands.execute(args, in_blender, log, out)
 
 
 def check_arguments(args) -> None:

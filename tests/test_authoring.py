@@ -37,7 +37,7 @@ def test_new_cloudscape_operator_and_layer_stack(blender):
 
 
 def test_painting_an_image_layer_updates_the_field(make_scene, blender):
-    from nubis_addon.blender import viewport
+    from nubis_addon.blender import events
 
     scene = make_scene("default")
     s = scene.nubis
@@ -51,9 +51,9 @@ def test_painting_an_image_layer_updates_the_field(make_scene, blender):
     px[:, 16:] = 1.0
     img.pixels.foreach_set(px.ravel())
     fake = types.SimpleNamespace(updates=[types.SimpleNamespace(id=img)])
-    viewport.on_depsgraph_update(scene, fake)
-    assert viewport._pending_images == {"Paint"}
-    viewport._regenerate_after_paint()  # what the timer runs a moment later
+    events.on_depsgraph_update(scene, fake)
+    assert events._pending_images == {"Paint"}
+    events._regenerate_after_paint()  # what the timer runs a moment later
     cov = _coverage(scene)
     assert cov[:, :200].max() < 0.01 and cov[:, 312:].min() > 0.99
 

@@ -9,8 +9,8 @@ from nubis_addon.core import fields, imageio, metrics, vdbio
 from nubis_addon.core.bakeplan import plan_bake
 from nubis_addon.core.errors import NubisError
 from nubis_addon.core.fsutil import atomic_path, check_output_path
-from nubis_addon.core.params import defaults
 from nubis_addon.core.presets import load_preset
+from nubis_addon.core.schema import defaults
 from nubis_addon.core.state import CloudState
 
 
@@ -33,9 +33,9 @@ def test_composite_default_preset_is_in_range_and_deterministic():
 
 
 def _layer(**kw):
-    from nubis_addon.core.presets import LAYER_SCHEMA
+    from nubis_addon.core import schema
 
-    layer = {k: (list(v[1]) if isinstance(v[1], list) else v[1]) for k, v in LAYER_SCHEMA.items()}
+    layer = schema.table_defaults(schema.LAYER)
     layer.update(kw)
     return layer
 

@@ -48,7 +48,7 @@ def test_viewport_draw_uses_the_render_code(make_scene):
     bound framebuffer) reproduces the offscreen render once every pixel has its sample."""
     import gpu
 
-    from nubis_addon.blender import pipeline, scene_io, viewport
+    from nubis_addon.blender import pipeline, scene_io, status, viewport
     from nubis_addon.render.engine import read_pixels
 
     assert viewport.is_registered()
@@ -65,7 +65,7 @@ def test_viewport_draw_uses_the_render_code(make_scene):
         got = read_pixels(fb, w, h)[::-1]
     offscreen.free()
     assert tv.since_change == 16 and not tv.converged
-    assert viewport.last_error() == ""
+    assert status.last_error() == ""
     # The viewport buffer is half float; everything else is the same shader.
     np.testing.assert_allclose(got, expected, atol=2e-3)
 

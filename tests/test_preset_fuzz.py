@@ -11,12 +11,9 @@ import tomllib
 
 import pytest
 
+from nubis_addon.core import schema
 from nubis_addon.core.errors import NubisError
-from nubis_addon.core.params import PARAMS_BY_KEY
 from nubis_addon.core.presets import (
-    EXTRA_SCHEMA,
-    LAYER_SCHEMA,
-    STORM_SCHEMA,
     list_presets,
     parse_preset,
     preset_dir,
@@ -119,8 +116,8 @@ def _odd_value(rng: random.Random):
 
 
 def _known_keys():
-    keys = {sec: list(table) for sec, table in EXTRA_SCHEMA.items()}
-    for p in PARAMS_BY_KEY.values():
+    keys = {sec: list(table) for sec, table in schema.EXTRA_SECTIONS.items()}
+    for p in schema.PRESET_SCENE:
         keys.setdefault(p.section, []).append(p.name)
     return keys
 
@@ -145,7 +142,9 @@ def _mutate(template: bytes, paths: list, rng: random.Random) -> dict:
         elif op == 4:  # an extra or misplaced key
             section = rng.choice([*KNOWN, "bogus", "storms", "field"])
             table = data.setdefault(section, {}) if rng.random() < 0.9 else data
-            name = rng.choice([*rng.choice(list(KNOWN.values())), "bogus", "layers", *LAYER_SCHEMA, *STORM_SCHEMA])
+            name = rng.choice(
+                [*rng.choice(list(KNOWN.values())), "bogus", "layers", *schema.LAYER_BY_NAME, *schema.STORM_BY_NAME]
+            )
             if isinstance(table, dict):
                 table[name] = _odd_value(rng)
             else:
@@ -155,7 +154,7 @@ def _mutate(template: bytes, paths: list, rng: random.Random) -> dict:
             if rng.random() < 0.5:
                 data["storms"] = [{"x": rng.uniform(-1e7, 1e7)} for _ in range(count)]
             else:
-                layer = {k: _odd_value(rng) for k in rng.sample(list(LAYER_SCHEMA), 3)}
+                layer = {k: _odd_value(rng) for k in rng.sample(list(schema.LAYER_BY_NAME), 3)}
                 if not isinstance(data.get("field"), dict):
                     data["field"] = {}
                 data["field"]["layers"] = [_copy(layer) for _ in range(count)]
@@ -213,8 +212,8 @@ def test_every_mutation_loads_or_raises_the_clean_error(name):
             pytest.fail(f"mutation {i} of {name} raised {type(err).__name__}: {err}")
         loaded += 1
         for key, value in preset.params.items():
-            p = PARAMS_BY_KEY[key]
-            if p.min is not None:
+            p = schema.BY_KEY[key]
+            if p.kind in ("int", "float") and p.min is not None:
                 assert p.min <= value <= p.max, (i, key, value)
         assert len(preset.storms) <= 4 and len(preset.layers) <= 128
     assert loaded + refused == MUTATIONS_PER_PRESET

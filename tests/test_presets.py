@@ -5,8 +5,9 @@ from pathlib import Path
 import pytest
 
 from nubis_addon.core.errors import NubisError
-from nubis_addon.core.params import PARAMS, defaults
 from nubis_addon.core.presets import list_presets, load_preset
+from nubis_addon.core.schema import PRESET_SCENE as PARAMS
+from nubis_addon.core.schema import defaults
 
 
 def test_every_shipped_preset_loads():

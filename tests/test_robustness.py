@@ -249,11 +249,10 @@ def test_a_slow_field_composite_is_estimated_before_it_starts(tmp_path):
 
 
 def test_composite_reports_progress_and_estimates_by_cost():
-    from nubis_addon.core import fields
-    from nubis_addon.core.params import defaults
-    from nubis_addon.core.presets import LAYER_SCHEMA
+    from nubis_addon.core import fields, schema
+    from nubis_addon.core.schema import defaults
 
-    base = {k: (list(v[1]) if isinstance(v[1], list) else v[1]) for k, v in LAYER_SCHEMA.items()}
+    base = schema.table_defaults(schema.LAYER)
     layers = [dict(base, name=f"l{i}", kind=k) for i, k in enumerate(("perlin", "constant", "worley"))]
     params = defaults()
     params["field_resolution"] = 64

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from nubis_addon.core import fields
-from nubis_addon.core.params import defaults
 from nubis_addon.core.presets import load_preset
+from nubis_addon.core.schema import defaults
 from nubis_addon.core.storms import Storm, apply_storms, lifecycle_keys, storm_weight
 
 RES = 256

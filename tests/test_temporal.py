@@ -163,7 +163,7 @@ def test_sidebar_quality_and_benchmark(make_scene, blender):
     """The Viewport panel's Quality menu writes a row of presets/quality/quality.toml into the scene,
     and its Benchmark button reports the benchmark's numbers without changing the artist's render
     settings."""
-    from nubis_addon.blender import viewport
+    from nubis_addon.blender import status
 
     scene = make_scene("default")
     assert blender.ops.nubis.viewport_quality(quality="draft") == {"FINISHED"}
@@ -174,10 +174,10 @@ def test_sidebar_quality_and_benchmark(make_scene, blender):
     assert (s.march_light_samples, s.march_steps_min, s.march_steps_max) == (10, 96, 180)
     scene.render.engine = "CYCLES"
     scene.render.resolution_x, scene.render.resolution_y = 1234, 567
-    viewport.last_benchmark.clear()
+    status.last_benchmark.clear()
     assert blender.ops.nubis.benchmark(width=48, height=27) == {"FINISHED"}
-    assert any("naive / redraw" in line for line in viewport.last_benchmark)
-    assert any("EEVEE / redraw" in line for line in viewport.last_benchmark)
+    assert any("naive / redraw" in line for line in status.last_benchmark)
+    assert any("EEVEE / redraw" in line for line in status.last_benchmark)
     assert scene.render.engine == "CYCLES" and (scene.render.resolution_x, scene.render.resolution_y) == (1234, 567)
 
 
@@ -288,7 +288,7 @@ def test_a_3d_view_region_draws_converges_and_culls(make_scene, blender):
             assert tv.converged  # one sample per pixel was asked for
             np.testing.assert_allclose(got, expected, rtol=2e-3, atol=2e-3)
             # Geometry over the whole view (a new scene update): nothing is marched or shown.
-            viewport._scene_updates[0] += 1
+            viewport.geometry_changed(viewport._geometry[0] + 1)
             for _ in range(16):
                 fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=0.5)
                 viewport.draw_region(scene, region, rv3d)

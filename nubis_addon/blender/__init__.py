@@ -1,44 +1,19 @@
-"""Blender glue: properties, operators, panels, the viewport draw and the command-line command."""
+"""Blender's side of the extension, a one-way chain from the top down:
+
+- registration: registers what follows (and ensure_registered for the command line);
+- commands: the command line's commands (cli.py parses, these run);
+- panels, operators: the sidebar and what its buttons do;
+- properties: the property groups, generated from core/schema.py;
+- events: what a change triggers, and Blender's handlers;
+- viewport: the 3D view's draw; preview: the same draw headless, and the benchmark;
+- pipeline, cycles_setup: renders, bakes, Cycles scenes and comparisons;
+- scene_io: Blender data to and from the plain data core/ and render/ work on;
+- runtime: session GPU resources and the cache folder; status: messages for the sidebar;
+- cli_command: `blender -b --command nubis`, registered by the package's register().
+"""
 
 from __future__ import annotations
 
-import bpy
+from .registration import ensure_registered, register, unregister
 
-from . import cli_command, operators, panels, properties, viewport
-
-_registered = False
-
-
-def register() -> None:
-    global _registered
-    if _registered:
-        return
-    properties.register()
-    operators.register()
-    panels.register()
-    viewport.register()
-    cli_command.register()
-    _registered = True
-
-
-def unregister() -> None:
-    global _registered
-    if not _registered:
-        return
-    cli_command.unregister()
-    viewport.unregister()
-    panels.unregister()
-    operators.unregister()
-    properties.unregister()
-    from . import runtime
-
-    runtime.free()
-    _registered = False
-
-
-def ensure_registered() -> None:
-    """For the command line: the property group must exist before a scene is read or built."""
-    if not hasattr(bpy.types.Scene, "nubis"):
-        global _registered
-        _registered = False
-        register()
+__all__ = ("ensure_registered", "register", "unregister")

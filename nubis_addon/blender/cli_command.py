@@ -1,21 +1,26 @@
-"""`blender -b [FILE.blend] --command nubis ...`: the command line, registered with Blender."""
+"""`blender -b [FILE.blend] --command nubis ...`: the command line, registered with Blender.
+
+The function that runs it is handed in by the package's register() (nubis_addon/__init__.py), which
+sits above both cli.py and blender/: nothing in blender/ imports the command line."""
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import bpy
 
 COMMAND_ID = "nubis"
 _handle = None
+_run: list[Callable] = []
 
 
 def execute(argv: list[str]) -> int:
-    from ..cli import run
-
-    return run(argv, in_blender=True)
+    return _run[0](argv, in_blender=True)
 
 
-def register() -> None:
+def register(run: Callable[..., int]) -> None:
     global _handle
+    _run[:] = [run]
     if _handle is None:
         _handle = bpy.utils.register_cli_command(COMMAND_ID, execute)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import bpy
 
+from ..core import bundled
 from ..core.errors import NubisError
 
 VOLUME_NAME = "Nubis Clouds VDB"
@@ -115,8 +116,6 @@ def import_volume(scene, vdb_path: str) -> bpy.types.Object:
 
 
 def _voxel_size(vdb_path: str) -> float:
-    from ..core import bundled
-
     grids = bundled.openvdb().readAllGridMetadata(vdb_path)
     density = next(g for g in grids if g.name == "density")
     return float(density.transform.voxelSize()[0])

@@ -7,9 +7,11 @@ import contextlib
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
-from ..core import presets
+from ..core import presets, quality, storms
 from ..core.errors import NubisError
-from . import cycles_setup, pipeline, scene_io, viewport
+from ..core.limits import MAX_LAYERS
+from ..core.state import MAX_STORMS
+from . import cycles_setup, pipeline, preview, runtime, scene_io, status, viewport
 
 
 def _preset_items(_self, _context):
@@ -29,11 +31,6 @@ def _absolute(path: str) -> str:
     return bpy.path.abspath(path)
 
 
-def _has_cloudscape(context) -> bool:
-    scene = context.scene
-    return scene is not None and getattr(scene, "nubis", None) is not None and scene.nubis.field_a is not None
-
-
 class NubisOperator:
     def run(self, context):
         raise NotImplementedError
@@ -46,16 +43,15 @@ class NubisOperator:
             return {"CANCELLED"}
         if message:
             self.report({"INFO"}, message)
-        viewport.mark_dirty()
-        for area in context.screen.areas if context.screen else ():
-            area.tag_redraw()
+        viewport.invalidate()
+        scene_io.redraw_views()
         return {"FINISHED"}
 
 
 class NeedsCloudscape:
     @classmethod
     def poll(cls, context):
-        if not _has_cloudscape(context):
+        if not scene_io.has_cloudscape(context.scene):
             cls.poll_message_set("Create a cloudscape first (Nubis > New Cloudscape)")
             return False
         return True
@@ -109,8 +105,6 @@ class NUBIS_OT_layer_add(NeedsCloudscape, NubisOperator, bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     def run(self, context):
-        from ..core.limits import MAX_LAYERS
-
         s = context.scene.nubis
         if len(s.layers) >= MAX_LAYERS:
             raise NubisError(f"a scene holds at most {MAX_LAYERS} field layers: merge or remove one first")
@@ -165,14 +159,13 @@ class NUBIS_OT_layer_duplicate(NeedsCloudscape, NubisOperator, bpy.types.Operato
     bl_options = {"REGISTER", "UNDO"}
 
     def run(self, context):
-        from .properties import layer_from_dict, layer_to_dict
-
         s = context.scene.nubis
         if not s.layers:
             raise NubisError("there is no layer to duplicate")
-        data = layer_to_dict(s.layers[s.active_layer])
+        data = scene_io.layer_to_dict(s.layers[s.active_layer])
         data["name"] += " copy"
-        layer_from_dict(s.layers.add(), data)
+        with scene_io.batch_edit():
+            scene_io.layer_from_dict(s.layers.add(), data)
         s.layers.move(len(s.layers) - 1, s.active_layer + 1)
         s.active_layer += 1
         scene_io.generate_fields(context.scene)
@@ -192,7 +185,8 @@ class NUBIS_OT_apply_weather_rules(NeedsCloudscape, NubisOperator, bpy.types.Ope
 
     def run(self, context):
         s = context.scene.nubis
-        s.rule_rain, s.rule_horizon = self.rain, self.horizon
+        with scene_io.batch_edit():
+            s.rule_rain, s.rule_horizon = self.rain, self.horizon
         scene_io.generate_fields(context.scene)
         rules = [name for name, on in (("rain", self.rain), ("horizon", self.horizon)) if on]
         return f"Weather rules applied: {', '.join(rules) or 'none'}"
@@ -206,8 +200,6 @@ class NUBIS_OT_storm_add(NeedsCloudscape, NubisOperator, bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     def run(self, context):
-        from ..core.state import MAX_STORMS
-
         s = context.scene.nubis
         if len(s.storms) >= MAX_STORMS:
             raise NubisError(f"a scene holds at most {MAX_STORMS} superstorms: remove one first")
@@ -270,11 +262,9 @@ class NUBIS_OT_storm_lifecycle(NeedsCloudscape, NubisOperator, bpy.types.Operato
     ramp_out: FloatProperty(name="Ramp Out (s)", default=120.0, min=0.0)
 
     def run(self, context):
-        from ..core import storms
-
         scene = context.scene
         storm = _active_storm(context)
-        fps = scene.render.fps / scene.render.fps_base
+        fps = scene_io.scene_fps(scene)
         keys = storms.lifecycle_keys(scene.frame_current, fps, self.ramp_in, self.hold, self.ramp_out)
         _insert_keys(context.scene, storm, "blend", keys)
         return f"Lifecycle keyed over frames {keys[0][0]}-{keys[-1][0]}"
@@ -294,11 +284,9 @@ class NUBIS_OT_lightning_sequence(NeedsCloudscape, NubisOperator, bpy.types.Oper
     seed: IntProperty(name="Seed", default=0, min=0)
 
     def run(self, context):
-        from ..core import storms
-
         scene = context.scene
         storm = _active_storm(context)
-        fps = scene.render.fps / scene.render.fps_base
+        fps = scene_io.scene_fps(scene)
         keys = storms.lightning_keys(scene.frame_current, fps, self.flashes, self.discharges, self.peak, self.seed)
         frames = [int(k["frame"]) for k in keys]
         _insert_keys(scene, storm, "flash", list(zip(frames, (k["flash"] for k in keys), strict=True)))
@@ -389,8 +377,6 @@ class NUBIS_OT_bake_frames(NeedsCloudscape, NubisOperator, bpy.types.Operator):
 
 
 def _quality_items():
-    from ..core import quality
-
     try:
         rows = quality.qualities()
     except NubisError as err:
@@ -412,8 +398,6 @@ class NUBIS_OT_viewport_quality(NeedsCloudscape, NubisOperator, bpy.types.Operat
     quality: EnumProperty(name="Quality", items=_QUALITY_ITEMS)
 
     def run(self, context):
-        from . import preview
-
         preview.apply_quality(context.scene, self.quality)
         return f"Quality '{self.quality}' applied"
 
@@ -429,8 +413,6 @@ class NUBIS_OT_benchmark(NeedsCloudscape, NubisOperator, bpy.types.Operator):
     eevee: BoolProperty(name="Include EEVEE", default=True, description="Also bake and render the view with EEVEE")
 
     def run(self, context):
-        from . import preview, runtime
-
         scene = context.scene
         out = runtime.cache_dir() / "benchmark"
         wm = context.window_manager
@@ -439,7 +421,7 @@ class NUBIS_OT_benchmark(NeedsCloudscape, NubisOperator, bpy.types.Operator):
             result = preview.benchmark(scene, out, self.width, self.height, eevee=self.eevee)
         finally:
             wm.progress_end()
-        viewport.last_benchmark[:] = preview.table(result).splitlines()
+        status.last_benchmark[:] = preview.table(result).splitlines()
         eevee = f", EEVEE {result['eevee_over_redraw']:.0f}x" if "eevee_ms" in result else ""
         return (
             f"Redraw {result['redraw_ms']:.1f} ms, naive {result['naive_ms']:.0f} ms "

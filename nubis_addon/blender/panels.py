@@ -1,28 +1,26 @@
-"""The sidebar (N panel) of the 3D viewport, tab 'Nubis'."""
+"""The sidebar (N panel) of the 3D viewport, tab 'Nubis', generated from the settings schema
+(core/schema.py): each sub-panel draws the settings the schema assigns to it, in the schema's order,
+plus the lists and buttons that belong there."""
 
 from __future__ import annotations
 
 import bpy
 
-from ..core.params import PARAMS
-from . import viewport
+from ..core import quality, schema
+from . import scene_io, status
 
 
-class NubisPanel:
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "Nubis"
+def draw_settings(layout, owner, settings) -> None:
+    """The schema's settings of one panel, in its order, as Blender's property-split columns."""
+    layout.use_property_split = True
+    layout.use_property_decorate = True
+    col = layout.column()
+    for s in settings:
+        col.prop(owner, s.key)
 
-    @classmethod
-    def poll(cls, context):
-        return getattr(context.scene, "nubis", None) is not None and context.scene.nubis.field_a is not None
 
-
-def _draw_section(layout, settings, section: str) -> None:
-    col = layout.column(align=True)
-    for p in PARAMS:
-        if p.section == section:
-            col.prop(settings, p.key)
+def panel_settings(panel: str, group=schema.SCENE) -> tuple[schema.Setting, ...]:
+    return tuple(s for s in group if s.panel == panel)
 
 
 class NUBIS_PT_main(bpy.types.Panel):
@@ -33,25 +31,60 @@ class NUBIS_PT_main(bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
-        settings = getattr(context.scene, "nubis", None)
         layout.operator_menu_enum("nubis.new_cloudscape", "preset", text="New Cloudscape", icon="OUTLINER_DATA_VOLUME")
-        if settings is None or settings.field_a is None:
+        if not scene_io.has_cloudscape(context.scene):
             layout.label(text="No cloudscape in this scene yet")
             return
-        layout.prop(settings, "enabled")
-        if viewport.last_error():
-            layout.label(text=viewport.last_error(), icon="ERROR")
+        layout.prop(context.scene.nubis, "enabled")
+        if status.last_error():
+            layout.label(text=status.last_error(), icon="ERROR")
         layout.operator("nubis.render_image", icon="RENDER_STILL")
+
+
+class NubisPanel:
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Nubis"
+    bl_parent_id = "NUBIS_PT_main"
+    panel = ""
+
+    @classmethod
+    def poll(cls, context):
+        return scene_io.has_cloudscape(context.scene)
+
+    def draw(self, context):
+        self.draw_before(context)
+        shown = tuple(s for s in panel_settings(self.panel) if s.key != "enabled")
+        if shown:
+            draw_settings(self.layout, context.scene.nubis, shown)
+        self.draw_after(context)
+
+    def draw_before(self, context) -> None:
+        pass
+
+    def draw_after(self, context) -> None:
+        pass
+
+
+_LAYER_KEYS_BY_KIND = {
+    "PERLIN": ("scale", "seed", "octaves"),
+    "WORLEY": ("scale", "seed", "octaves"),
+    "PERLIN_WORLEY": ("scale", "seed", "octaves"),
+    "GRADIENT": ("gradient", "angle", "center", "radius"),
+    "CONSTANT": ("value",),
+    "IMAGE": (),
+}
+_LAYER_COMMON = ("kind", "channel", "blend", "enabled", "opacity", "mask", "invert_mask")
 
 
 class NUBIS_PT_field(NubisPanel, bpy.types.Panel):
     bl_label = "Data Field"
-    bl_parent_id = "NUBIS_PT_main"
+    panel = "field"
 
-    def draw(self, context):
+    def draw_after(self, context):
         layout = self.layout
+        layout.use_property_split = False
         s = context.scene.nubis
-        _draw_section(layout, s, "field")
         row = layout.row()
         row.template_list("UI_UL_list", "nubis_layers", s, "layers", s, "active_layer", rows=4)
         col = row.column(align=True)
@@ -63,55 +96,68 @@ class NUBIS_PT_field(NubisPanel, bpy.types.Panel):
         if s.layers and 0 <= s.active_layer < len(s.layers):
             layer = s.layers[s.active_layer]
             box = layout.box()
-            for key in ("kind", "channel", "blend", "enabled", "opacity", "mask", "invert_mask"):
+            box.use_property_split = True
+            for key in _LAYER_COMMON + _LAYER_KEYS_BY_KIND[layer.kind]:
                 box.prop(layer, key)
-            if layer.kind in {"PERLIN", "WORLEY", "PERLIN_WORLEY"}:
-                for key in ("scale", "seed", "octaves"):
-                    box.prop(layer, key)
-            elif layer.kind == "GRADIENT":
-                for key in ("gradient", "angle", "center", "radius"):
-                    box.prop(layer, key)
-            elif layer.kind == "CONSTANT":
-                box.prop(layer, "value")
-            elif layer.kind == "IMAGE":
+            if layer.kind == "IMAGE":
                 box.template_ID(layer, "image", open="image.open")
             box.prop(layer, "remap")
-        row = layout.row(align=True)
-        row.prop(s, "rule_rain", toggle=True)
-        row.prop(s, "rule_horizon", toggle=True)
         layout.operator("nubis.generate_field", icon="FILE_REFRESH")
 
 
-def _section_panel(section: str, label: str):
-    def draw(self, context):
-        _draw_section(self.layout, context.scene.nubis, section)
-
-    return type(
-        f"NUBIS_PT_{section}",
-        (NubisPanel, bpy.types.Panel),
-        {"bl_label": label, "bl_parent_id": "NUBIS_PT_main", "bl_options": {"DEFAULT_CLOSED"}, "draw": draw},
-    )
+class NUBIS_PT_altitude(NubisPanel, bpy.types.Panel):
+    bl_label = "Altitude"
+    bl_options = {"DEFAULT_CLOSED"}
+    panel = "altitude"
 
 
-class NUBIS_PT_light(NubisPanel, bpy.types.Panel):
-    bl_label = "Light"
-    bl_parent_id = "NUBIS_PT_main"
+class NUBIS_PT_shape(NubisPanel, bpy.types.Panel):
+    bl_label = "Shape"
+    bl_options = {"DEFAULT_CLOSED"}
+    panel = "shape"
 
-    def draw(self, context):
-        s = context.scene.nubis
+
+class NUBIS_PT_wind(NubisPanel, bpy.types.Panel):
+    bl_label = "Wind"
+    bl_options = {"DEFAULT_CLOSED"}
+    panel = "wind"
+
+
+class NUBIS_PT_lighting(NubisPanel, bpy.types.Panel):
+    bl_label = "Lighting"
+    panel = "lighting"
+
+    def draw_before(self, context):
         self.layout.label(text="The sun is the scene's first Sun lamp: rotate it to change the time of day")
-        self.layout.prop(s, "ambient_source", expand=True)
-        if s.ambient_source == "COLOR":
-            self.layout.prop(s, "ambient_color")
-        self.layout.prop(context.scene.cycles, "volume_bounces", text="Cycles Volume Bounces")
+
+    def draw(self, context):
+        self.draw_before(context)
+        s = context.scene.nubis
+        layout = self.layout
+        layout.use_property_split = True
+        col = layout.column()
+        for setting in panel_settings("lighting"):
+            row = col.row()
+            if setting.key == "ambient_color":
+                row.active = s.ambient_source == "COLOR"
+            elif setting.key == "lighting_droplet_size":
+                row.active = s.lighting_cycles_mie
+            row.prop(s, setting.key)
+        col.prop(context.scene.cycles, "volume_bounces", text="Cycles Volume Bounces")
+
+
+class NUBIS_PT_cirrus(NubisPanel, bpy.types.Panel):
+    bl_label = "Cirrus"
+    bl_options = {"DEFAULT_CLOSED"}
+    panel = "cirrus"
 
 
 class NUBIS_PT_storms(NubisPanel, bpy.types.Panel):
     bl_label = "Superstorms"
-    bl_parent_id = "NUBIS_PT_main"
     bl_options = {"DEFAULT_CLOSED"}
+    panel = "storms"
 
-    def draw(self, context):
+    def draw_before(self, context):
         layout = self.layout
         s = context.scene.nubis
         row = layout.row()
@@ -122,84 +168,71 @@ class NUBIS_PT_storms(NubisPanel, bpy.types.Panel):
         if s.storms and 0 <= s.active_storm < len(s.storms):
             storm = s.storms[s.active_storm]
             box = layout.box()
-            for key in (
-                "empty",
-                "radius",
-                "coverage",
-                "blend",
-                "height",
-                "base",
-                "bottom_type",
-                "seed",
-                "spin",
-                "darkening",
-                "ambient_boost",
-                "glow",
-                "glow_color",
-                "flash",
-                "anvil_offset",
-            ):
-                box.prop(storm, key)
-            layout.operator("nubis.storm_lifecycle", icon="KEYFRAME")
-            layout.operator("nubis.lightning_sequence", icon="LIGHT_SUN")
-        layout.prop(s, "storm_twist")
-        layout.prop(s, "storm_jittered_rings")
+            draw_settings(box, storm, panel_settings("storms", schema.STORM))
+            row = layout.row(align=True)
+            row.operator("nubis.storm_lifecycle", icon="KEYFRAME")
+            row.operator("nubis.lightning_sequence", icon="LIGHT_SUN")
+
+
+class NUBIS_PT_march(NubisPanel, bpy.types.Panel):
+    bl_label = "Ray March"
+    bl_options = {"DEFAULT_CLOSED"}
+    panel = "march"
 
 
 class NUBIS_PT_viewport(NubisPanel, bpy.types.Panel):
     """The temporal viewport (docs/viewport.md): quality, convergence and the benchmark."""
 
     bl_label = "Viewport"
-    bl_parent_id = "NUBIS_PT_main"
+    panel = "viewport"
 
-    def draw(self, context):
-        from ..core import quality
-
-        layout = self.layout
+    def draw_before(self, context):
         s = context.scene.nubis
         params = {k: getattr(s, k) for k in quality.ROW_KEYS.values()}
-        current = next((q.label for q in quality.qualities().values() if q.matches(params)), "Custom")
-        layout.operator_menu_enum("nubis.viewport_quality", "quality", text=f"Quality: {current}")
-        layout.use_property_split = True
-        col = layout.column(align=True)
-        col.prop(s, "viewport_samples", text="Samples")
-        col.prop(s, "viewport_resolution", text="Resolution")
-        col.prop(s, "viewport_blur", text="Upscale Blur")
-        col = layout.column(align=True)
-        col.prop(s, "march_light_samples", text="Light Samples")
-        col.prop(s, "march_mip", text="Noise Mip")
+        try:
+            rows = quality.qualities()
+        except Exception as err:  # a damaged quality file: say so in place of the menu
+            self.layout.label(text=str(err), icon="ERROR")
+            return
+        current = next((q.label for q in rows.values() if q.matches(params)), "Custom")
+        self.layout.operator_menu_enum("nubis.viewport_quality", "quality", text=f"Quality: {current}")
+
+    def draw_after(self, context):
+        layout = self.layout
         layout.use_property_split = False
         layout.operator("nubis.benchmark", icon="TIME")
-        if viewport.last_benchmark:
+        if status.last_benchmark:
             box = layout.box().column(align=True)
-            for line in viewport.last_benchmark:
+            for line in status.last_benchmark:
                 box.label(text=line)
 
 
 class NUBIS_PT_bake(NubisPanel, bpy.types.Panel):
     bl_label = "Bake"
-    bl_parent_id = "NUBIS_PT_main"
+    panel = "bake"
 
-    def draw(self, context):
-        self.layout.prop(context.scene.nubis, "bake_voxel_size")
+    def draw_after(self, context):
         self.layout.operator("nubis.bake_vdb", icon="FILE_VOLUME")
         self.layout.operator("nubis.bake_frames", icon="SEQUENCE")
 
 
-CLASSES = (
-    NUBIS_PT_main,
-    NUBIS_PT_field,
-    _section_panel("layer", "Layer"),
-    _section_panel("noise", "Noise"),
-    _section_panel("density", "Density"),
-    _section_panel("wind", "Wind"),
-    NUBIS_PT_storms,
-    NUBIS_PT_light,
-    _section_panel("lighting", "Lighting"),
-    _section_panel("march", "Ray March"),
-    NUBIS_PT_viewport,
-    NUBIS_PT_bake,
-)
+PANEL_CLASSES = {
+    cls.panel: cls
+    for cls in (
+        NUBIS_PT_field,
+        NUBIS_PT_altitude,
+        NUBIS_PT_shape,
+        NUBIS_PT_wind,
+        NUBIS_PT_lighting,
+        NUBIS_PT_cirrus,
+        NUBIS_PT_storms,
+        NUBIS_PT_march,
+        NUBIS_PT_viewport,
+        NUBIS_PT_bake,
+    )
+}
+# Sub-panels in the schema's order (the order an artist works in).
+CLASSES = (NUBIS_PT_main, *(PANEL_CLASSES[p] for p in schema.PANEL_IDS))
 
 
 register, unregister = bpy.utils.register_classes_factory(CLASSES)

@@ -18,7 +18,7 @@ import bpy
 import mathutils
 import numpy as np
 
-from ..core import imageio, quality, staging
+from ..core import camera, imageio, quality, staging
 from ..core.bakeplan import comparison_voxel_size, view_footprint
 from ..core.errors import NubisError
 from ..core.fsutil import check_output_dir
@@ -51,9 +51,10 @@ def apply_quality(scene, name: str | None) -> str:
     """Write a quality row into the scene's settings; returns the name in effect ('custom' if none fits)."""
     s = scene.nubis
     if name:
-        for key, value in quality.quality(name).settings.items():
-            setattr(s, key, value)
-        s.viewport_quality = name
+        with scene_io.batch_edit():
+            for key, value in quality.quality(name).settings.items():
+                setattr(s, key, value)
+            s.viewport_quality = name
         return name
     params = {k: getattr(s, k) for k in quality.ROW_KEYS.values()}
     for row in quality.qualities().values():
@@ -85,8 +86,6 @@ def _naive(clouds: engine.CloudGPU, view: temporal.View) -> np.ndarray:
 
 
 def _with_footprint(state, view: temporal.View):
-    from ..core import camera
-
     angle, size = camera.pixel_footprint(np.array(view.inv_view_proj), view.width, view.height)
     state.pixel_angle, state.pixel_size = angle, size
     return state

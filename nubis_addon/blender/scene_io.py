@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 from pathlib import Path
 
@@ -9,13 +10,12 @@ import bpy
 import numpy as np
 from mathutils import Euler, Matrix, Vector
 
-from ..core import camera
+from ..core import camera, schema
 from ..core import fields as fieldgen
 from ..core import storms as stormgen
 from ..core.errors import NubisError
 from ..core.presets import Preset
 from ..core.state import MAX_STORMS, CloudState, StormLight, sun_vector, wind_vector
-from .properties import layer_from_dict, layer_to_dict, params_from_scene
 
 FIELD_IMAGES = {
     "a": ("field_a", "Nubis Field A"),
@@ -24,6 +24,85 @@ FIELD_IMAGES = {
 }
 SUN_NAME = "Nubis Sun"
 CAMERA_NAME = "Nubis Camera"
+
+
+# ---- settings ---------------------------------------------------------------------------------------
+
+
+def has_cloudscape(scene) -> bool:
+    """Whether `scene` holds a Nubis cloudscape (New Cloudscape has made its field images)."""
+    settings = getattr(scene, "nubis", None) if scene is not None else None
+    return settings is not None and settings.field_a is not None
+
+
+def redraw_views() -> None:
+    """Ask every 3D view of every window to redraw."""
+    wm = getattr(bpy.context, "window_manager", None)
+    for window in wm.windows if wm else ():
+        for area in window.screen.areas:
+            if area.type == "VIEW_3D":
+                area.tag_redraw()
+
+
+def scene_fps(scene) -> float:
+    return scene.render.fps / scene.render.fps_base
+
+
+_batch = [0]
+
+
+@contextlib.contextmanager
+def batch_edit():
+    """Many settings written at once (a preset, a quality level): their update callbacks wait, and the
+    writer composites or redraws once at the end."""
+    _batch[0] += 1
+    try:
+        yield
+    finally:
+        _batch[0] -= 1
+
+
+def in_batch_edit() -> bool:
+    return _batch[0] > 0
+
+
+def params_from_scene(settings) -> dict:
+    """The scene settings a preset holds, as plain values by key."""
+    out = {}
+    for s in schema.PRESET_SCENE:
+        value = getattr(settings, s.key)
+        out[s.key] = value.lower() if s.kind == "enum" else value
+    return out
+
+
+def _from_blender(s: schema.Setting, value):
+    if s.kind == "image" or s.kind == "object":
+        return value.name if value else ""
+    if s.kind == "enum":
+        return value.lower()
+    if s.kind in ("vector", "color"):
+        return list(value)
+    return value
+
+
+def table_to_dict(item, settings) -> dict:
+    """A layer or storm property group as its preset table."""
+    return {s.name: _from_blender(s, getattr(item, s.name)) for s in settings if s.in_preset and hasattr(item, s.name)}
+
+
+def layer_to_dict(layer) -> dict:
+    return table_to_dict(layer, schema.LAYER)
+
+
+def layer_from_dict(layer, data: dict) -> None:
+    for key, value in data.items():
+        s = schema.LAYER_BY_NAME[key]
+        if s.kind == "image":
+            layer.image = bpy.data.images.get(value) if value else None
+        elif s.kind == "enum":
+            setattr(layer, key, value.upper())
+        else:
+            setattr(layer, key, value)
 
 
 # ---- field images ----------------------------------------------------------------------------------
@@ -161,7 +240,7 @@ def _vortex_time(scene, index: int, storm, time: float) -> float | None:
     if curve is None:
         return None
     s = scene.nubis
-    fps = scene.render.fps / scene.render.fps_base
+    fps = scene_fps(scene)
     offset = s.wind_time_offset
     if time <= offset or s.wind_time_scale <= 0:
         return float(time * stormgen.vortex_fade(storm.blend))
@@ -207,11 +286,12 @@ def add_storm(scene, data: dict):
     empty.empty_display_size = data.get("radius", 12000.0)
     empty.location = (data.get("x", 0.0), data.get("y", 0.0), scene.nubis.layer_bottom)
     scene.collection.objects.link(empty)
-    storm = scene.nubis.storms.add()
-    for key, value in data.items():
-        if key not in ("x", "y"):
-            setattr(storm, key, value)
-    storm.empty = empty
+    with batch_edit():
+        storm = scene.nubis.storms.add()
+        for key, value in data.items():
+            if key not in ("x", "y"):
+                setattr(storm, key, value)
+        storm.empty = empty
     return storm
 
 
@@ -276,27 +356,26 @@ def apply_preset(scene, preset: Preset, progress=None) -> None:
     """Make `scene` the preset's cloudscape: settings, layer stack, field images, sun, world, camera;
     ``progress`` follows the field composite."""
     settings = scene.nubis
-    for key, value in preset.params.items():
-        setattr(settings, key, value)
-    settings.preset = preset.path.stem if preset.path else preset.name
-    rules = preset.extra["rules"]
-    settings.rule_rain, settings.rule_horizon = rules["rain"], rules["horizon"]
-    settings.rule_cumulonimbus_top, settings.rule_horizon_start = rules["cumulonimbus_top"], rules["horizon_start"]
-    settings.layers.clear()
-    for data in preset.layers:
-        data = dict(data)
-        if data["kind"] == "image":
-            data["image"] = _load_layer_image(data["image"], preset.path)
-        layer_from_dict(settings.layers.add(), data)
-    _setup_sun(scene, preset.extra["sun"])
-    _setup_world(scene, preset.extra["world"])
-    _setup_camera(scene, preset.extra["camera"])
-    for storm in list(settings.storms):
-        if storm.empty is not None:
-            bpy.data.objects.remove(storm.empty)
-    settings.storms.clear()
-    for data in preset.storms:
-        add_storm(scene, data)
+    with batch_edit():
+        for key, value in preset.params.items():
+            s = schema.BY_KEY[key]
+            setattr(settings, key, value.upper() if s.kind == "enum" else value)
+        settings.preset = preset.path.stem if preset.path else preset.name
+        settings.layers.clear()
+        for data in preset.layers:
+            data = dict(data)
+            if data["kind"] == "image":
+                data["image"] = _load_layer_image(data["image"], preset.path)
+            layer_from_dict(settings.layers.add(), data)
+        _setup_sun(scene, preset.extra["sun"])
+        _setup_world(scene, preset.extra["world"])
+        _setup_camera(scene, preset.extra["camera"])
+        for storm in list(settings.storms):
+            if storm.empty is not None:
+                bpy.data.objects.remove(storm.empty)
+        settings.storms.clear()
+        for data in preset.storms:
+            add_storm(scene, data)
     generate_fields(scene, progress)  # after the camera and storms: the rules and stencils are placed by them
     r = preset.extra["render"]
     scene.render.resolution_x, scene.render.resolution_y = r["width"], r["height"]
@@ -419,7 +498,7 @@ def state_from_scene(scene, camera_location=None, fields: tuple | None = None) -
         direction, radiance = (0.0, 0.0, 1.0), (0.0, 0.0, 0.0)
     if camera_location is None:
         camera_location = evaluated_matrix(scene.camera).translation if scene.camera else (0.0, 0.0, 0.0)
-    fps = scene.render.fps / scene.render.fps_base
+    fps = scene_fps(scene)
     time = (scene.frame_current + scene.frame_subframe) / fps * params["wind_time_scale"] + params["wind_time_offset"]
     if fields is None:
         fields = read_fields(settings)

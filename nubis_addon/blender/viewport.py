@@ -11,78 +11,23 @@ import numpy as np
 from ..core import camera
 from ..core.errors import NubisError
 from ..render import temporal
-from . import runtime, scene_io
+from . import runtime, scene_io, status
 
 _handle = None
 _fields_cache: dict = {}  # scene pointer -> (key, field arrays)
 _views: dict = {}  # region pointer -> TemporalViewport
 _depth_cache: dict = {}
-_scene_updates = [0]  # counts depsgraph updates: the scene's geometry (and so its depth) may have changed
-_last_error: list[str] = []
-last_benchmark: list[str] = []  # the sidebar's Benchmark button's table, line by line
+_geometry = [0]  # the scene's geometry generation (blender/events.py counts depsgraph updates)
 
 
-@bpy.app.handlers.persistent
-def mark_dirty(*_args) -> None:
+def invalidate() -> None:
     """Forget the cached field pixels (on file loads and setting edits)."""
     _fields_cache.clear()
 
 
-_pending_images: set[str] = set()
-
-
-@bpy.app.handlers.persistent
-def on_load(*_args) -> None:
-    """A new file: forget cached pixels and any paint regeneration pending for the old one."""
-    mark_dirty()
-    _pending_images.clear()
-    if bpy.app.timers.is_registered(_regenerate_after_paint):
-        bpy.app.timers.unregister(_regenerate_after_paint)
-
-
-@bpy.app.handlers.persistent
-def on_frame_change(scene, _depsgraph=None) -> None:
-    """Animated storms (lifecycle blend, a moving Empty) change the field: re-composite on frame changes."""
-    settings = getattr(scene, "nubis", None)
-    if settings is None or settings.field_a is None or not settings.storms:
-        return
-    if scene_io.storms_animated(settings):
-        try:
-            scene_io.generate_fields(scene)
-        except NubisError as err:
-            _last_error[:] = [str(err)]
-
-
-@bpy.app.handlers.persistent
-def on_depsgraph_update(scene, depsgraph) -> None:
-    """Painting an image layer in the image editor re-composites the field. Strokes arrive as image
-    updates; a short timer gathers them so a fast brush does not re-composite on every dab. Any update
-    may move geometry, so the viewport reads its depth again."""
-    _scene_updates[0] += 1
-    settings = getattr(scene, "nubis", None)
-    if settings is None or settings.field_a is None:
-        return
-    used = scene_io.layer_images(settings)
-    edited = {u.id.name for u in depsgraph.updates if isinstance(u.id, bpy.types.Image) and u.id.name in used}
-    if edited:
-        _pending_images.update(edited)
-        if not bpy.app.timers.is_registered(_regenerate_after_paint):
-            bpy.app.timers.register(_regenerate_after_paint, first_interval=0.25)
-
-
-def _regenerate_after_paint():
-    _pending_images.clear()
-    scene = bpy.context.scene
-    if getattr(scene, "nubis", None) is not None and scene.nubis.field_a is not None:
-        try:
-            scene_io.generate_fields(scene)
-        except NubisError as err:
-            _last_error[:] = [str(err)]
-        for window in bpy.context.window_manager.windows:
-            for area in window.screen.areas:
-                if area.type == "VIEW_3D":
-                    area.tag_redraw()
-    return None
+def geometry_changed(generation: int) -> None:
+    """The scene's geometry may have moved: each view reads its depth again on its next redraw."""
+    _geometry[0] = generation
 
 
 def _state(scene, view_origin):
@@ -178,11 +123,7 @@ def _converging_tick():
     now = time.monotonic()
     if not any(not tv.converged and now - getattr(tv, "last_drawn", 0.0) < _IDLE_SECONDS for tv in _views.values()):
         return None
-    wm = getattr(bpy.context, "window_manager", None)
-    for window in wm.windows if wm else ():
-        for area in window.screen.areas:
-            if area.type == "VIEW_3D":
-                area.tag_redraw()
+    scene_io.redraw_views()
     return 1.0 / 60.0
 
 
@@ -194,19 +135,17 @@ def _keep_converging() -> None:
 def _draw_callback() -> None:
     context = bpy.context
     scene = context.scene
-    settings = getattr(scene, "nubis", None)
-    if settings is None or not settings.enabled or settings.field_a is None:
+    if not scene_io.has_cloudscape(scene) or not scene.nubis.enabled:
         return
     region, rv3d = context.region, context.region_data
     if region is None or rv3d is None:
         return
     try:
         draw_region(scene, region, rv3d)
-        _last_error.clear()
+        status.clear_error()
     except NubisError as err:
         # A draw callback cannot report; remember the message for the sidebar instead of spamming the console.
-        if not _last_error or _last_error[0] != str(err):
-            _last_error[:] = [str(err)]
+        status.set_error(str(err))
 
 
 def draw_region(scene, region, rv3d) -> temporal.TemporalViewport:
@@ -214,7 +153,7 @@ def draw_region(scene, region, rv3d) -> temporal.TemporalViewport:
     window_matrix, is_perspective) over the bound framebuffer, its depth culling the march; asks for
     more redraws while the view converges."""
     fb = gpu.state.active_framebuffer_get()
-    view_key = (tuple(map(tuple, rv3d.view_matrix)), tuple(map(tuple, rv3d.window_matrix)), _scene_updates[0])
+    view_key = (tuple(map(tuple, rv3d.view_matrix)), tuple(map(tuple, rv3d.window_matrix)), _geometry[0])
     depth = _scene_depth(fb, region.width, region.height, view_key, region.as_pointer())
     # The eye from the same float64 inverse the rays use: mathutils inverts in float32, which puts the
     # eye millimetres off the rays' own origin and turns rays that are only metres long by 0.04 degrees.
@@ -228,27 +167,17 @@ def draw_region(scene, region, rv3d) -> temporal.TemporalViewport:
         rv3d.is_perspective,
         key=region.as_pointer(),
         depth=depth,
-        depth_key=_scene_updates[0],
+        depth_key=_geometry[0],
     )
     if not tv.converged:
         _keep_converging()
     return tv
 
 
-def last_error() -> str:
-    return _last_error[0] if _last_error else ""
-
-
 def register() -> None:
     global _handle
     if _handle is None:
         _handle = bpy.types.SpaceView3D.draw_handler_add(_draw_callback, (), "WINDOW", "POST_VIEW")
-    if on_load not in bpy.app.handlers.load_post:
-        bpy.app.handlers.load_post.append(on_load)
-    if on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
-    if on_frame_change not in bpy.app.handlers.frame_change_post:
-        bpy.app.handlers.frame_change_post.append(on_frame_change)
 
 
 def unregister() -> None:
@@ -256,12 +185,6 @@ def unregister() -> None:
     if _handle is not None:
         bpy.types.SpaceView3D.draw_handler_remove(_handle, "WINDOW")
         _handle = None
-    if on_load in bpy.app.handlers.load_post:
-        bpy.app.handlers.load_post.remove(on_load)
-    if on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
-    if on_frame_change in bpy.app.handlers.frame_change_post:
-        bpy.app.handlers.frame_change_post.remove(on_frame_change)
     for tv in _views.values():
         tv.free()
     _views.clear()
@@ -269,9 +192,6 @@ def unregister() -> None:
     if bpy.app.timers.is_registered(_converging_tick):
         bpy.app.timers.unregister(_converging_tick)
     _fields_cache.clear()
-    _pending_images.clear()
-    if bpy.app.timers.is_registered(_regenerate_after_paint):
-        bpy.app.timers.unregister(_regenerate_after_paint)
 
 
 def is_registered() -> bool:

@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import contextlib
 import os
-from collections.abc import Callable
+import sys
+from collections.abc import Callable, Iterator
+from pathlib import Path
 
 
 class Console:
@@ -36,3 +38,50 @@ class Console:
     def close(self) -> None:
         with contextlib.suppress(OSError):
             os.close(self.fd)
+
+
+_stack: list[Console] = []  # the running command's terminal (its stderr before any redirection)
+
+
+def push(console: Console) -> None:
+    _stack.append(console)
+
+
+def pop(console: Console) -> None:
+    if console in _stack:
+        _stack.remove(console)
+
+
+def current() -> Console:
+    if not _stack:
+        _stack.append(Console())
+    return _stack[-1]
+
+
+def progress(label: str) -> Callable[[float], None] | None:
+    """A progress bar on the user's terminal (also while Blender's output goes to the log), or None."""
+    return current().progress(label)
+
+
+@contextlib.contextmanager
+def quiet(log: Path) -> Iterator[None]:
+    """Send Blender's and Mesa's own chatter (render progress, EGL notices) to a log file so the user
+    sees one summary line; with NUBIS_VERBOSE=1 everything stays on the terminal."""
+    if os.environ.get("NUBIS_VERBOSE"):
+        yield
+        return
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = os.dup(1), os.dup(2)
+    with open(log, "ab") as f:
+        os.dup2(f.fileno(), 1)
+        os.dup2(f.fileno(), 2)
+        try:
+            yield
+        finally:
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            os.close(saved[0])
+            os.close(saved[1])

@@ -17,9 +17,11 @@ import contextlib
 import os
 import shutil
 import signal
+import sys
 import threading
 import time
 from collections.abc import Iterator
+from pathlib import Path
 
 MESSAGE = "nubis: interrupted\n"
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -148,3 +150,31 @@ def handle_signals(message_fd: int | None = None) -> Iterator[None]:
         os.close(read_fd)
         _installed.clear()
         _pending.clear()
+
+
+_tracked: list[Path] = []
+
+
+def blender_tempdir() -> Path | None:
+    """Blender's per-session temporary folder (/tmp/blender_XXXXXX), which only Blender's own teardown
+    removes; the command line leaves without that teardown (__main__.py), so it removes it itself.
+    Found through the loaded bpy module, so this module never imports bpy."""
+    if "bpy" not in sys.modules:
+        return None
+    tmp = Path(sys.modules["bpy"].app.tempdir or ".")
+    return tmp if tmp.name.startswith("blender_") and tmp.is_dir() else None
+
+
+def track_blender_tempdir() -> None:
+    """Have an interrupt remove Blender's current session folder (it ends the process without Blender's
+    teardown); call again after anything that starts a new session folder (loading factory settings)."""
+    untrack_blender_tempdir()
+    tmp = blender_tempdir()
+    if tmp is not None:
+        register(tmp)
+        _tracked.append(tmp)
+
+
+def untrack_blender_tempdir() -> None:
+    if _tracked:
+        unregister(_tracked.pop())

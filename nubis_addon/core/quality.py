@@ -9,19 +9,11 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
+from . import schema
 from .errors import NubisError
-from .params import PARAMS_BY_KEY
 
-# Each row's keys and the scene setting each one writes.
-ROW_KEYS: dict[str, str] = {
-    "resolution": "viewport_resolution",
-    "light_samples": "march_light_samples",
-    "steps_min": "march_steps_min",
-    "steps_max": "march_steps_max",
-    "blur": "viewport_blur",
-    "mip": "march_mip",
-    "jittered_rings": "storm_jittered_rings",
-}
+# Each row's keys and the scene setting each one writes (the schema's `quality` column).
+ROW_KEYS: dict[str, str] = schema.QUALITY_COLUMNS
 DEFAULT = "standard"
 
 
@@ -68,7 +60,7 @@ def qualities(path: Path | None = None) -> dict[str, Quality]:
             raise NubisError(f"{where} ('{row['name']}'): unknown keys {sorted(unknown)}, missing {sorted(missing)}")
         settings = {}
         for key, target in ROW_KEYS.items():
-            settings[target] = _check(PARAMS_BY_KEY[target], row[key], f"{where}, {key}")
+            settings[target] = _check(schema.BY_KEY[target], row[key], f"{where}, {key}")
         label, description = str(row.get("label", row["name"])), str(row.get("description", ""))
         out[row["name"]] = Quality(row["name"], label, description, settings)
     return out

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from .params import defaults
+from .schema import defaults
 
 
 @dataclass(frozen=True)

@@ -18,11 +18,12 @@ import math
 from dataclasses import dataclass
 
 import gpu
+import mathutils
 import numpy as np
 
 from ..core import camera, march
 from ..core.state import CloudState
-from . import engine
+from . import engine, uniforms
 
 BLOCK = 4  # the working buffer holds one pixel of every BLOCK x BLOCK block
 REDRAWS_PER_SAMPLE = BLOCK * BLOCK
@@ -50,8 +51,6 @@ def _matrix_block(m) -> np.ndarray:
 
 
 def _mathutils(rows):
-    import mathutils
-
     return mathutils.Matrix(rows)
 
 
@@ -132,8 +131,6 @@ class TemporalViewport:
             time=0.0,
             storms=tuple(dataclasses.replace(s, flash=0.0) for s in state.storms),
         )
-        from . import uniforms
-
         return (uniforms.pack(quiet).tobytes(), tuple(id(a) for a in (state.field_a, state.field_b, state.field_c)))
 
     # ---- one redraw ---------------------------------------------------------------------------------------

@@ -7,7 +7,7 @@ Cycles' reference of each preset (its own volume bounces, the camera's bake) doe
 viewport's lighting terms, so it is rendered once; then a coordinate search re-renders only the
 viewport. The objective is the mean luminance error over the presets (compare's metric). Presets
 that set a tuned parameter themselves keep their value. Prints the search and the before/after
-table; nothing is written to the presets: copy the result into core/params.py by hand.
+table; nothing is written to the presets: copy the result into core/schema.py by hand.
 """
 
 from __future__ import annotations
@@ -92,7 +92,7 @@ def table(per_preset: dict, shots: dict) -> str:
 
 def main(out_dir: str, width: int = 160, height: int = 90, samples: int = 256, rounds: int = 3) -> None:
     import nubis_addon
-    from nubis_addon.core.params import defaults
+    from nubis_addon.core.schema import defaults
     from nubis_addon.render.gpu_context import ensure_gpu_context
 
     nubis_addon.register()

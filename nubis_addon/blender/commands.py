@@ -1,0 +1,140 @@
+"""The command line's commands (render, bake, cycles, compare, preview, benchmark): what each one does
+once cli.py has parsed and checked its arguments. Each returns its one-line summary."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import bpy
+
+from ..core import console, fields, imageio, interrupt, staging
+from ..core.errors import NubisError
+from ..core.presets import load_preset
+from ..render.gpu_context import ensure_gpu_context
+from . import pipeline, preview, registration, scene_io
+
+PROG = "nubis"
+# A field composite slower than this gets an estimate first, then a progress bar.
+SLOW_COMPOSITE_S = 5.0
+
+
+def _composite_progress(preset):
+    seconds = fields.composite_seconds(preset.layers, preset.params["field_resolution"])
+    if seconds < SLOW_COMPOSITE_S:
+        return None
+    res = preset.params["field_resolution"]
+    console.current().line(
+        f"{PROG}: compositing {len(preset.layers)} field layers at {res}x{res} pixels, about {seconds:.0f} s"
+    )
+    return console.progress("field")
+
+
+def load_scene(args, in_blender: bool):
+    """The scene to work on: a saved .blend, a preset, or (inside Blender) the open file's cloudscape."""
+    if args.blend:
+        path = Path(args.blend).expanduser()
+        if not path.is_file():
+            raise NubisError(f"the .blend file '{path}' does not exist: check the path")
+        try:
+            bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False)
+        except RuntimeError as err:
+            first = str(err).strip().splitlines()[-1] if str(err).strip() else "unreadable"
+            raise NubisError(f"cannot open '{path}' ({first}): check that it is a Blender file") from None
+        interrupt.track_blender_tempdir()
+        registration.ensure_registered()
+        scene = bpy.context.scene
+        if not scene_io.has_cloudscape(scene):
+            raise NubisError(f"'{path}' holds no Nubis cloudscape: add one with New Cloudscape and save the file")
+        return scene
+    if in_blender and not args.preset and bpy.data.filepath and scene_io.has_cloudscape(bpy.context.scene):
+        return bpy.context.scene
+    preset = load_preset(args.preset or "default")
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    interrupt.track_blender_tempdir()  # factory settings start a new session folder
+    registration.ensure_registered()
+    scene = bpy.context.scene
+    scene_io.apply_preset(scene, preset, progress=_composite_progress(preset))
+    return scene
+
+
+def execute(args, in_blender: bool, log: Path, out: Path) -> str:
+    """Run one checked command writing to `out`; Blender's own output goes to `log`."""
+    start = time.perf_counter()
+    cmd = args.command
+    voxel = getattr(args, "voxel_size", None)
+    with console.quiet(log):
+        interrupt.track_blender_tempdir()
+        scene = load_scene(args, in_blender)
+        if getattr(args, "frame", None) is not None:
+            scene.frame_set(args.frame)
+        pipeline.check_scene(scene)
+        ensure_gpu_context()
+    label = scene.nubis.preset or "scene"
+
+    if cmd == "render":
+        w, h = pipeline.resolution(scene, args.width, args.height)
+        with console.quiet(log), staging.output_set() as outputs:  # the image and its motion vectors together
+            rgba = pipeline.render_viewport(scene, w, h, passes=args.passes)
+            pipeline.save_render(scene, outputs.stage(out), rgba)
+            if args.motion:
+                imageio.write_image(outputs.stage(args.motion), pipeline.render_motion(scene, w, h))
+        cover = float((rgba[..., 3] > 0.05).mean()) * 100
+        return f"rendered {label} at {w}x{h} ({cover:.0f}% cloud cover) in {time.perf_counter() - start:.1f} s -> {out}"
+    if cmd == "bake":
+        progress = console.progress("baking")
+        with console.quiet(log):
+            result = pipeline.bake(scene, out, voxel, progress, camera_only=args.camera_only)
+        nx, ny, nz = result.plan.dims
+        return (
+            f"baked {label}: {nx}x{ny}x{nz} voxels of {result.plan.voxel_size:g} m, "
+            f"{result.active_voxels} active, in {result.seconds:.1f} s -> {out}"
+        )
+    w, h = pipeline.resolution(scene, args.width, args.height)
+    if cmd in ("preview", "benchmark"):
+        return _realtime(cmd, args, scene, out, w, h, log, label, start)
+    if cmd == "cycles":
+        with console.quiet(log):
+            rgba = pipeline.render_cycles(scene, w, h, args.samples, voxel_size=voxel, bounces=args.bounces)
+            pipeline.save_render(scene, out, rgba)
+        return f"rendered {label} with Cycles at {w}x{h} in {time.perf_counter() - start:.1f} s -> {out}"
+    with console.quiet(log):
+        if args.bounces is not None:
+            scene.cycles.volume_bounces = args.bounces
+        m = pipeline.compare(scene, out, w, h, args.samples, args.mode, voxel, args.noise_estimate)
+    capped = (
+        f" (reference march in {m['reference_view_steps']} of {scene.nubis.march_steps_max} view steps: "
+        "the shader loop limit)"
+        if m.get("reference_steps_capped")
+        else ""
+    )
+    return (
+        f"compared {label} ({args.mode}) at {w}x{h}: alpha RMSE {m['alpha_rmse']:.4f}, luminance error "
+        f"{m['luminance_rel_error'] * 100:.1f}%, silhouette IoU {m['silhouette_iou']:.3f}{capped} "
+        f"in {time.perf_counter() - start:.1f} s -> {out}"
+    )
+
+
+def _realtime(cmd: str, args, scene, out: Path, w: int, h: int, log: Path, label: str, start: float) -> str:
+    if cmd == "preview":
+        frames = preview.parse_frames(args.frames, scene.frame_current)
+        progress = console.progress("preview")
+        with console.quiet(log):
+            r = preview.preview(
+                scene, out, w, h, frames, args.redraws, args.orbit, args.naive, args.quality, progress=progress
+            )
+        ms = sorted(x for frame in r.redraw_ms for x in frame)
+        median = ms[len(ms) // 2]
+        naive = f", naive {sorted(r.naive_ms)[len(r.naive_ms) // 2]:.0f} ms" if r.naive_ms else ""
+        return (
+            f"previewed {label} at {w}x{h} ({r.quality}): {len(frames)} frame(s) x {args.redraws} redraw(s), "
+            f"median redraw {median:.1f} ms{naive}, in {time.perf_counter() - start:.1f} s -> {out}"
+        )
+    with console.quiet(log):
+        result = preview.benchmark(scene, out, w, h, args.quality)
+    print(preview.table(result))
+    return (
+        f"benchmarked {label} at {w}x{h} ({result['quality']}): naive {result['naive_ms']:.0f} ms, redraw "
+        f"{result['redraw_ms']:.1f} ms ({result['naive_over_redraw']:.1f}x), EEVEE {result['eevee_ms']:.0f} ms "
+        f"({result['eevee_over_redraw']:.0f}x) in {time.perf_counter() - start:.1f} s -> {out}"
+    )

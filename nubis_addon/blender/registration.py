@@ -1,0 +1,39 @@
+"""Registering the extension's Blender side: properties, handlers, operators, panels and the draw."""
+
+from __future__ import annotations
+
+import bpy
+
+from . import events, operators, panels, properties, runtime, viewport
+
+_registered = [False]
+
+
+def register() -> None:
+    if _registered[0]:
+        return
+    properties.register()
+    events.register()
+    operators.register()
+    panels.register()
+    viewport.register()
+    _registered[0] = True
+
+
+def unregister() -> None:
+    if not _registered[0]:
+        return
+    viewport.unregister()
+    panels.unregister()
+    operators.unregister()
+    events.unregister()
+    properties.unregister()
+    runtime.free()
+    _registered[0] = False
+
+
+def ensure_registered() -> None:
+    """For the command line: the property group must exist before a scene is read or built."""
+    if not hasattr(bpy.types.Scene, "nubis"):
+        _registered[0] = False
+        register()

@@ -1,0 +1,1461 @@
+"""Every setting of a cloudscape, declared once.
+
+Each `Setting` gives its key, type, default, range, unit, label, description, the sidebar panel that
+draws it (or why none does), what a change triggers and whether it reaches the GPU. Generated from
+this table: the PropertyGroups (blender/properties.py), the one preset validator (core/presets.py),
+the sidebar panels (blender/panels.py), the quality levels' columns (core/quality.py) and the shaders'
+uniform block, whose members are named after the keys (render/uniforms.py).
+
+Groups and their keys:
+- ``scene``: a scene's cloud settings. The key is ``<section>_<name>`` (``lighting_powder``) and a preset
+  writes it as ``[section] name = value``. A few are Blender state only (``in_preset=False``).
+- ``layer``: one field layer (``[[field.layers]]``); ``storm``: one superstorm (``[[storms]]``).
+- ``sun``, ``world``, ``camera``, ``render``, ``preset``: preset sections that set Blender's own
+  objects (the Sun lamp, the World, the camera, the render settings): Blender's own panels draw them.
+
+Labels and descriptions are in Blender's US English. Sources are cited as in docs/sources.md.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+TAU = 2.0 * math.pi
+
+# Sidebar panels, in the order an artist works (blender/panels.py draws them in this order).
+PANELS: tuple[tuple[str, str], ...] = (
+    ("field", "Data Field"),
+    ("altitude", "Altitude"),
+    ("shape", "Shape"),
+    ("wind", "Wind"),
+    ("lighting", "Lighting"),
+    ("cirrus", "Cirrus"),
+    ("storms", "Superstorms"),
+    ("march", "Ray March"),
+    ("viewport", "Viewport"),
+    ("bake", "Bake"),
+)
+PANEL_IDS = tuple(p for p, _label in PANELS)
+
+# What a change triggers (blender/events.py): nothing beyond Blender's own redraw, a redraw of the
+# clouds, or a re-composite of the data field and then a redraw.
+TRIGGERS = ("none", "redraw", "field")
+
+
+@dataclass(frozen=True)
+class Setting:
+    group: str
+    section: str  # the preset table: "layer", "field", ... for scene settings; the group otherwise
+    name: str  # the key inside that table
+    kind: str  # float | int | bool | enum | string | vector | color | image | object
+    default: Any
+    label: str
+    description: str
+    min: float | None = None
+    max: float | None = None
+    soft_min: float | None = None
+    soft_max: float | None = None
+    unit: str = "NONE"  # Blender's: NONE, LENGTH, ROTATION, TIME_ABSOLUTE, VELOCITY
+    items: tuple[tuple[str, str, str], ...] = ()  # enum choices: (id as in presets, label, description)
+    size: int = 0  # vector and color length
+    panel: str = ""  # a PANEL_IDS entry, or "" with `internal` saying why no panel draws it
+    internal: str = ""
+    trigger: str = "redraw"
+    gpu: bool = False  # a member of the shaders' uniform block, named after the key
+    in_preset: bool = True  # presets read and write it
+    quality: str = ""  # its column in presets/quality/quality.toml, if a quality level sets it
+    key_override: str = ""
+
+    @property
+    def key(self) -> str:
+        if self.key_override:
+            return self.key_override
+        return f"{self.section}_{self.name}" if self.group == "scene" else self.name
+
+    @property
+    def choices(self) -> tuple[str, ...]:
+        return tuple(i[0] for i in self.items)
+
+
+def _items(*names: str, **labels: str) -> tuple[tuple[str, str, str], ...]:
+    return tuple((n, labels.get(n, n.replace("_", " ").title()), "") for n in names)
+
+
+def _scene(section: str, name: str, kind: str, default, label: str, description: str, **kw) -> Setting:
+    return Setting("scene", section, name, kind, default, label, description, **kw)
+
+
+S = _scene
+M = 1e6  # metres in 1000 km
+_BLENDER_OBJECTS = "set on Blender's own objects and settings, drawn by Blender's own panels"
+
+SCENE: tuple[Setting, ...] = (
+    # -- altitude: low layer 1500-4000 m (S15, GPU Pro 7); S15 draws clouds within 35 km. The planet
+    #    radius is ours to choose (docs/sources.md#planet-radius).
+    S(
+        "layer",
+        "bottom",
+        "float",
+        1500.0,
+        "Base Altitude",
+        "Altitude of the cloud layer's base above sea level",
+        min=0.0,
+        max=20000.0,
+        soft_max=10000.0,
+        unit="LENGTH",
+        panel="altitude",
+        gpu=True,
+        trigger="field",
+    ),
+    S(
+        "layer",
+        "top",
+        "float",
+        4000.0,
+        "Top Altitude",
+        "Altitude of the cloud layer's top (cumulonimbus reach 8 km)",
+        min=100.0,
+        max=30000.0,
+        soft_max=15000.0,
+        unit="LENGTH",
+        panel="altitude",
+        gpu=True,
+        trigger="field",
+    ),
+    S(
+        "layer",
+        "planet_radius",
+        "float",
+        6371000.0,
+        "Planet Radius",
+        "Planet radius: shrink it to make clouds fall into the horizon sooner (S15)",
+        min=10000.0,
+        max=1e8,
+        soft_min=100000.0,
+        soft_max=2e7,
+        unit="LENGTH",
+        panel="altitude",
+        gpu=True,
+    ),
+    S(
+        "layer",
+        "draw_radius",
+        "float",
+        35000.0,
+        "Draw Distance",
+        "Clouds are drawn within this distance of the camera",
+        min=1000.0,
+        max=500000.0,
+        soft_max=150000.0,
+        unit="LENGTH",
+        panel="altitude",
+        gpu=True,
+    ),
+    # -- the data field
+    S(
+        "field",
+        "size",
+        "float",
+        70000.0,
+        "Field Size",
+        "World-space width of the square data field",
+        min=100.0,
+        max=1e7,
+        soft_max=500000.0,
+        unit="LENGTH",
+        panel="field",
+        gpu=True,
+        trigger="field",
+    ),
+    S(
+        "field",
+        "origin_x",
+        "float",
+        0.0,
+        "Field Center X",
+        "Center of the data field (X)",
+        min=-1e7,
+        max=1e7,
+        soft_min=-200000.0,
+        soft_max=200000.0,
+        unit="LENGTH",
+        panel="field",
+        gpu=True,
+        trigger="field",
+    ),
+    S(
+        "field",
+        "origin_y",
+        "float",
+        0.0,
+        "Field Center Y",
+        "Center of the data field (Y)",
+        min=-1e7,
+        max=1e7,
+        soft_min=-200000.0,
+        soft_max=200000.0,
+        unit="LENGTH",
+        panel="field",
+        gpu=True,
+        trigger="field",
+    ),
+    S(
+        "field",
+        "resolution",
+        "int",
+        512,
+        "Field Resolution",
+        "Pixels per side of the data-field images",
+        min=16,
+        max=4096,
+        soft_max=2048,
+        panel="field",
+        trigger="field",
+    ),
+    # -- shape: noise and density (GPU Pro 7)
+    S(
+        "noise",
+        "seed",
+        "int",
+        0,
+        "Noise Seed",
+        "Seed of the 3D noise volumes",
+        min=0,
+        max=2**31 - 1,
+        soft_max=1000,
+        panel="shape",
+    ),
+    S(
+        "noise",
+        "lf_period",
+        "float",
+        12000.0,
+        "Shape Noise Size",
+        "Tile size of the low-frequency shape noise",
+        min=100.0,
+        max=1e6,
+        soft_max=50000.0,
+        unit="LENGTH",
+        panel="shape",
+        gpu=True,
+    ),
+    S(
+        "noise",
+        "hf_period",
+        "float",
+        1600.0,
+        "Detail Noise Size",
+        "Tile size of the high-frequency detail noise",
+        min=10.0,
+        max=1e5,
+        soft_max=10000.0,
+        unit="LENGTH",
+        panel="shape",
+        gpu=True,
+    ),
+    S(
+        "noise",
+        "curl_period",
+        "float",
+        6000.0,
+        "Curl Noise Size",
+        "Tile size of the curl noise that swirls cloud bases",
+        min=10.0,
+        max=1e6,
+        soft_max=50000.0,
+        unit="LENGTH",
+        panel="shape",
+        gpu=True,
+    ),
+    S(
+        "noise",
+        "curl_strength",
+        "float",
+        250.0,
+        "Curl Strength",
+        "How far curl noise displaces the detail at cloud bases",
+        min=0.0,
+        max=10000.0,
+        soft_max=2000.0,
+        unit="LENGTH",
+        panel="shape",
+        gpu=True,
+    ),
+    # One extinction coefficient, shared by the viewport and the VDB's Cycles material.
+    S(
+        "density",
+        "sigma",
+        "float",
+        0.04,
+        "Extinction",
+        "Extinction per meter at density 1 (shared with Cycles)",
+        min=0.0,
+        max=10.0,
+        soft_max=0.5,
+        panel="shape",
+        gpu=True,
+    ),
+    S(
+        "density",
+        "coverage",
+        "float",
+        1.0,
+        "Coverage",
+        "Multiplier on the coverage field",
+        min=0.0,
+        max=2.0,
+        panel="shape",
+        gpu=True,
+    ),
+    S(
+        "density",
+        "erosion",
+        "float",
+        0.2,
+        "Erosion",
+        "Strength of the detail erosion (GPU Pro 7: 0.2)",
+        min=0.0,
+        max=1.0,
+        panel="shape",
+        gpu=True,
+    ),
+    S(
+        "density",
+        "multiply_coverage",
+        "bool",
+        True,
+        "Lighter Small Clouds",
+        "Make small clouds lighter by multiplying the density by the coverage (GPU Pro 7)",
+        panel="shape",
+        gpu=True,
+    ),
+    # -- wind (GPU Pro 7: 10 m/s, 500 m top offset, 0.1 upward bias)
+    S(
+        "wind",
+        "direction",
+        "float",
+        0.0,
+        "Direction",
+        "Wind heading, 0 = towards +X",
+        min=-TAU,
+        max=TAU,
+        unit="ROTATION",
+        panel="wind",
+    ),
+    S(
+        "wind",
+        "speed",
+        "float",
+        10.0,
+        "Speed",
+        "Wind speed (GPU Pro 7: 10 m/s)",
+        min=0.0,
+        max=500.0,
+        soft_max=60.0,
+        unit="VELOCITY",
+        panel="wind",
+        gpu=True,
+    ),
+    S(
+        "wind",
+        "top_offset",
+        "float",
+        500.0,
+        "Top Offset",
+        "How far cloud tops lean downwind (GPU Pro 7: 500 m)",
+        min=-10000.0,
+        max=10000.0,
+        soft_min=-3000.0,
+        soft_max=3000.0,
+        unit="LENGTH",
+        panel="wind",
+        gpu=True,
+    ),
+    S(
+        "wind",
+        "upward_bias",
+        "float",
+        0.1,
+        "Upward Bias",
+        "Upward drift relative to the wind (GPU Pro 7: 0.1)",
+        min=-1.0,
+        max=1.0,
+        panel="wind",
+        gpu=True,
+    ),
+    S(
+        "wind",
+        "detail_speed",
+        "float",
+        2.0,
+        "Detail Speed",
+        "Detail-noise speed relative to the shape noise",
+        min=0.0,
+        max=20.0,
+        soft_max=5.0,
+        panel="wind",
+        gpu=True,
+    ),
+    S(
+        "wind",
+        "time_offset",
+        "float",
+        0.0,
+        "Time Offset",
+        "Seconds added to the frame time",
+        min=-1e7,
+        max=1e7,
+        soft_min=-3600.0,
+        soft_max=3600.0,
+        unit="TIME_ABSOLUTE",
+        panel="wind",
+    ),
+    S(
+        "wind",
+        "time_scale",
+        "float",
+        1.0,
+        "Time Scale",
+        "Simulated seconds per second of animation",
+        min=0.0,
+        max=1e4,
+        soft_max=100.0,
+        panel="wind",
+    ),
+    # -- lighting: GDC22's eccentricity 0.2, a second lobe for the silver lining
+    S(
+        "lighting",
+        "phase_g0",
+        "float",
+        0.2,
+        "Forward Scattering",
+        "Eccentricity of the main phase lobe (GDC22: 0.2)",
+        min=-0.99,
+        max=0.99,
+        panel="lighting",
+        gpu=True,
+    ),
+    S(
+        "lighting",
+        "phase_g1",
+        "float",
+        0.8,
+        "Silver Lining",
+        "Eccentricity of the silver-lining lobe",
+        min=-0.99,
+        max=0.99,
+        panel="lighting",
+        gpu=True,
+    ),
+    S(
+        "lighting",
+        "phase_mix",
+        "float",
+        0.2,
+        "Silver Lining Weight",
+        "Weight of the silver-lining lobe",
+        min=0.0,
+        max=1.0,
+        panel="lighting",
+        gpu=True,
+    ),
+    S(
+        "lighting",
+        "ambient",
+        "float",
+        1.3,
+        "Ambient",
+        "Strength of the sky's ambient light",
+        min=0.0,
+        max=10.0,
+        soft_max=4.0,
+        panel="lighting",
+    ),
+    S(
+        "lighting",
+        "ambient_bottom",
+        "float",
+        0.3,
+        "Ambient at Base",
+        "Ambient light at the cloud base relative to the top (S15)",
+        min=0.0,
+        max=1.0,
+        panel="lighting",
+        gpu=True,
+    ),
+    S(
+        "lighting",
+        "cycles_mie",
+        "bool",
+        False,
+        "Mie Phase in Cycles",
+        "Cycles uses its Mie phase for water droplets instead of the viewport's two Henyey-Greenstein lobes",
+        panel="lighting",
+        trigger="none",
+    ),
+    S(
+        "lighting",
+        "droplet_size",
+        "float",
+        20.0,
+        "Droplet Size",
+        "Droplet diameter for Cycles' Mie phase, micrometers",
+        min=5.0,
+        max=50.0,
+        panel="lighting",
+        trigger="none",
+    ),
+    S(
+        "lighting",
+        "rain_absorption",
+        "float",
+        3.0,
+        "Rain Absorption",
+        "Extra light absorption of raining clouds (GPU Pro 7)",
+        min=1.0,
+        max=20.0,
+        panel="lighting",
+        gpu=True,
+    ),
+    # Not from the Guerrilla sources: Wrenninge et al.'s multiple-scattering octaves. Ambient, octave and
+    # powder defaults were tuned against Cycles with 8 volume bounces (docs/sources.md#lighting-tuning).
+    S(
+        "lighting",
+        "ms_octaves",
+        "int",
+        3,
+        "Scattering Octaves",
+        "Multiple-scattering octaves; 1 is single scattering (Wrenninge et al. 2017, not in Nubis)",
+        min=1,
+        max=8,
+        panel="lighting",
+        gpu=True,
+    ),
+    S(
+        "lighting",
+        "ms_attenuation",
+        "float",
+        0.2,
+        "Octave Attenuation",
+        "Optical-depth scale per octave (Wrenninge et al.'s a)",
+        min=0.0,
+        max=1.0,
+        panel="lighting",
+        gpu=True,
+    ),
+    S(
+        "lighting",
+        "ms_contribution",
+        "float",
+        0.85,
+        "Octave Contribution",
+        "Energy per octave (Wrenninge et al.'s b)",
+        min=0.0,
+        max=1.0,
+        panel="lighting",
+        gpu=True,
+    ),
+    S(
+        "lighting",
+        "ms_eccentricity",
+        "float",
+        0.0,
+        "Octave Eccentricity",
+        "Phase eccentricity scale per octave (Wrenninge et al.'s c)",
+        min=0.0,
+        max=1.0,
+        panel="lighting",
+        gpu=True,
+    ),
+    S(
+        "lighting",
+        "powder",
+        "float",
+        0.25,
+        "Powder",
+        "Dark edges with the sun behind you (GPU Pro 7's powder effect)",
+        min=0.0,
+        max=1.0,
+        panel="lighting",
+        gpu=True,
+    ),
+    S(
+        "lighting",
+        "fade_distance",
+        "float",
+        0.0,
+        "Fade Distance",
+        "Distance over which clouds fade into the sky color (0: off)",
+        min=0.0,
+        max=1e7,
+        soft_max=200000.0,
+        unit="LENGTH",
+        panel="lighting",
+        gpu=True,
+    ),
+    # -- the high 2D cirrus layer (GPU Pro 7, GDC22), above the volumetric one
+    S(
+        "cirrus",
+        "altitude",
+        "float",
+        8000.0,
+        "Altitude",
+        "Altitude of the cirrus layer",
+        min=1000.0,
+        max=30000.0,
+        soft_max=15000.0,
+        unit="LENGTH",
+        panel="cirrus",
+        gpu=True,
+    ),
+    S(
+        "cirrus",
+        "coverage",
+        "float",
+        1.0,
+        "Coverage",
+        "Multiplier on the cirrus coverage field",
+        min=0.0,
+        max=2.0,
+        panel="cirrus",
+        gpu=True,
+    ),
+    S(
+        "cirrus",
+        "period",
+        "float",
+        24000.0,
+        "Texture Size",
+        "Tile size of the cirrus texture",
+        min=100.0,
+        max=1e6,
+        soft_max=100000.0,
+        unit="LENGTH",
+        panel="cirrus",
+    ),
+    S(
+        "cirrus",
+        "opacity",
+        "float",
+        1.0,
+        "Opacity",
+        "Optical depth of a fully dense cirrus",
+        min=0.0,
+        max=20.0,
+        soft_max=5.0,
+        panel="cirrus",
+        gpu=True,
+    ),
+    S(
+        "cirrus",
+        "wind_direction",
+        "float",
+        0.5,
+        "Wind Direction",
+        "Cirrus wind heading",
+        min=-TAU,
+        max=TAU,
+        unit="ROTATION",
+        panel="cirrus",
+    ),
+    S(
+        "cirrus",
+        "wind_speed",
+        "float",
+        25.0,
+        "Wind Speed",
+        "Cirrus wind speed",
+        min=0.0,
+        max=500.0,
+        soft_max=100.0,
+        unit="VELOCITY",
+        panel="cirrus",
+    ),
+    S(
+        "cirrus",
+        "thickness",
+        "float",
+        400.0,
+        "Bake Thickness",
+        "Thickness of the cirrus slab in the VDB bake",
+        min=10.0,
+        max=5000.0,
+        soft_max=2000.0,
+        unit="LENGTH",
+        panel="cirrus",
+    ),
+    # -- superstorms (GDC22): the vortex twist at ring boundaries, the anvil and the internal glow
+    S(
+        "storm",
+        "twist",
+        "float",
+        0.6,
+        "Vortex Twist",
+        "Twist of the outer rings' noise about the storm center",
+        min=0.0,
+        max=TAU,
+        unit="ROTATION",
+        panel="storms",
+        gpu=True,
+    ),
+    S(
+        "storm",
+        "jittered_rings",
+        "bool",
+        False,
+        "Jittered Rings",
+        "Cheaper vortex: one noise sample with a jittered ring boundary (GDC22's PS4 path)",
+        panel="storms",
+        gpu=True,
+        quality="jittered_rings",
+    ),
+    S(
+        "storm",
+        "anvil_shift",
+        "float",
+        6000.0,
+        "Anvil Shift",
+        "How far the anvil streams downwind at its top",
+        min=0.0,
+        max=100000.0,
+        soft_max=30000.0,
+        unit="LENGTH",
+        panel="storms",
+        gpu=True,
+    ),
+    S(
+        "storm",
+        "glow_height",
+        "float",
+        0.3,
+        "Glow Height",
+        "Height of the internal glow, in layer thicknesses",
+        min=0.0,
+        max=3.0,
+        panel="storms",
+        gpu=True,
+    ),
+    # -- the ray march (GPU Pro 7: 64 view samples looking up, 128 towards the horizon; GDC22's platform
+    #    table: 6 light samples and noise mip 1 on PS4, 10 and mip 0 on PS5)
+    S(
+        "march",
+        "steps_min",
+        "int",
+        64,
+        "View Samples Up",
+        "View samples looking straight up (GPU Pro 7: 64)",
+        min=8,
+        max=1024,
+        soft_max=256,
+        panel="march",
+        gpu=True,
+        quality="steps_min",
+    ),
+    S(
+        "march",
+        "steps_max",
+        "int",
+        128,
+        "View Samples at Horizon",
+        "View samples towards the horizon (GPU Pro 7: 128)",
+        min=8,
+        max=2048,
+        soft_max=512,
+        panel="march",
+        gpu=True,
+        quality="steps_max",
+    ),
+    S(
+        "march",
+        "light_step",
+        "float",
+        200.0,
+        "Light Step",
+        "Length of a light-march step",
+        min=1.0,
+        max=5000.0,
+        soft_max=1000.0,
+        unit="LENGTH",
+        panel="march",
+    ),
+    S(
+        "march",
+        "light_samples",
+        "int",
+        6,
+        "Light Samples",
+        "Light-march samples: a cone towards the sun plus one long-distance sample (GDC22: 6 on PS4, 10 on PS5)",
+        min=2,
+        max=16,
+        panel="viewport",
+        gpu=True,
+        quality="light_samples",
+    ),
+    S(
+        "march",
+        "mip",
+        "int",
+        0,
+        "Noise Mip",
+        "Base mip level of the 3D noise (GDC22: 1 on PS4, 0 on PS5)",
+        min=0,
+        max=2,
+        panel="viewport",
+        gpu=True,
+        quality="mip",
+    ),
+    # -- the temporal viewport (docs/viewport.md)
+    S(
+        "viewport",
+        "resolution",
+        "float",
+        1.0,
+        "Resolution",
+        "Resolution of the viewport's converged image relative to the view (GDC22: 1/2 on PS4, 1 on PS5)",
+        min=0.25,
+        max=1.0,
+        panel="viewport",
+        quality="resolution",
+    ),
+    S(
+        "viewport",
+        "blur",
+        "float",
+        1.0,
+        "Upscale Blur",
+        "Width of the upscale filter in pixels of the converged image (GDC22: 2x on PS4, 1x on PS5)",
+        min=1.0,
+        max=2.0,
+        panel="viewport",
+        quality="blur",
+    ),
+    S(
+        "viewport",
+        "samples",
+        "int",
+        8,
+        "Samples",
+        "Samples per pixel the still viewport converges to (16 redraws each), then it stops redrawing",
+        min=1,
+        max=256,
+        soft_max=64,
+        panel="viewport",
+    ),
+    # -- the bake
+    S(
+        "bake",
+        "voxel_size",
+        "float",
+        100.0,
+        "Voxel Size",
+        "Edge of a voxel in the OpenVDB bake",
+        min=1.0,
+        max=10000.0,
+        soft_max=500.0,
+        unit="LENGTH",
+        panel="bake",
+        trigger="none",
+    ),
+    # -- the weather rules, applied after the layer stack (GPU Pro 7, S15)
+    S(
+        "rules",
+        "rain",
+        "bool",
+        False,
+        "Rain Rule",
+        "Where it rains, turn clouds to cumulonimbus covering at least 70% (GPU Pro 7)",
+        panel="field",
+        trigger="field",
+        key_override="rule_rain",
+    ),
+    S(
+        "rules",
+        "horizon",
+        "bool",
+        False,
+        "Horizon Rule",
+        "Blend towards cumulus at about 50% coverage far from the camera (S15)",
+        panel="field",
+        trigger="field",
+        key_override="rule_horizon",
+    ),
+    S(
+        "rules",
+        "cumulonimbus_top",
+        "float",
+        2.6,
+        "Cumulonimbus Top",
+        "Max height, in layer thicknesses, of fully raining clouds",
+        min=0.0,
+        max=8.0,
+        panel="field",
+        trigger="field",
+        key_override="rule_cumulonimbus_top",
+    ),
+    S(
+        "rules",
+        "horizon_start",
+        "float",
+        15000.0,
+        "Horizon Start",
+        "Distance from the camera where the horizon rule begins (S15: 15 km)",
+        min=0.0,
+        max=1e6,
+        soft_max=100000.0,
+        unit="LENGTH",
+        panel="field",
+        trigger="field",
+        key_override="rule_horizon_start",
+    ),
+    # -- Blender state only, never in a preset
+    S(
+        "",
+        "enabled",
+        "bool",
+        True,
+        "Show Clouds",
+        "Draw the clouds in the 3D viewport",
+        panel="viewport",
+        in_preset=False,
+        key_override="enabled",
+    ),
+    S(
+        "",
+        "preset",
+        "string",
+        "default",
+        "Preset",
+        "The preset this cloudscape came from",
+        internal="a record of where the cloudscape came from, shown in the benchmark",
+        in_preset=False,
+        trigger="none",
+        key_override="preset",
+    ),
+    S(
+        "",
+        "ambient_source",
+        "enum",
+        "world",
+        "Ambient",
+        "Where the clouds' sky light comes from",
+        panel="lighting",
+        in_preset=False,
+        key_override="ambient_source",
+        items=(
+            ("world", "World", "Sky light from the World's background color and strength"),
+            ("color", "Color", "Sky light from an explicit color"),
+        ),
+    ),
+    S(
+        "",
+        "ambient_color",
+        "color",
+        (0.3, 0.45, 0.8),
+        "Ambient Color",
+        "The sky light when Ambient is Color",
+        min=0.0,
+        soft_max=1.0,
+        size=3,
+        panel="lighting",
+        in_preset=False,
+        key_override="ambient_color",
+    ),
+    S(
+        "",
+        "viewport_quality",
+        "string",
+        "standard",
+        "Quality",
+        "The quality level last applied (presets/quality/quality.toml)",
+        internal="drawn as the Quality menu of the Viewport panel",
+        in_preset=False,
+        trigger="none",
+        key_override="viewport_quality",
+    ),
+    S(
+        "",
+        "field_a",
+        "image",
+        None,
+        "Field A",
+        "Coverage, precipitation, cloud type, bottom type",
+        internal="written by Generate Field",
+        in_preset=False,
+        key_override="field_a",
+    ),
+    S(
+        "",
+        "field_b",
+        "image",
+        None,
+        "Field B",
+        "Storm coverage, min height, max height, density multiplier",
+        internal="written by Generate Field",
+        in_preset=False,
+        key_override="field_b",
+    ),
+    S(
+        "",
+        "field_cirrus",
+        "image",
+        None,
+        "Cirrus Field",
+        "Cirrus coverage and type",
+        internal="written by Generate Field",
+        in_preset=False,
+        key_override="field_cirrus",
+    ),
+    S(
+        "",
+        "active_layer",
+        "int",
+        0,
+        "Active Layer",
+        "The layer the list has selected",
+        internal="the layer list's selection",
+        in_preset=False,
+        trigger="none",
+        key_override="active_layer",
+    ),
+    S(
+        "",
+        "active_storm",
+        "int",
+        0,
+        "Active Storm",
+        "The storm the list has selected",
+        internal="the storm list's selection",
+        in_preset=False,
+        trigger="none",
+        key_override="active_storm",
+    ),
+)
+del S
+
+LAYER_KINDS = ("perlin", "worley", "perlin_worley", "gradient", "constant", "image")
+FIELD_CHANNELS = (
+    "coverage",
+    "precipitation",
+    "type",
+    "bottom_type",
+    "storm",
+    "min_height",
+    "max_height",
+    "density",
+    "cirrus_coverage",
+    "cirrus_type",
+    "none",
+)
+BLEND_MODES = ("replace", "add", "multiply", "min", "max")
+GRADIENT_SHAPES = ("linear", "radial")
+
+
+def _table(group: str, section: str, rows: list[tuple]) -> tuple[Setting, ...]:
+    out = []
+    for name, kind, default, label, description, kw in rows:
+        out.append(Setting(group, section, name, kind, default, label, description, **kw))
+    return tuple(out)
+
+
+_F = {"panel": "field", "trigger": "field"}
+LAYER: tuple[Setting, ...] = _table(
+    "layer",
+    "field.layers",
+    [
+        ("name", "string", "", "Name", "The layer's name; masks refer to layers by it", _F),
+        (
+            "kind",
+            "enum",
+            "perlin",
+            "Kind",
+            "What the layer generates",
+            {**_F, "items": _items(*LAYER_KINDS, perlin_worley="Perlin-Worley")},
+        ),
+        (
+            "channel",
+            "enum",
+            "coverage",
+            "Channel",
+            "The data-field channel the layer writes",
+            {**_F, "items": _items(*FIELD_CHANNELS)},
+        ),
+        (
+            "blend",
+            "enum",
+            "replace",
+            "Blend",
+            "How the layer combines with the layers above it",
+            {**_F, "items": _items(*BLEND_MODES)},
+        ),
+        ("enabled", "bool", True, "Enabled", "Include the layer in the composite", _F),
+        (
+            "opacity",
+            "float",
+            1.0,
+            "Opacity",
+            "How much of the layer's result is blended in",
+            {**_F, "min": 0.0, "max": 1.0},
+        ),
+        ("mask", "string", "", "Mask", "An earlier layer whose value scales this one's opacity", _F),
+        ("invert_mask", "bool", False, "Invert Mask", "Use one minus the mask", _F),
+        (
+            "scale",
+            "float",
+            8000.0,
+            "Scale",
+            "Feature size of the noise",
+            {**_F, "min": 1.0, "max": 1e7, "soft_max": 100000.0, "unit": "LENGTH"},
+        ),
+        ("seed", "int", 0, "Seed", "Seed of the noise", {**_F, "min": 0, "max": 2**31 - 1, "soft_max": 1000}),
+        ("octaves", "int", 4, "Octaves", "Octaves of the fractal noise", {**_F, "min": 1, "max": 10}),
+        (
+            "remap",
+            "vector",
+            (0.0, 1.0, 0.0, 1.0),
+            "Remap",
+            "Input low and high, output low and high: the layer's value mapped linearly",
+            {**_F, "size": 4},
+        ),
+        (
+            "value",
+            "float",
+            1.0,
+            "Value",
+            "The constant layer's value",
+            {**_F, "min": -1e6, "max": 1e6, "soft_min": -2.0, "soft_max": 2.0},
+        ),
+        ("gradient", "enum", "linear", "Gradient", "Shape of the gradient", {**_F, "items": _items(*GRADIENT_SHAPES)}),
+        (
+            "angle",
+            "float",
+            0.0,
+            "Angle",
+            "Direction of a linear gradient, in degrees",
+            {**_F, "min": -360.0, "max": 360.0},
+        ),
+        ("center", "vector", (0.0, 0.0), "Center", "Center of the gradient in meters", {**_F, "size": 2}),
+        (
+            "radius",
+            "float",
+            10000.0,
+            "Radius",
+            "Radius of a radial gradient",
+            {**_F, "min": 1.0, "max": 1e7, "soft_max": 200000.0, "unit": "LENGTH"},
+        ),
+        ("image", "image", "", "Image", "Painted image for image layers", _F),
+    ],
+)
+
+_ST = {"panel": "storms", "trigger": "field"}
+_SL = {"panel": "storms", "trigger": "redraw"}
+_POSITION = "the storm's Empty holds its position; move it in the viewport"
+_KEYED = "keyframed by Add Lightning"
+STORM: tuple[Setting, ...] = _table(
+    "storm",
+    "storms",
+    [
+        ("name", "string", "Superstorm", "Name", "The storm's name", {**_ST, "trigger": "none"}),
+        (
+            "x",
+            "float",
+            0.0,
+            "X",
+            "Storm center X",
+            {"min": -1e7, "max": 1e7, "internal": _POSITION, "trigger": "field"},
+        ),
+        (
+            "y",
+            "float",
+            0.0,
+            "Y",
+            "Storm center Y",
+            {"min": -1e7, "max": 1e7, "internal": _POSITION, "trigger": "field"},
+        ),
+        (
+            "radius",
+            "float",
+            12000.0,
+            "Radius",
+            "Radius of the storm's stencil",
+            {**_ST, "min": 100.0, "max": 1e6, "soft_max": 50000.0, "unit": "LENGTH"},
+        ),
+        ("coverage", "float", 1.0, "Coverage", "Coverage inside the storm", {**_ST, "min": 0.0, "max": 1.0}),
+        (
+            "blend",
+            "float",
+            1.0,
+            "Blend",
+            "Lifecycle blend factor: animate it for the storm to form and dissipate (GDC22)",
+            {**_ST, "min": 0.0, "max": 1.0},
+        ),
+        (
+            "height",
+            "float",
+            3.0,
+            "Height",
+            "Top of the storm at its center, in layer thicknesses",
+            {**_ST, "min": 0.1, "max": 8.0},
+        ),
+        (
+            "base",
+            "float",
+            -0.1,
+            "Base",
+            "Height of the storm's flat foot, in layer thicknesses (negative lowers it)",
+            {**_ST, "min": -1.0, "max": 1.0},
+        ),
+        ("bottom_type", "float", 0.85, "Bottom Type", "Raggedness of the underside", {**_ST, "min": 0.0, "max": 1.0}),
+        (
+            "seed",
+            "int",
+            0,
+            "Seed",
+            "Seed of the storm's shape noise",
+            {**_ST, "min": 0, "max": 2**31 - 1, "soft_max": 1000},
+        ),
+        (
+            "spin",
+            "float",
+            0.02,
+            "Spin",
+            "Vortex rotation at the center in radians per second; outer rings turn slower",
+            {**_SL, "min": -10.0, "max": 10.0, "soft_min": -0.2, "soft_max": 0.2},
+        ),
+        (
+            "darkening",
+            "float",
+            3.0,
+            "Darkening",
+            "Optical-depth scale of the light reaching the storm's center",
+            {**_SL, "min": 1.0, "max": 50.0, "soft_max": 10.0},
+        ),
+        (
+            "glow",
+            "float",
+            0.0,
+            "Glow",
+            "Intensity of the internal glow",
+            {**_SL, "min": 0.0, "max": 1e4, "soft_max": 20.0},
+        ),
+        (
+            "glow_color",
+            "color",
+            (1.0, 0.08, 0.03),
+            "Glow Color",
+            "Color of the internal glow",
+            {**_SL, "size": 3, "min": 0.0},
+        ),
+        (
+            "ambient_boost",
+            "float",
+            1.5,
+            "Ambient Boost",
+            "Ambient light under the storm relative to the other clouds",
+            {**_SL, "min": 0.0, "max": 20.0, "soft_max": 5.0},
+        ),
+        (
+            "anvil_offset",
+            "float",
+            12000.0,
+            "Anvil Offset",
+            "How far downwind the cirrus anvil sits",
+            {**_ST, "min": -1e6, "max": 1e6, "soft_min": -50000.0, "soft_max": 50000.0, "unit": "LENGTH"},
+        ),
+        # Blender state of a storm, keyframed by the operators; never in a preset.
+        (
+            "empty",
+            "object",
+            None,
+            "Position",
+            "An Empty whose location is the storm's center; move it in the viewport",
+            {**_ST, "in_preset": False},
+        ),
+        (
+            "flash",
+            "float",
+            0.0,
+            "Flash",
+            "Lightning flash intensity; keyframed by Add Lightning",
+            {**_SL, "min": 0.0, "max": 1e6, "soft_max": 500.0, "in_preset": False},
+        ),
+        (
+            "flash_x",
+            "float",
+            0.0,
+            "Flash X",
+            "Where the flash is, relative to the storm center",
+            {"unit": "LENGTH", "internal": _KEYED, "in_preset": False},
+        ),
+        (
+            "flash_y",
+            "float",
+            0.0,
+            "Flash Y",
+            "Where the flash is, relative to the storm center",
+            {"unit": "LENGTH", "internal": _KEYED, "in_preset": False},
+        ),
+        (
+            "flash_ground",
+            "float",
+            0.0,
+            "Ground Discharge",
+            "1 while the flash is a ground discharge (adds the external flash)",
+            {"min": 0.0, "max": 1.0, "internal": _KEYED, "in_preset": False},
+        ),
+    ],
+)
+
+_OBJ = {"internal": _BLENDER_OBJECTS, "trigger": "none"}
+EXTRA: tuple[Setting, ...] = (
+    *_table(
+        "preset",
+        "preset",
+        [
+            ("name", "string", "Untitled", "Name", "The preset's name in the New Cloudscape menu", _OBJ),
+            ("description", "string", "", "Description", "One sentence on the preset, its tooltip", _OBJ),
+        ],
+    ),
+    *_table(
+        "sun",
+        "sun",
+        [
+            ("elevation", "float", 35.0, "Elevation", "Sun elevation in degrees", {**_OBJ, "min": -90.0, "max": 90.0}),
+            (
+                "azimuth",
+                "float",
+                135.0,
+                "Azimuth",
+                "Sun azimuth in degrees from north (+Y) towards east (+X)",
+                {**_OBJ, "min": -360.0, "max": 360.0},
+            ),
+            ("color", "vector", (1.0, 0.96, 0.9), "Color", "The Sun lamp's color", {**_OBJ, "size": 3}),
+            ("strength", "float", 4.0, "Strength", "The Sun lamp's strength", {**_OBJ, "min": 0.0, "max": 1e5}),
+            (
+                "angle",
+                "float",
+                0.53,
+                "Angle",
+                "The sun's angular diameter in degrees",
+                {**_OBJ, "min": 0.0, "max": 180.0},
+            ),
+        ],
+    ),
+    *_table(
+        "world",
+        "world",
+        [
+            ("color", "vector", (0.35, 0.5, 0.8), "Color", "The World's background color", {**_OBJ, "size": 3}),
+            ("strength", "float", 1.0, "Strength", "The World's background strength", {**_OBJ, "min": 0.0, "max": 1e5}),
+        ],
+    ),
+    *_table(
+        "camera",
+        "camera",
+        [
+            ("location", "vector", (0.0, 0.0, 2.0), "Location", "Camera location in meters", {**_OBJ, "size": 3}),
+            (
+                "rotation",
+                "vector",
+                (80.0, 0.0, 0.0),
+                "Rotation",
+                "Camera XYZ Euler rotation in degrees",
+                {**_OBJ, "size": 3},
+            ),
+            ("lens", "float", 24.0, "Focal Length", "Focal length in millimeters", {**_OBJ, "min": 1.0, "max": 5000.0}),
+            (
+                "clip_end",
+                "float",
+                200000.0,
+                "Clip End",
+                "Camera far clip distance in meters",
+                {**_OBJ, "min": 10.0, "max": 1e8},
+            ),
+        ],
+    ),
+    *_table(
+        "render",
+        "render",
+        [
+            ("width", "int", 640, "Width", "Render width in pixels", {**_OBJ, "min": 4, "max": 16384}),
+            ("height", "int", 360, "Height", "Render height in pixels", {**_OBJ, "min": 4, "max": 16384}),
+            ("samples", "int", 64, "Samples", "Cycles samples", {**_OBJ, "min": 1, "max": 65536}),
+            ("volume_bounces", "int", 8, "Volume Bounces", "Cycles volume bounces", {**_OBJ, "min": 0, "max": 1024}),
+            (
+                "view_transform",
+                "enum",
+                "AgX",
+                "View Transform",
+                "The scene's view transform",
+                {**_OBJ, "items": tuple((v, v, "") for v in ("AgX", "Standard", "Filmic", "Khronos PBR Neutral"))},
+            ),
+            ("frame", "int", 1, "Frame", "The current frame", {**_OBJ, "min": -1048574, "max": 1048574}),
+        ],
+    ),
+)
+
+ALL: tuple[Setting, ...] = SCENE + LAYER + STORM + EXTRA
+BY_KEY: dict[str, Setting] = {s.key: s for s in SCENE}
+PRESET_SCENE: tuple[Setting, ...] = tuple(s for s in SCENE if s.in_preset)
+EXTRA_SECTIONS: dict[str, dict[str, Setting]] = {}
+for _s in EXTRA:
+    EXTRA_SECTIONS.setdefault(_s.section, {})[_s.name] = _s
+LAYER_BY_NAME: dict[str, Setting] = {s.name: s for s in LAYER}
+STORM_BY_NAME: dict[str, Setting] = {s.name: s for s in STORM}
+QUALITY_COLUMNS: dict[str, str] = {s.quality: s.key for s in SCENE if s.quality}
+
+
+def defaults() -> dict[str, Any]:
+    """The scene settings a preset holds, at their defaults, by key."""
+    return {s.key: s.default for s in PRESET_SCENE}
+
+
+def table_defaults(settings) -> dict[str, Any]:
+    """One [[field.layers]] or [[storms]] entry (or a preset section) at its defaults; lists are fresh."""
+    return {s.name: list(s.default) if isinstance(s.default, tuple) else s.default for s in settings if s.in_preset}
+
+
+def gpu_settings() -> tuple[Setting, ...]:
+    return tuple(s for s in SCENE if s.gpu)
+
+
+def check_schema() -> None:
+    """The table's own consistency (a test calls it): unique keys, known panels and triggers, a panel or a
+    reason for every setting, defaults inside their ranges and among their choices."""
+    for group in (SCENE, LAYER, STORM):
+        keys = [s.key for s in group]
+        dupes = {k for k in keys if keys.count(k) > 1}
+        assert not dupes, f"duplicate keys {dupes}"
+    for s in ALL:
+        where = f"{s.group}.{s.key}"
+        assert (s.panel in PANEL_IDS) != bool(s.internal), f"{where}: needs exactly one of a panel or a reason"
+        assert s.trigger in TRIGGERS, where
+        assert s.label and s.description, f"{where}: needs a label and a description"
+        if s.kind in ("float", "int") and s.min is not None and s.max is not None:
+            assert s.min <= s.default <= s.max, f"{where}: default outside its range"
+        if s.kind == "enum":
+            assert s.default in s.choices, where
+        if s.kind in ("vector", "color"):
+            assert s.size == len(s.default), where
+        assert "colour" not in (s.label + s.description).lower(), f"{where}: US English"
+
+
+@dataclass(frozen=True)
+class CrossLimit:
+    """A limit between two settings, enforced by the preset loader and by the sidebar (which moves the
+    other setting along when one is dragged past it)."""
+
+    low: str  # the key that must stay below
+    high: str  # the key that must stay above
+    gap: float  # the least difference
+    message: str
+
+    def holds(self, values: dict[str, Any]) -> bool:
+        return values[self.high] - values[self.low] >= self.gap
+
+
+CROSS_LIMITS: tuple[CrossLimit, ...] = (
+    CrossLimit("layer_bottom", "layer_top", 1e-3, "layer.top must be above layer.bottom"),
+    CrossLimit("march_steps_min", "march_steps_max", 0, "march.steps_max must be at least march.steps_min"),
+)
