@@ -6,9 +6,9 @@ void main()
   NubisDensity d = nubis_density(p, false, 0.0);
   float density = d.fine;
   /* The 2D cirrus layer becomes a thin slab holding the same optical depth the march gives it. */
-  float from_cirrus = abs(nubis_altitude(p, P.layer.x) - P.cirrus.x);
-  if (from_cirrus < 0.5 * P.cirrus2.z && P.density.x > 0.0) {
-    density += nubis_cirrus_density(p.xy, 0.0) * P.cirrus.w / (P.cirrus2.z * P.density.x);
+  float from_cirrus = abs(nubis_altitude(p, P.layer_planet_radius) - P.cirrus_altitude);
+  if (from_cirrus < 0.5 * P.cirrus_slab && P.density_sigma > 0.0) {
+    density += nubis_cirrus_density(p.xy, 0.0) * P.cirrus_opacity / (P.cirrus_slab * P.density_sigma);
   }
   /* The storm glow as an emission grid: what the march adds per unit length is sigma x density x
    * glow, so the grid holds density x glow (its strongest channel) and Cycles multiplies by sigma. */

@@ -29,11 +29,11 @@ struct NubisFieldSample {
 float nubis_inside(vec2 xy, vec2 uv)
 {
   /* Nothing outside the painted field: repeating it would invent clouds nobody authored. */
-  vec2 edge = min(uv, 1.0 - uv) * P.field.z;
-  float in_field = clamp01(min(edge.x, edge.y) / max(P.draw.z, 1.0));
+  vec2 edge = min(uv, 1.0 - uv) * P.field_size;
+  float in_field = clamp01(min(edge.x, edge.y) / max(P.draw_fade, 1.0));
   /* SPEC 1.1, S15: clouds are drawn within the draw radius; the fade lives in the density itself so
    * that the bake holds exactly what the viewport shows. */
-  float in_radius = clamp01((P.layer.w - length(xy - P.draw.xy)) / max(P.draw.z, 1.0));
+  float in_radius = clamp01((P.layer_draw_radius - length(xy - vec2(P.draw_center_x, P.draw_center_y))) / max(P.draw_fade, 1.0));
   if (P.clip_box.z >= P.clip_box.x && (any(lessThan(xy, P.clip_box.xy)) || any(greaterThan(xy, P.clip_box.zw)))) {
     return 0.0;
   }
@@ -43,7 +43,7 @@ float nubis_inside(vec2 xy, vec2 uv)
 NubisFieldSample nubis_sample_field(vec2 xy)
 {
   NubisFieldSample f;
-  vec2 uv = (xy - P.field.xy) * P.field.w + 0.5;
+  vec2 uv = (xy - vec2(P.field_origin_x, P.field_origin_y)) * P.field_inv_size + 0.5;
   f.a = textureLod(field_a, clamp(uv, 0.0, 1.0), 0.0);
   f.b = textureLod(field_b, clamp(uv, 0.0, 1.0), 0.0);
   f.inside = nubis_inside(xy, uv);
@@ -68,9 +68,9 @@ float nubis_vertical_profile(float h, float top_type, float bottom_type)
 /* Height fraction in the column's own layer (SPEC 1.2 on the spherical shell; SPEC 1.9.4 min/max field). */
 float nubis_height_fraction(float altitude, vec4 field_b_sample)
 {
-  float thickness = P.layer.z - P.layer.y;
-  float lo = P.layer.y + field_b_sample.g * thickness;
-  float hi = P.layer.y + field_b_sample.b * thickness;
+  float thickness = P.layer_top - P.layer_bottom;
+  float lo = P.layer_bottom + field_b_sample.g * thickness;
+  float hi = P.layer_bottom + field_b_sample.b * thickness;
   return (altitude - lo) / max(hi - lo, 1.0);
 }
 
@@ -83,7 +83,7 @@ float nubis_ring_angle(int ring, float u, float spin, float time)
 {
   float speed = spin * (1.0 - float(ring) / 6.0);
   float skew = float(ring) * 1.913;
-  float twist = ring > 0 ? P.storm_info.y * (float(ring) + 1.0 - u) : 0.0;
+  float twist = ring > 0 ? P.storm_twist * (float(ring) + 1.0 - u) : 0.0;
   return time * speed + skew + twist;
 }
 
@@ -101,7 +101,7 @@ vec2 nubis_vortex(vec2 xy, out vec2 second, out float weight, out float unturned
   weight = 0.0;
   float turned_share = 0.0;
 #if NUBIS_STORMS
-  int count = min(int(P.storm_info.x), NUBIS_MAX_STORMS);
+  int count = min(int(P.storm_count), NUBIS_MAX_STORMS);
   for (int i = 0; i < count; i++) {
     vec4 shape = P.storm_shape[i];
     float dist = distance(xy, shape.xy);
@@ -116,7 +116,7 @@ vec2 nubis_vortex(vec2 xy, out vec2 second, out float weight, out float unturned
     float boundary = floor(u + 0.5);
     float e = u - boundary;
     int ring = int(floor(u));
-    if (P.options.y > 0.5) {
+    if (P.storm_jittered_rings > 0.5) {
       /* PS4 quality (GDC22): one sample, the ring boundary jittered instead of blended. */
       float jitter = fract(sin(dot(xy, vec2(12.9898, 78.233))) * 43758.5453) - 0.5;
       ring = clamp(int(floor(u + jitter * overlap)), 0, 5);
@@ -145,10 +145,10 @@ vec2 nubis_vortex(vec2 xy, out vec2 second, out float weight, out float unturned
 /* Detail fBm at a (wind-moved) position, with the curl twist at the base. */
 float nubis_detail_fbm(vec3 p_hf, float h, int level)
 {
-  vec2 curl_uv = nubis_tile_uv(p_hf.xy / P.noise.z, vec2(NUBIS_CURL_SIZE));
+  vec2 curl_uv = nubis_tile_uv(p_hf.xy / P.noise_curl_period, vec2(NUBIS_CURL_SIZE));
   vec2 curl = textureLod(noise_curl, curl_uv, 0.0).xy * 2.0 - 1.0;
-  p_hf.xy += curl * (1.0 - h) * P.noise.w;
-  vec3 uvw = p_hf / P.noise.y;
+  p_hf.xy += curl * (1.0 - h) * P.noise_curl_strength;
+  vec3 uvw = p_hf / P.noise_hf_period;
   NUBIS_COUNT_3D(1);
   /* Branches, not a conditional expression: compilers may evaluate both sides of ?: and fetch twice. */
   vec3 hf;
@@ -187,9 +187,9 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
    * ("we only need to do the high detail noise where the low detail sample returns a non zero
    * result"). The benchmark's naive march (NUBIS_NAIVE) takes the full sample at every step instead;
    * the values are the same. */
-  float altitude = nubis_altitude(p, P.layer.x);
+  float altitude = nubis_altitude(p, P.layer_planet_radius);
 #if !NUBIS_NAIVE
-  if (altitude < P.shell.x || altitude > P.shell.y) {
+  if (altitude < P.shell_bottom || altitude > P.shell_top) {
     return d;
   }
 #endif
@@ -197,7 +197,7 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
   float h = nubis_height_fraction(altitude, f.b);
   d.h = clamp01(h);
   d.precipitation = f.a.g;
-  float coverage = clamp01(f.a.r * P.density.y) * f.inside;
+  float coverage = clamp01(f.a.r * P.density_coverage) * f.inside;
   float profile = (h > 0.0 && h < 1.0) ? nubis_vertical_profile(h, f.a.b, f.a.a) : 0.0;
   /* SPEC 1.9.6 (GDC22): where storm coverage is non-zero, the flipped vertical profile joins the
    * normal one to spread the top into an anvil. We place the flipped lookup in a band under the
@@ -209,13 +209,13 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
   float anvil = 0.0;
   float anvil_coverage = 0.0;
 #if NUBIS_STORMS
-  float band = 0.22 * (P.shell.y - P.layer.y);
-  float anvil_h = (altitude - (P.shell.y - band)) / band;
-  if (P.storm_info.x > 0.0 && anvil_h > 0.0 && anvil_h < 1.0) {
+  float band = 0.22 * (P.shell_top - P.layer_bottom);
+  float anvil_h = (altitude - (P.shell_top - band)) / band;
+  if (P.storm_count > 0.0 && anvil_h > 0.0 && anvil_h < 1.0) {
     /* The anvil "flattens out and spreads in the wind direction" (GDC22): its storm coverage is read
      * upwind, further the higher the sample, so the top streams downwind of the column. */
-    vec2 upwind = p.xy - P.wind.xy * (P.storm_info.w * anvil_h);
-    vec2 upwind_uv = (upwind - P.field.xy) * P.field.w + 0.5;
+    vec2 upwind = p.xy - vec2(P.wind_dir_x, P.wind_dir_y) * (P.storm_anvil_shift * anvil_h);
+    vec2 upwind_uv = (upwind - vec2(P.field_origin_x, P.field_origin_y)) * P.field_inv_size + 0.5;
     float anvil_storm = clamp01(textureLod(field_b, clamp(upwind_uv, 0.0, 1.0), 0.0).r) * f.inside;
     anvil = nubis_vertical_profile(1.0 - anvil_h, 0.3, 0.0) * anvil_storm;
     anvil_coverage = max(coverage, 0.85 * anvil_storm);
@@ -230,14 +230,14 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
   /* SPEC 1.7, GPU Pro 7: tops skew downwind and both noises drift with the wind and slightly
    * upward, each at its own speed. We subtract the offsets (GDC22, SPEC 6 Q16) so features move
    * downwind and rise; the coverage/type field itself never moves (GDC22, SPEC 1.3.1). */
-  vec3 wind_dir = vec3(P.wind.xy, 0.0);
-  vec3 drift = (wind_dir + vec3(0.0, 0.0, P.wind2.y)) * P.wind.z;
+  vec3 wind_dir = vec3(vec2(P.wind_dir_x, P.wind_dir_y), 0.0);
+  vec3 drift = (wind_dir + vec3(0.0, 0.0, P.wind_upward_bias)) * P.wind_distance;
   /* The anvil also leans downwind (GDC22: noises rotated and skewed for a wind-swept look), from the
    * column's own height and storm coverage, which are smooth where the anvil takes over. */
-  vec3 skewed = p - h * wind_dir * (P.wind2.x + storm * h * 4.0 * P.wind2.x);
+  vec3 skewed = p - h * wind_dir * (P.wind_top_offset + storm * h * 4.0 * P.wind_top_offset);
   vec3 p_lf = skewed - drift;
 
-  vec3 lf_uvw = p_lf / P.noise.x;
+  vec3 lf_uvw = p_lf / P.noise_lf_period;
   NUBIS_COUNT_3D(1);
   vec4 lf;
   if (lod < 0.5) {
@@ -253,9 +253,9 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
   /* SPEC 1.6.2, GPU Pro 7: the Worley fBm dilates the Perlin-Worley base shape. */
   float shape = remap(lf.r, -(1.0 - lf_fbm), 1.0, 0.0, 1.0);
   /* GDC22's 1 - coverage, so clouds inflate as coverage rises; GPU Pro 7's "smaller clouds are
-   * lighter" multiply is the option in P.density.w. */
+   * lighter" multiply is the option in P.density_multiply_coverage. */
   float with_coverage = clamp01(remap(shape * profile, 1.0 - coverage, 1.0, 0.0, 1.0));
-  with_coverage *= mix(1.0, coverage, P.density.w);
+  with_coverage *= mix(1.0, coverage, P.density_multiply_coverage);
   /* The height the detail noise is shaped by: where the anvil is the larger shape its detail turns
    * to billows (not the wisps of a cloud base), in proportion, so nothing jumps. */
   float detail_h = h;
@@ -263,7 +263,7 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
   float anvil_density = clamp01(remap(shape * anvil, 1.0 - anvil_coverage, 1.0, 0.0, 1.0));
   /* Only where the anvil's profile reaches past the column's, as GDC22's max of the two profiles,
    * faded in over a short range of profile instead of switched. */
-  anvil_density *= mix(1.0, anvil_coverage, P.density.w) * smoothstep(-0.1, 0.1, anvil - profile);
+  anvil_density *= mix(1.0, anvil_coverage, P.density_multiply_coverage) * smoothstep(-0.1, 0.1, anvil - profile);
   if (anvil_density > 0.0) {
     detail_h = mix(h, max(h, 0.9), anvil_density / (anvil_density + with_coverage));
     with_coverage = max(with_coverage, anvil_density);
@@ -282,7 +282,7 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
 
   /* SPEC 1.6.2, GPU Pro 7: animated curl noise twists the detail at the base, fading to none at the top.
    * Inside a superstorm the detail turns with the vortex; two rings overlap -> two samples (GDC22). */
-  vec3 p_hf = skewed - drift * P.wind.w;
+  vec3 p_hf = skewed - drift * P.wind_detail_speed;
   /* The rings are decided by where the sample is, not by where the wind has carried its noise, so
    * nothing outside a storm's radius ever turns. */
   vec2 second;
@@ -295,7 +295,7 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
   }
 #if NUBIS_STORMS
   if (unturned > 0.0) {
-    if (P.options.y < 0.5) {
+    if (P.storm_jittered_rings < 0.5) {
       hf_fbm = mix(hf_fbm, nubis_detail_fbm(p_hf, detail_h, hf_level), unturned);
     }
     else if (fract(sin(dot(p.xy, vec2(39.3468, 11.135))) * 24634.6345) < unturned) {
@@ -310,7 +310,7 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
   float billow = clamp01(detail_h * mix(10.0, 2.0, clamp01(f.a.a)));
   float hf_modifier = mix(hf_fbm, 1.0 - hf_fbm, billow);
   /* GPU Pro 7: erosion strength 0.2; the remap never raises a value, so fine <= coarse. */
-  float eroded = clamp01(remap(with_coverage, hf_modifier * P.density.z, 1.0, 0.0, 1.0));
+  float eroded = clamp01(remap(with_coverage, hf_modifier * P.density_erosion, 1.0, 0.0, 1.0));
   d.fine = eroded * multiplier;
   return d;
 }
@@ -338,13 +338,13 @@ vec3 nubis_cirrus_level(vec2 uv, int level)
  * distant cirrus seen at a grazing angle filters instead of aliasing into streaks. */
 float nubis_cirrus_density(vec2 xy, float lod)
 {
-  vec2 uv = (xy - P.field.xy) * P.field.w + 0.5;
+  vec2 uv = (xy - vec2(P.field_origin_x, P.field_origin_y)) * P.field_inv_size + 0.5;
   vec4 c = textureLod(field_c, clamp(uv, 0.0, 1.0), 0.0);
-  float coverage = clamp01(c.r * P.cirrus.y) * nubis_inside(xy, uv);
+  float coverage = clamp01(c.r * P.cirrus_coverage) * nubis_inside(xy, uv);
   if (coverage <= 0.0) {
     return 0.0;
   }
-  vec2 tex_uv = (xy - P.cirrus2.xy) * P.cirrus.z;
+  vec2 tex_uv = (xy - vec2(P.cirrus_offset_x, P.cirrus_offset_y)) * P.cirrus_inv_period;
   float level = clamp(lod, 0.0, float(NUBIS_CIRRUS_LEVELS - 1));
   int l0 = int(floor(level));
   vec3 layers = nubis_cirrus_level(tex_uv, l0);
@@ -362,29 +362,29 @@ float nubis_cirrus_density(vec2 xy, float lod)
  * what the baked slab gives Cycles. */
 float nubis_cirrus_optical_depth(vec3 p, vec3 dir, float lod)
 {
-  if (P.cirrus.y <= 0.0 || P.cirrus.w <= 0.0) {
+  if (P.cirrus_coverage <= 0.0 || P.cirrus_opacity <= 0.0) {
     return 0.0;
   }
-  float altitude = nubis_altitude(p, P.layer.x);
-  vec2 hit = nubis_ray_sphere(p, dir, P.layer.x, P.cirrus.x);
+  float altitude = nubis_altitude(p, P.layer_planet_radius);
+  vec2 hit = nubis_ray_sphere(p, dir, P.layer_planet_radius, P.cirrus_altitude);
   if (hit.x > hit.y) {
     return 0.0;
   }
-  float t = altitude < P.cirrus.x ? hit.y : hit.x;
+  float t = altitude < P.cirrus_altitude ? hit.y : hit.x;
   if (t <= 0.0) {
     return 0.0;
   }
   vec3 q = p + dir * t;
-  vec3 up = normalize(q + vec3(0.0, 0.0, P.layer.x));
+  vec3 up = normalize(q + vec3(0.0, 0.0, P.layer_planet_radius));
   float slant = 1.0 / max(abs(dot(dir, up)), 0.05);
   /* lod >= 0 is the caller's fixed level; lod < 0 asks for the view's own: the pixel's footprint on
    * the layer (P.view: metres per metre of distance, plus a constant for orthographic views),
    * stretched by the slant, in texels, one level late as for the 3D noise (nubis_view_lod). */
   float level = lod;
   if (lod < 0.0) {
-    float footprint = (P.view.x * t + P.view.y) * slant;
-    level = max(log2(max(footprint * P.cirrus.z * float(NUBIS_CIRRUS_SIZE), 1.0)) - 1.0, 0.0);
+    float footprint = (P.pixel_angle * t + P.pixel_size) * slant;
+    level = max(log2(max(footprint * P.cirrus_inv_period * float(NUBIS_CIRRUS_SIZE), 1.0)) - 1.0, 0.0);
   }
   float density = nubis_cirrus_density(q.xy, level);
-  return density * P.cirrus.w * slant;
+  return density * P.cirrus_opacity * slant;
 }

@@ -12,9 +12,9 @@ float nubis_henyey_greenstein(float cos_angle, float g)
  * `eccentricity_scale` < 1 flattens both lobes for the multiple-scattering octaves. */
 float nubis_phase(float cos_angle, float eccentricity_scale)
 {
-  return mix(nubis_henyey_greenstein(cos_angle, P.phase.x * eccentricity_scale),
-             nubis_henyey_greenstein(cos_angle, P.phase.y * eccentricity_scale),
-             P.phase.z);
+  return mix(nubis_henyey_greenstein(cos_angle, P.lighting_phase_g0 * eccentricity_scale),
+             nubis_henyey_greenstein(cos_angle, P.lighting_phase_g1 * eccentricity_scale),
+             P.lighting_phase_mix);
 }
 
 /* SPEC 2.5, GPU Pro 7: raining clouds absorb more light. Modelled as absorption added to the
@@ -23,7 +23,7 @@ float nubis_phase(float cos_angle, float eccentricity_scale)
  * dark rain cores. */
 float nubis_rain_extinction(float precipitation)
 {
-  return mix(1.0, P.phase.w, clamp01(precipitation));
+  return mix(1.0, P.lighting_rain_absorption, clamp01(precipitation));
 }
 
 /* ---- superstorm lighting (SPEC 2.10, GDC22) -------------------------------------------------------- */
@@ -35,7 +35,7 @@ float nubis_storm_darkening(vec3 q)
 {
   float scale = 1.0;
 #if NUBIS_STORMS
-  int count = min(int(P.storm_info.x), NUBIS_MAX_STORMS);
+  int count = min(int(P.storm_count), NUBIS_MAX_STORMS);
   for (int i = 0; i < count; i++) {
     vec4 shape = P.storm_shape[i];
     float proximity = clamp01(1.0 - distance(q.xy, shape.xy) / shape.z);
@@ -59,7 +59,7 @@ float nubis_storm_ambient(vec3 p, float h)
 {
   float factor = 1.0;
 #if NUBIS_STORMS
-  int count = min(int(P.storm_info.x), NUBIS_MAX_STORMS);
+  int count = min(int(P.storm_count), NUBIS_MAX_STORMS);
   for (int i = 0; i < count; i++) {
     vec4 shape = P.storm_shape[i];
     float blend = clamp01(1.0 - distance(p.xy, shape.xy) / shape.z) * clamp01(1.0 - h) * shape.w;
@@ -75,7 +75,7 @@ float nubis_storm_ambient(vec3 p, float h)
 float nubis_glow_energy(vec3 p, vec3 centre, float radius, float fine_density, float thickness)
 {
   float potential = pow(clamp01(1.0 - distance(p, centre) / radius), 12.0);
-  float below = clamp01((centre.z - nubis_altitude(p, P.layer.x) + thickness) / (2.0 * thickness));
+  float below = clamp01((centre.z - nubis_altitude(p, P.layer_planet_radius) + thickness) / (2.0 * thickness));
   float pseudo_attenuation = 1.0 - clamp01(fine_density * 5.0);
   return potential * below * pseudo_attenuation;
 }
@@ -88,20 +88,20 @@ vec4 nubis_flash_energy(vec3 p, float fine_density)
 {
   vec4 energy = vec4(0.0);
 #if NUBIS_STORMS
-  int count = min(int(P.storm_info.x), NUBIS_MAX_STORMS);
-  float thickness = P.layer.z - P.layer.y;
+  int count = min(int(P.storm_count), NUBIS_MAX_STORMS);
+  float thickness = P.layer_top - P.layer_bottom;
   for (int i = 0; i < count; i++) {
     vec4 shape = P.storm_shape[i];
     if (shape.w <= 0.0) {
       continue;
     }
-    float height = P.layer.y + P.storm_info.z * thickness;
+    float height = P.layer_bottom + P.storm_glow_height * thickness;
     vec4 where = P.storm_flash[i]; /* offset x, y from the centre; 1 for a ground discharge */
     vec3 at = vec3(shape.xy + where.xy, height);
     float e = nubis_glow_energy(p, at, 0.6 * shape.z, fine_density, thickness);
     if (where.z > 0.5) {
       /* The external flash: highlights on the underside features near the strike. */
-      float h = clamp01((nubis_altitude(p, P.layer.x) - P.layer.y) / thickness);
+      float h = clamp01((nubis_altitude(p, P.layer_planet_radius) - P.layer_bottom) / thickness);
       float near = pow(clamp01(1.0 - distance(p.xy, at.xy) / (0.5 * shape.z)), 4.0);
       e += 0.05 * near * (1.0 - h) * (1.0 - h);
     }
@@ -122,15 +122,15 @@ vec3 nubis_storm_steady_glow(vec3 p, float fine_density)
 {
   vec3 glow = vec3(0.0);
 #if NUBIS_STORMS
-  int count = min(int(P.storm_info.x), NUBIS_MAX_STORMS);
-  float thickness = P.layer.z - P.layer.y;
+  int count = min(int(P.storm_count), NUBIS_MAX_STORMS);
+  float thickness = P.layer_top - P.layer_bottom;
   for (int i = 0; i < count; i++) {
     vec4 shape = P.storm_shape[i];
     float intensity = P.storm_light[i].z;
     if (shape.w <= 0.0 || intensity <= 0.0) {
       continue;
     }
-    float height = P.layer.y + P.storm_info.z * thickness;
+    float height = P.layer_bottom + P.storm_glow_height * thickness;
     float e = nubis_glow_energy(p, vec3(shape.xy, height), shape.z, fine_density, thickness);
     glow += P.storm_glow[i].rgb * intensity * e * shape.w;
   }
@@ -150,14 +150,14 @@ vec3 nubis_storm_glow(vec3 p, float fine_density)
  * returns the density alone, for the powder term. */
 float nubis_reference_depth(vec3 p, vec3 dir, int samples, out float plain)
 {
-  float altitude = nubis_altitude(p, P.layer.x);
-  vec2 top = nubis_ray_sphere(p, dir, P.layer.x, P.shell.y);
-  vec2 bottom = nubis_ray_sphere(p, dir, P.layer.x, P.shell.x);
+  float altitude = nubis_altitude(p, P.layer_planet_radius);
+  vec2 top = nubis_ray_sphere(p, dir, P.layer_planet_radius, P.shell_top);
+  vec2 bottom = nubis_ray_sphere(p, dir, P.layer_planet_radius, P.shell_bottom);
   float len = max(top.y, 0.0);
-  if (altitude > P.shell.x && bottom.x <= bottom.y && bottom.x > 0.0) {
+  if (altitude > P.shell_bottom && bottom.x <= bottom.y && bottom.x > 0.0) {
     len = min(len, bottom.x); /* heading down out of the layer's floor */
   }
-  len = min(len, 2.0 * P.layer.w);
+  len = min(len, 2.0 * P.layer_draw_radius);
   /* Samples crowd near the point (t = len u^2): the nearby cloud decides most of the shadowing,
    * while a horizontal ray may cross tens of kilometres of layer. */
   float depth = 0.0;
@@ -197,24 +197,24 @@ float nubis_reference_sky_visibility(vec3 p, vec3 view_dir, vec2 pixel)
    * limiter), which silently cut long reference marches short; 12 x 16 + 48 per cloud sample keeps
    * a 128-step view ray under it. */
   const int count = 12;
-  int silver = int(floor(float(count) * P.phase.z + 0.5));
-  silver = clamp(silver, P.phase.z > 0.0 ? 1 : 0, P.phase.z < 1.0 ? count - 1 : count);
+  int silver = int(floor(float(count) * P.lighting_phase_mix + 0.5));
+  silver = clamp(silver, P.lighting_phase_mix > 0.0 ? 1 : 0, P.lighting_phase_mix < 1.0 ? count - 1 : count);
   vec3 side = normalize(abs(view_dir.z) < 0.9 ? cross(view_dir, vec3(0.0, 0.0, 1.0)) :
                                                 cross(view_dir, vec3(1.0, 0.0, 0.0)));
   vec3 up = cross(view_dir, side);
-  float spin = 6.2831853 * fract(nubis_pixel_hash(pixel + vec2(0.5, 17.5)) + 0.7548777 * P.options.z);
+  float spin = 6.2831853 * fract(nubis_pixel_hash(pixel + vec2(0.5, 17.5)) + 0.7548777 * P.jitter_pass);
   float main_lobe = 0.0, silver_lobe = 0.0;
   for (int i = 0; i < count; i++) {
     bool in_silver = i < silver;
     int k = in_silver ? i : i - silver;
     int n = in_silver ? silver : count - silver;
-    float g = in_silver ? P.phase.y : P.phase.x;
+    float g = in_silver ? P.lighting_phase_g1 : P.lighting_phase_g0;
     float cos_t = nubis_henyey_greenstein_sample(g, (float(k) + 0.5) / float(n));
     float sin_t = sqrt(max(0.0, 1.0 - cos_t * cos_t));
     float phi = spin + float(i) * 2.39996323; /* the golden angle */
     vec3 dir = view_dir * cos_t + (side * cos(phi) + up * sin(phi)) * sin_t;
     float plain;
-    float tau = nubis_reference_depth(p, dir, 16, plain) * P.density.x + nubis_cirrus_optical_depth(p, dir, 0.0);
+    float tau = nubis_reference_depth(p, dir, 16, plain) * P.density_sigma + nubis_cirrus_optical_depth(p, dir, 0.0);
     if (in_silver) {
       silver_lobe += exp(-tau) / float(n);
     }
@@ -222,7 +222,7 @@ float nubis_reference_sky_visibility(vec3 p, vec3 view_dir, vec2 pixel)
       main_lobe += exp(-tau) / float(n);
     }
   }
-  return mix(main_lobe, silver_lobe, P.phase.z);
+  return mix(main_lobe, silver_lobe, P.lighting_phase_mix);
 }
 
 /* What the light of one view ray shares along its length (for a sun light they are constant along
@@ -242,7 +242,7 @@ NubisRayLight nubis_ray_light(vec3 view_dir)
   l.phase_lo = vec4(0.0);
   l.phase_hi = vec4(0.0);
   float c = 1.0;
-  int octaves = min(int(P.scatter.x), 8);
+  int octaves = min(int(P.lighting_ms_octaves), 8);
   for (int i = 0; i < octaves; i++) {
     float ph = nubis_phase(l.cos_angle, c);
     if (i < 4) {
@@ -251,18 +251,18 @@ NubisRayLight nubis_ray_light(vec3 view_dir)
     else {
       l.phase_hi[i - 4] = ph;
     }
-    c *= P.scatter.w;
+    c *= P.lighting_ms_eccentricity;
   }
   /* GPU Pro 7's "Beer's powder" with S15's view dependence: the in-scatter probability darkens
    * the edges facing the sun, visible only with the sun behind the viewer. */
-  l.powder_weight = P.scatter2.x * clamp01(0.5 - 0.5 * l.cos_angle);
+  l.powder_weight = P.lighting_powder * clamp01(0.5 - 0.5 * l.cos_angle);
   return l;
 }
 
 /* Optical depth towards the sun. Real time: the march of GPU Pro 7 / S15, samples in a widening cone
  * plus one long-distance sample (GPU Pro 7 fig 4.36) at the coarse density. The taps (offset from the
  * point, and the length each stands for) are the same for every sample of a frame, so Python computes
- * them once (core/march.py) into P.light_taps; P.march.w counts them, the long one last. Samples
+ * them once (core/march.py) into P.light_taps; P.march_light_samples counts them, the long one last. Samples
  * read the noise one mip level coarser than the view ray (GPU Pro 7) and switch to cheap samples
  * once the view ray is half opaque (S15: "2x faster"); the naive march of the benchmark keeps full
  * samples. The reference permutation marches many fine samples out of the
@@ -282,7 +282,7 @@ float nubis_light_optical_depth(vec3 p, float view_alpha, float lod, out float p
   bool cheap = view_alpha > 0.5;
 #  endif
   float light_lod = min(lod + 1.0, 2.0);
-  int taps = int(P.march.w);
+  int taps = int(P.march_light_samples);
   for (int i = 0; i < taps - 1; i++) {
     vec4 tap = P.light_taps[i];
     vec3 q = p + tap.xyz;
@@ -298,8 +298,8 @@ float nubis_light_optical_depth(vec3 p, float view_alpha, float lod, out float p
   powder_depth += w;
   tau += w * nubis_extinction_factor(far_point, far_sample.precipitation);
 #endif
-  powder_depth *= P.density.x;
-  return tau * P.density.x;
+  powder_depth *= P.density_sigma;
+  return tau * P.density_sigma;
 }
 
 /* Light scattered towards the eye per unit of scattering at a point inside the cloud, without the
@@ -321,12 +321,12 @@ vec3 nubis_in_scattering(
   float direct_energy = 0.0;
   float a = 1.0, b = 1.0;
   float albedo = 1.0 / max(extinction_factor, 1.0);
-  int octaves = min(int(P.scatter.x), 8);
+  int octaves = min(int(P.lighting_ms_octaves), 8);
   for (int i = 0; i < octaves; i++) {
     float phase = i < 4 ? ray.phase_lo[i] : ray.phase_hi[i - 4];
     direct_energy += b * exp(-a * tau) * phase;
-    a *= P.scatter.y;
-    b *= P.scatter.z * albedo;
+    a *= P.lighting_ms_attenuation;
+    b *= P.lighting_ms_contribution * albedo;
   }
   /* GPU Pro 7's factor 2 restores the energy where the powder term applies. */
   direct_energy *= mix(1.0, 2.0 * (1.0 - exp(-2.0 * powder_depth)), ray.powder_weight);
@@ -335,16 +335,16 @@ vec3 nubis_in_scattering(
    * Cycles: a separate factor, so it neither hides the powder rim nor thins the octaves. */
   direct_energy *= exp(-nubis_cirrus_optical_depth(p, P.sun_dir.xyz, 0.0));
 #endif
-  vec3 direct = P.sun_rad.rgb * direct_energy;
+  vec3 direct = P.sun_radiance.rgb * direct_energy;
   /* SPEC 2.7: GDC22's ambient probability from the coarse density, growing with height (S15); the
    * reference permutation measures the sky's visibility instead. */
 #if NUBIS_REFERENCE
   float ambient_probability = nubis_reference_sky_visibility(p, view_dir, pixel);
 #else
-  float ambient_probability = sqrt(1.0 - clamp01(d.coarse)) * mix(P.ambient.w, 1.0, d.h);
+  float ambient_probability = sqrt(1.0 - clamp01(d.coarse)) * mix(P.lighting_ambient_bottom, 1.0, d.h);
 #  if NUBIS_CIRRUS
   /* ... and the sky light by its transmittance overhead. */
-  ambient_probability *= exp(-nubis_cirrus_optical_depth(p, normalize(p + vec3(0.0, 0.0, P.layer.x)), 0.0));
+  ambient_probability *= exp(-nubis_cirrus_optical_depth(p, normalize(p + vec3(0.0, 0.0, P.layer_planet_radius)), 0.0));
 #  endif
 #endif
   ambient_probability *= nubis_storm_ambient(p, d.h);

@@ -9,10 +9,10 @@
  * Sky light is taken as scattered in proportion to the layer's opacity. Premultiplied radiance, alpha. */
 vec4 nubis_cirrus(vec3 origin, vec3 dir)
 {
-  float altitude = nubis_altitude(origin, P.layer.x);
-  vec2 ground = nubis_ray_sphere(origin, dir, P.layer.x, 0.0);
-  vec2 hit = nubis_ray_sphere(origin, dir, P.layer.x, P.cirrus.x);
-  float t = altitude < P.cirrus.x ? hit.y : hit.x;
+  float altitude = nubis_altitude(origin, P.layer_planet_radius);
+  vec2 ground = nubis_ray_sphere(origin, dir, P.layer_planet_radius, 0.0);
+  vec2 hit = nubis_ray_sphere(origin, dir, P.layer_planet_radius, P.cirrus_altitude);
+  float t = altitude < P.cirrus_altitude ? hit.y : hit.x;
   bool hits_ground = ground.x <= ground.y && ground.y > 0.0 && ground.x < t;
   if (hits_ground && altitude >= 0.0) {
     return vec4(0.0);
@@ -21,7 +21,7 @@ vec4 nubis_cirrus(vec3 origin, vec3 dir)
   if (tau_view <= 0.0) {
     return vec4(0.0);
   }
-  vec3 up = normalize(origin + dir * t + vec3(0.0, 0.0, P.layer.x));
+  vec3 up = normalize(origin + dir * t + vec3(0.0, 0.0, P.layer_planet_radius));
   float mu_v = dot(dir, up);
   float mu_s = dot(P.sun_dir.xyz, up);
   float m_v = 1.0 / max(abs(mu_v), 0.05);
@@ -37,7 +37,7 @@ vec4 nubis_cirrus(vec3 origin, vec3 dir)
     sun_fraction = m_v / (m_v + m_s) * (1.0 - exp(-tau * (m_v + m_s)));
   }
   float alpha = 1.0 - exp(-tau_view);
-  vec3 light = P.sun_rad.rgb * nubis_phase(dot(dir, P.sun_dir.xyz), 1.0) * sun_fraction + P.ambient.rgb * alpha;
+  vec3 light = P.sun_radiance.rgb * nubis_phase(dot(dir, P.sun_dir.xyz), 1.0) * sun_fraction + P.ambient.rgb * alpha;
   return vec4(light, alpha);
 }
 
@@ -48,7 +48,7 @@ vec4 nubis_with_cirrus(vec4 clouds, vec3 origin, vec3 dir, out float behind)
 {
   vec4 cirrus = nubis_cirrus(origin, dir);
   /* `behind`: what the layer lets through of the clouds' own light (their flashes too). */
-  if (nubis_altitude(origin, P.layer.x) > P.cirrus.x) {
+  if (nubis_altitude(origin, P.layer_planet_radius) > P.cirrus_altitude) {
     behind = 1.0 - cirrus.a;
     return cirrus + behind * clouds;
   }
@@ -56,8 +56,8 @@ vec4 nubis_with_cirrus(vec4 clouds, vec3 origin, vec3 dir, out float behind)
   return clouds + (1.0 - clouds.a) * cirrus;
 }
 
-/* The mip level of the noise for a view sample at distance t: the pixel's footprint there (P.view.x
- * metres per metre of distance, P.view.y for orthographic views) in texels of the base-shape noise,
+/* The mip level of the noise for a view sample at distance t: the pixel's footprint there (P.pixel_angle
+ * metres per metre of distance, P.pixel_size for orthographic views) in texels of the base-shape noise,
  * plus the quality's base level (GDC22: PS4 reads MIP 1, PS5 MIP 0). The fractional part is dithered
  * per pixel, so neighbouring levels blend as the passes accumulate. */
 /* Averaging the noise before the erosion's non-linear remap flattens the detail, so a level is only
@@ -66,8 +66,8 @@ vec4 nubis_with_cirrus(vec4 clouds, vec3 origin, vec3 dir, out float behind)
 #define NUBIS_LOD_BIAS 1.0
 float nubis_view_lod(float t, float dither)
 {
-  float footprint = P.view.x * t + P.view.y;
-  float level = log2(max(footprint * float(NUBIS_LF_SIZE - 1) / P.noise.x, 1.0)) - NUBIS_LOD_BIAS + P.view.z;
+  float footprint = P.pixel_angle * t + P.pixel_size;
+  float level = log2(max(footprint * float(NUBIS_LF_SIZE - 1) / P.noise_lf_period, 1.0)) - NUBIS_LOD_BIAS + P.march_mip;
   return min(floor(level + dither), 2.0);
 }
 
@@ -87,24 +87,24 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out v
 {
   cloud_depth = 0.0;
   flash_mask = vec4(0.0);
-  float R = P.layer.x;
+  float R = P.layer_planet_radius;
   /* SPEC 3.1: segment between the shell's spheres; rays that meet the ground see no clouds. */
   vec2 ground = nubis_ray_sphere(origin, dir, R, 0.0);
-  vec2 inner = nubis_ray_sphere(origin, dir, R, P.shell.x);
-  vec2 outer = nubis_ray_sphere(origin, dir, R, P.shell.y);
+  vec2 inner = nubis_ray_sphere(origin, dir, R, P.shell_bottom);
+  vec2 outer = nubis_ray_sphere(origin, dir, R, P.shell_top);
   if (outer.x > outer.y || outer.y <= 0.0) {
     return vec4(0.0);
   }
   float altitude = nubis_altitude(origin, R);
   float t0, t1;
-  if (altitude < P.shell.x) {
+  if (altitude < P.shell_bottom) {
     if (ground.x <= ground.y && ground.y > 0.0 && altitude >= 0.0) {
       return vec4(0.0);
     }
     t0 = inner.y;
     t1 = outer.y;
   }
-  else if (altitude <= P.shell.y) {
+  else if (altitude <= P.shell_top) {
     t0 = 0.0;
     t1 = (inner.x <= inner.y && inner.x > 0.0) ? inner.x : outer.y;
   }
@@ -115,11 +115,11 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out v
   t0 = max(t0, 0.0);
   /* Nothing exists beyond the draw radius (the density fades it), so stop the ray there. */
   vec2 dxy = dir.xy;
-  vec2 oxy = origin.xy - P.draw.xy;
+  vec2 oxy = origin.xy - vec2(P.draw_center_x, P.draw_center_y);
   float a = dot(dxy, dxy);
   if (a > 1e-12) {
     float b = dot(oxy, dxy);
-    float c = dot(oxy, oxy) - P.layer.w * P.layer.w;
+    float c = dot(oxy, oxy) - P.layer_draw_radius * P.layer_draw_radius;
     float disc = b * b - a * c;
     if (disc < 0.0) {
       return vec4(0.0);
@@ -132,19 +132,19 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out v
 
   /* SPEC 3.3, GPU Pro 7: 64 steps looking up, up to 128 towards the horizon. */
   float seg = t1 - t0;
-  float thickness = P.shell.y - P.shell.x;
-  float k = clamp01((seg - thickness) / max(P.layer.w - thickness, 1.0));
-  int steps = int(mix(P.march.x, P.march.y, k));
-  /* Within the platform's loop limit (core/march.py, max_steps, in P.view.w): longer steps, never a
+  float thickness = P.shell_top - P.shell_bottom;
+  float k = clamp01((seg - thickness) / max(P.layer_draw_radius - thickness, 1.0));
+  int steps = int(mix(P.march_steps_min, P.march_steps_max, k));
+  /* Within the platform's loop limit (core/march.py, max_steps, in P.max_view_steps): longer steps, never a
    * ray cut short. */
-  steps = min(steps, int(P.view.w));
+  steps = min(steps, int(P.max_view_steps));
   float dt = seg / float(steps);
   /* Per-pixel start offset, hiding step banding as fine grain; each accumulation pass (options.z)
    * shifts it by the golden ratio so N passes cover the step evenly. */
-  float jitter = P.options.x > 0.5 ? fract(nubis_pixel_hash(pixel) + 0.61803399 * P.options.z) : 0.5;
+  float jitter = P.jitter > 0.5 ? fract(nubis_pixel_hash(pixel) + 0.61803399 * P.jitter_pass) : 0.5;
 
   /* A second per-pixel value for the mip dither, independent of the step jitter. */
-  float dither = P.options.x > 0.5 ? fract(jitter * 7.0 + 0.5) : 0.5;
+  float dither = P.jitter > 0.5 ? fract(jitter * 7.0 + 0.5) : 0.5;
   NubisRayLight ray = nubis_ray_light(dir);
 
   vec3 radiance = vec3(0.0);
@@ -193,7 +193,7 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out v
     }
     empty_fine = 0;
     float absorb = nubis_extinction_factor(p, d.precipitation);
-    float sigma = d.fine * P.density.x * absorb;
+    float sigma = d.fine * P.density_sigma * absorb;
     float step_t = exp(-sigma * dt);
     vec3 s = nubis_in_scattering(p, dir, d, ray, 1.0 - transmittance, absorb, lod, pixel);
     /* Energy-conserving step (Hillaire 2016): the exact integral of constant in-scattering over
@@ -214,8 +214,8 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out v
   float alpha = 1.0 - transmittance;
   cloud_depth = alpha > 0.0 ? depth_sum / alpha : 0.0;
   /* SPEC 2.11 (S15): clouds fade into the atmosphere with the depth of what the ray saw. */
-  if (P.scatter2.y > 0.0 && alpha > 0.0) {
-    float fade = exp(-(depth_sum / alpha) / P.scatter2.y);
+  if (P.lighting_fade_distance > 0.0 && alpha > 0.0) {
+    float fade = exp(-(depth_sum / alpha) / P.lighting_fade_distance);
     radiance = mix(P.ambient.rgb * alpha, radiance, fade);
     flash_mask *= fade;
   }

@@ -16,7 +16,7 @@ void main()
   /* Both ends are projected (rather than taking this fragment's own position for "now"), so the
    * error of unprojecting through a far-reaching frustum in float cancels out. */
   vec4 now = C.view_proj * vec4(world, 1.0);
-  vec4 before = C.prev_view_proj * vec4(nubis_previous_position(world, P.motion.x), 1.0);
+  vec4 before = C.prev_view_proj * vec4(nubis_previous_position(world, P.motion_dt), 1.0);
   vec2 size = gl_FragCoord.xy / uv;
   vec2 motion = (now.xy / now.w - before.xy / before.w) * 0.5 * size;
   color = vec4(motion, cloud_depth, clouds.a);

@@ -18,7 +18,7 @@ float nubis_storm_turn_rate(vec2 xy, int i)
   float boundary = floor(u + 0.5);
   float e = u - boundary;
   float rate;
-  if (P.options.y < 0.5 && abs(e) < 0.5 * overlap && boundary >= 1.0 && boundary <= 5.0) {
+  if (P.storm_jittered_rings < 0.5 && abs(e) < 0.5 * overlap && boundary >= 1.0 && boundary <= 5.0) {
     float inner = boundary - 1.0;
     float w = smoothstep(-0.5 * overlap, 0.5 * overlap, e);
     rate = spin * mix(1.0 - inner / 6.0, 1.0 - (inner + 1.0) / 6.0, w);
@@ -34,9 +34,9 @@ float nubis_storm_turn_rate(vec2 xy, int i)
  * ring's rate, blended by GDC22's mask pow(1 - d / radius, 0.1). */
 vec3 nubis_previous_position(vec3 world, float dt)
 {
-  vec3 scrolled = world - vec3(P.wind.xy, P.wind2.y) * P.motion.y * dt;
+  vec3 scrolled = world - vec3(vec2(P.wind_dir_x, P.wind_dir_y), P.wind_upward_bias) * P.wind_speed * dt;
 #if NUBIS_STORMS
-  int count = min(int(P.storm_info.x), NUBIS_MAX_STORMS);
+  int count = min(int(P.storm_count), NUBIS_MAX_STORMS);
   for (int i = 0; i < count; i++) {
     vec4 shape = P.storm_shape[i];
     float dist = distance(world.xy, shape.xy);

@@ -118,7 +118,7 @@ void main()
   float depth = near_depth > 0.0 ? near_depth : hist_a.x;
   if (depth <= 0.0) {
     /* No cloud seen here: reproject at the middle of the cloud layer, or as a direction far away. */
-    vec2 mid = nubis_ray_sphere(origin, dir, P.layer.x, 0.5 * (P.shell.x + P.shell.y));
+    vec2 mid = nubis_ray_sphere(origin, dir, P.layer_planet_radius, 0.5 * (P.shell_bottom + P.shell_top));
     depth = mid.y > 0.0 ? (mid.x > 0.0 ? mid.x : mid.y) : 1e6;
   }
   vec3 world = origin + dir * depth;

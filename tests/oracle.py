@@ -2,7 +2,7 @@
 
 An independent port of `nubis_density` (shaders/nubis_density_lib.glsl, SPEC 1.2-1.7) that the GPU
 read-backs are compared against. The constants are not copied: they come from the same CloudState, the
-same NoiseSet and the same uniform vectors (render/uniforms.param_vectors) the shader is fed, rounded to
+same NoiseSet and the same uniform vectors (render/uniforms.member_values) the shader is fed, rounded to
 float32 as the uniform block stores them.
 
 Texture sampling follows the GL rules rather than an idealised continuous noise, because that is what
@@ -26,7 +26,7 @@ import numpy as np
 
 from nubis_addon.core.noise import FBM_WEIGHTS, NoiseSet, downsample2
 from nubis_addon.core.state import CloudState
-from nubis_addon.render.uniforms import param_vectors
+from nubis_addon.render.uniforms import member_values
 
 _FBM = np.asarray(FBM_WEIGHTS, np.float64)
 
@@ -152,6 +152,26 @@ def vertical_profile(h, top_type, bottom_type):
     return bottom * top
 
 
+def _vectors(state: CloudState) -> dict[str, tuple]:
+    """The uniform block's named members, grouped into the vectors this oracle computes with."""
+    m = member_values(state)
+
+    def group(*names):
+        return tuple(m[n] for n in names)
+
+    return {
+        "layer": group("layer_planet_radius", "layer_bottom", "layer_top", "layer_draw_radius"),
+        "shell": group("shell_bottom", "shell_top"),
+        "field": group("field_origin_x", "field_origin_y", "field_size", "field_inv_size"),
+        "draw": group("draw_center_x", "draw_center_y", "draw_fade"),
+        "noise": group("noise_lf_period", "noise_hf_period", "noise_curl_period", "noise_curl_strength"),
+        "wind": group("wind_dir_x", "wind_dir_y", "wind_distance", "wind_detail_speed"),
+        "wind2": group("wind_top_offset", "wind_upward_bias", "time"),
+        "density": group("density_sigma", "density_coverage", "density_erosion", "density_multiply_coverage"),
+        "clip_box": m["clip_box"],
+    }
+
+
 class DensityOracle:
     """`nubis_density(p, cheap=false, lod)` for a CloudState and NoiseSet, vectorised over points."""
 
@@ -159,7 +179,7 @@ class DensityOracle:
         if state.field_a is None or state.field_b is None:
             raise ValueError("the oracle needs the state's field A and B arrays")
         # The uniform block is float32: use exactly the values the shader sees.
-        self.v32 = {k: np.asarray(vec, np.float32) for k, vec in param_vectors(state).items()}
+        self.v32 = {k: np.asarray(vec, np.float32) for k, vec in _vectors(state).items()}
         self.v = {k: vec.astype(np.float64) for k, vec in self.v32.items()}
         # As textures.field_texture uploads them: float32, non-finite texels zeroed.
         self.field_a, self.field_b = (

@@ -92,7 +92,7 @@ def _create_info(name: str, defines: dict[str, object]) -> GPUShaderCreateInfo:
     # for the reference light march, the cirrus layer, the naive march and the fetch counter.
     for key, value in defines.items():
         info.define(key, str(value))
-    info.typedef_source(read_shader("nubis_params.glsl"))
+    info.typedef_source(uniforms.struct_source() + read_shader("nubis_params.glsl"))
     info.uniform_buf(0, "NubisParams", "P")
     for slot, (struct, block) in enumerate(stage.blocks, start=1):
         info.uniform_buf(slot, struct, block)

@@ -19,7 +19,9 @@ CLOUD_LIBS = (
 
 @cache
 def read_shader(name: str) -> str:
-    return (SHADER_DIR / name).read_text(encoding="utf-8")
+    """A shader of shaders/ by file name (an absolute path reads a stage from elsewhere, e.g. the tests')."""
+    path = Path(name)
+    return (path if path.is_absolute() else SHADER_DIR / name).read_text(encoding="utf-8")
 
 
 def assemble(*names: str) -> str:

@@ -1,127 +1,169 @@
-"""Pack a CloudState into the NubisParams uniform block declared in shaders/nubis_params.glsl.
+"""The NubisParams uniform block: its GLSL struct, generated from the settings schema (core/schema.py),
+and a CloudState packed into it.
 
-The layout is read from the GLSL struct itself, so Python and the shaders cannot drift apart.
+Every setting the schema marks `gpu` is a float member named after its key (`P.lighting_powder`); the
+values derived from the scene (sun, time, storms, the view) follow with names of their own. Layout, for
+std140 on every backend: vec4 members first, then the floats, padded to whole vec4s, then the vec4
+arrays. Integers and switches travel as floats.
 """
 
 from __future__ import annotations
 
 import math
-import re
+from collections.abc import Callable
 from functools import cache
 
 import numpy as np
 
-from ..core import march, storms
+from ..core import march, schema, storms
 from ..core.errors import NubisError
-from ..core.state import CloudState, wind_vector
-from .sources import read_shader
+from ..core.state import MAX_STORMS, CloudState, wind_vector
+
+# Derived vec4 members: (name, what it holds, value).
+_VEC4: tuple[tuple[str, str, Callable[[CloudState], tuple]], ...] = (
+    ("sun_dir", "unit vector towards the sun, -", lambda st: (*_normalized(st.sun_direction), 0.0)),
+    ("sun_radiance", "sun color x strength (irradiance), -", lambda st: (*st.sun_radiance, 0.0)),
+    (
+        "ambient",
+        "ambient sky color x strength x the ambient setting, -",
+        lambda st: (*(c * st.params["lighting_ambient"] for c in st.ambient), 0.0),
+    ),
+    (
+        "clip_box",
+        "x0, y0, x1, y1: no clouds outside (a comparison clips to the baked box); x1 < x0: off",
+        lambda st: st.clip_box or (1.0, 1.0, -1.0, -1.0),
+    ),
+)
+
+
+def _shell(i: int):
+    return lambda st: st.shell()[i]
+
+
+def _wind(i: int):
+    return lambda st: wind_vector(st.params["wind_direction"])[i]
+
+
+def _cirrus_offset(i: int):
+    return lambda st: wind_vector(st.params["cirrus_wind_direction"])[i] * st.params["cirrus_wind_speed"] * st.time
+
+
+# Derived float members: (name, what it holds, value).
+_FLOATS: tuple[tuple[str, str, Callable[[CloudState], float]], ...] = (
+    ("shell_bottom", "lowest altitude any cloud reaches (the field's min heights)", _shell(0)),
+    ("shell_top", "highest altitude any cloud reaches (the field's max heights)", _shell(1)),
+    ("field_inv_size", "1 / field size", lambda st: 1.0 / st.params["field_size"]),
+    ("draw_center_x", "the draw radius' center (the camera), x", lambda st: st.draw_center[0]),
+    ("draw_center_y", "the draw radius' center, y", lambda st: st.draw_center[1]),
+    ("draw_fade", "fade width at the draw radius", lambda st: 0.05 * st.params["layer_draw_radius"]),
+    ("wind_dir_x", "wind direction, x", _wind(0)),
+    ("wind_dir_y", "wind direction, y", _wind(1)),
+    ("wind_distance", "distance the wind has travelled (speed x time)", lambda st: st.params["wind_speed"] * st.time),
+    ("time", "simulated seconds", lambda st: st.time),
+    ("cirrus_inv_period", "1 / cirrus texture period", lambda st: 1.0 / st.params["cirrus_period"]),
+    ("cirrus_offset_x", "cirrus scroll, x (meters)", _cirrus_offset(0)),
+    ("cirrus_offset_y", "cirrus scroll, y (meters)", _cirrus_offset(1)),
+    ("cirrus_slab", "cirrus slab thickness of the bake", lambda st: st.cirrus_slab or st.params["cirrus_thickness"]),
+    ("storm_count", "number of storms (<= NUBIS_MAX_STORMS)", lambda st: float(len(st.storms))),
+    ("motion_dt", "timestep of the motion vectors, simulated seconds", lambda st: st.motion_dt),
+    ("jitter", "jitter the march start (0/1)", lambda st: 1.0 if st.jitter else 0.0),
+    ("jitter_pass", "accumulation pass", lambda st: float(st.jitter_pass)),
+    ("pixel_angle", "pixel footprint: meters per meter of distance", lambda st: st.pixel_angle),
+    ("pixel_size", "pixel footprint: meters (orthographic)", lambda st: st.pixel_size),
+    ("max_view_steps", "most view steps within the shader loop limit", lambda st: float(state_max_steps(st))),
+)
+
+
+def _storm_rows(fn):
+    return lambda st: [fn(st, s) for s in st.storms]
+
+
+# Arrays of vec4: (name, length, what each row holds, rows).
+_ARRAYS: tuple[tuple[str, int, str, Callable[[CloudState], list]], ...] = (
+    (
+        "storm_shape",
+        MAX_STORMS,
+        "center x, y, radius, blend factor",
+        _storm_rows(lambda st, s: (s.x, s.y, s.radius, s.blend)),
+    ),
+    (
+        "storm_light",
+        MAX_STORMS,
+        "spin (rad/s at the center), darkening, glow intensity, ambient boost",
+        _storm_rows(lambda st, s: (s.spin, s.darkening, s.glow, s.ambient_boost)),
+    ),
+    ("storm_glow", MAX_STORMS, "glow color rgb, flash intensity", _storm_rows(lambda st, s: (*s.glow_color, s.flash))),
+    (
+        "storm_flash",
+        MAX_STORMS,
+        "flash offset x, y from the center, ground discharge (0/1), vortex time (wrapped)",
+        _storm_rows(lambda st, s: (s.flash_x, s.flash_y, s.flash_ground, _storm_time(_vortex_time(st, s), s.spin))),
+    ),
+    (
+        "light_taps",
+        march.MAX_LIGHT_TAPS,
+        "the light march's taps (core/march.py): offset, length it stands for",
+        lambda st: [
+            tuple(t)
+            for t in march.light_taps(st.sun_direction, st.params["march_light_step"], st.params["march_light_samples"])
+        ],
+    ),
+)
 
 
 @cache
-def struct_fields() -> tuple[tuple[str, int], ...]:
-    """(name, array length or 0) of each NubisParams member, in order."""
-    src = read_shader("nubis_params.glsl")
-    body = re.search(r"struct\s+NubisParams\s*{(.*?)};", src, re.S)
-    if body is None:
-        raise RuntimeError("nubis_params.glsl no longer declares struct NubisParams")
-    text = re.sub(r"/\*.*?\*/", "", body.group(1), flags=re.S)
-    members = re.findall(r"(\w+)\s+(\w+)\s*(?:\[(\d+)\])?\s*;", text)
-    bad = [name for typ, name, _n in members if typ != "vec4"]
-    if bad:
-        raise RuntimeError(f"NubisParams members must be vec4 or vec4 arrays, not: {bad}")
-    return tuple((name, int(n) if n else 0) for _typ, name, n in members)
+def struct_members() -> tuple[tuple[str, str, int], ...]:
+    """(name, GLSL type, array length or 0) of each NubisParams member, in order, padding included."""
+    vec4 = [(name, "vec4", 0) for name, _doc, _fn in _VEC4]
+    floats = [(s.key, "float", 0) for s in schema.gpu_settings()] + [(n, "float", 0) for n, _d, _f in _FLOATS]
+    floats += [(f"_pad{i}", "float", 0) for i in range(-len(floats) % 4)]
+    arrays = [(name, "vec4", n) for name, n, _doc, _fn in _ARRAYS]
+    return tuple(vec4 + floats + arrays)
 
 
-def param_vectors(state: CloudState) -> dict[str, tuple[float, float, float, float]]:
+@cache
+def struct_source() -> str:
+    """The GLSL declaration of NubisParams, each member commented with its label or meaning."""
+    docs = {s.key: f"{s.label} ({s.unit.lower()})" if s.unit != "NONE" else s.label for s in schema.gpu_settings()}
+    docs.update({n: d for n, d, _f in _VEC4 + _FLOATS})
+    docs.update({n: d for n, _c, d, _f in _ARRAYS})
+    lines = ["/* Generated from core/schema.py by render/uniforms.py: one member per setting, by its key. */"]
+    lines.append("struct NubisParams {")
+    for name, typ, n in struct_members():
+        decl = f"{typ} {name}[{n}];" if n else f"{typ} {name};"
+        lines.append(f"  {decl:<40} /* {docs.get(name, 'padding to whole vec4s')} */")
+    lines.append("};")
+    return "\n".join(lines) + "\n"
+
+
+def member_values(state: CloudState) -> dict:
     p = state.params
-    shell_lo, shell_hi = state.shell()
-    wx, wy = wind_vector(p["wind_direction"])
-    cwind = wind_vector(p["cirrus_wind_direction"])
-    field_size = p["field_size"]
-    return {
-        "layer": (p["layer_planet_radius"], p["layer_bottom"], p["layer_top"], p["layer_draw_radius"]),
-        "shell": (shell_lo, shell_hi, 0.0, 0.0),
-        "field": (p["field_origin_x"], p["field_origin_y"], field_size, 1.0 / field_size),
-        "draw": (*state.draw_center, 0.05 * p["layer_draw_radius"], 0.0),
-        "noise": (p["noise_lf_period"], p["noise_hf_period"], p["noise_curl_period"], p["noise_curl_strength"]),
-        "wind": (wx, wy, p["wind_speed"] * state.time, p["wind_detail_speed"]),
-        "wind2": (p["wind_top_offset"], p["wind_upward_bias"], state.time, 0.0),
-        "density": (
-            p["density_sigma"],
-            p["density_coverage"],
-            p["density_erosion"],
-            1.0 if p["density_multiply_coverage"] else 0.0,
-        ),
-        "sun_dir": (*_normalized(state.sun_direction), 0.0),
-        "sun_rad": (*state.sun_radiance, 0.0),
-        "ambient": (*(c * p["lighting_ambient"] for c in state.ambient), p["lighting_ambient_bottom"]),
-        "phase": (
-            p["lighting_phase_g0"],
-            p["lighting_phase_g1"],
-            p["lighting_phase_mix"],
-            p["lighting_rain_absorption"],
-        ),
-        "march": (
-            float(p["march_steps_min"]),
-            float(p["march_steps_max"]),
-            p["march_light_step"],
-            float(p["march_light_samples"]),
-        ),
-        "scatter": (
-            float(p["lighting_ms_octaves"]),
-            p["lighting_ms_attenuation"],
-            p["lighting_ms_contribution"],
-            p["lighting_ms_eccentricity"],
-        ),
-        "scatter2": (p["lighting_powder"], p["lighting_fade_distance"], 0.0, 0.0),
-        "cirrus": (p["cirrus_altitude"], p["cirrus_coverage"], 1.0 / p["cirrus_period"], p["cirrus_opacity"]),
-        "cirrus2": (
-            *(c * p["cirrus_wind_speed"] * state.time for c in cwind),
-            state.cirrus_slab or p["cirrus_thickness"],
-            0.0,
-        ),
-        "storm_info": (float(len(state.storms)), p["storm_twist"], p["storm_glow_height"], p["storm_anvil_shift"]),
-        "storm_shape": [(s.x, s.y, s.radius, s.blend) for s in state.storms],
-        "storm_light": [(s.spin, s.darkening, s.glow, s.ambient_boost) for s in state.storms],
-        "storm_glow": [(*s.glow_color, s.flash) for s in state.storms],
-        "storm_flash": [
-            (s.flash_x, s.flash_y, s.flash_ground, _storm_time(_vortex_time(state, s), s.spin)) for s in state.storms
-        ],
-        # motion_dt is already in simulated seconds (time scale included).
-        "motion": (state.motion_dt, p["wind_speed"], 0.0, 0.0),
-        "clip_box": state.clip_box or (1.0, 1.0, -1.0, -1.0),
-        "options": (
-            1.0 if state.jitter else 0.0,
-            1.0 if p["storm_jittered_rings"] else 0.0,
-            float(state.jitter_pass),
-            0.0,
-        ),
-        "view": (state.pixel_angle, state.pixel_size, float(p["march_mip"]), float(state_max_steps(state))),
-        "light_taps": [
-            tuple(t) for t in march.light_taps(state.sun_direction, p["march_light_step"], p["march_light_samples"])
-        ],
-    }
+    out: dict = {s.key: float(p[s.key]) for s in schema.gpu_settings()}
+    out.update({name: fn(state) for name, _doc, fn in _VEC4})
+    out.update({name: float(fn(state)) for name, _doc, fn in _FLOATS})
+    out.update({name: fn(state) for name, _n, _doc, fn in _ARRAYS})
+    return out
 
 
 def pack(state: CloudState) -> np.ndarray:
-    """The block as float32 rows of four (std140 lays vec4 members and vec4 arrays out densely)."""
-    vectors = param_vectors(state)
-    fields = struct_fields()
-    names = {n for n, _count in fields}
-    missing, extra = names - set(vectors), set(vectors) - names
-    if missing or extra:
-        raise RuntimeError(f"NubisParams and param_vectors disagree: missing {missing}, unknown {extra}")
-    rows = []
-    for name, count in fields:
-        value = vectors[name]
+    """The block as float32, laid out as struct_members() declares it (std140)."""
+    values = member_values(state)
+    flat: list[float] = []
+    for name, typ, count in struct_members():
+        if name.startswith("_pad"):
+            flat.append(0.0)
+            continue
+        value = values[name]
         if count:
             if len(value) > count:
                 raise ValueError(f"{name} holds at most {count} entries, got {len(value)}")
-            value = list(value) + [(0.0, 0.0, 0.0, 0.0)] * (count - len(value))
-            rows.extend(value)
+            for row in list(value) + [(0.0, 0.0, 0.0, 0.0)] * (count - len(value)):
+                flat.extend(row)
+        elif typ == "vec4":
+            flat.extend(value)
         else:
-            rows.append(value)
-    data = np.array(rows, dtype=np.float32)
+            flat.append(value)
+    data = np.array(flat, dtype=np.float32).reshape(-1, 4)
     if not np.all(np.isfinite(data)):
         raise NubisError("non-finite cloud settings: check the scene's Nubis values for NaN or infinity")
     return data

@@ -76,7 +76,7 @@ def test_ci_runs_readme_command_2_on_both_blender_lines():
     its own pinned requirements and virtual environment."""
     import re
 
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     readme = (root / "README.md").read_text()
     blocks = re.findall(r"```\n(.*?)```", readme, re.S)
     command_2 = [ln for ln in blocks[1].splitlines() if ln.strip()]

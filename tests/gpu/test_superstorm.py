@@ -24,8 +24,9 @@ def _gpu(scene):
 
 
 def test_outside_every_stencil_the_density_is_the_storm_free_density(storm_scene, blender):
+    from gpu_probe import probe_density
+
     from nubis_addon.blender import scene_io
-    from nubis_addon.render.probe import probe_density
 
     scene, storm = storm_scene
     scene.nubis.layers[0].remap = (0.3, 0.7, 0.0, 0.5)  # denser fair-weather clouds around the storm
@@ -54,8 +55,9 @@ def test_outside_every_stencil_the_density_is_the_storm_free_density(storm_scene
 
 
 def test_vortex_turns_faster_near_the_centre(storm_scene):
+    from gpu_probe import probe_vortex
+
     from nubis_addon.blender import scene_io
-    from nubis_addon.render.probe import probe_vortex
 
     scene, storm = storm_scene
     cx, cy = scene_io.storm_centre(storm)

@@ -1,7 +1,7 @@
 """The cloud density on the GPU (issue 3): the shader against the numpy oracle, and the density's
 contract (SPEC 1.2, 1.3.1, 1.6, 1.7) checked on GPU read-backs.
 
-The GPU side is the probe stage (render/probe.py), which runs the very `nubis_density` the viewport,
+The GPU side is the probe stage (tests/gpu_probe.py), which runs the very `nubis_density` the viewport,
 the render and the bake call. The oracle (tests/oracle.py) is an independent port fed the same state.
 """
 
@@ -34,7 +34,7 @@ def _inputs(scene):
 
 def _measure_sampler(clouds, noise_set) -> dict[str, tuple[float, float]]:
     """Max |GPU - oracle| of raw noise reads under the GL float filter and the 8-bit fixed-point filter."""
-    from nubis_addon.render.probe import probe_noise
+    from gpu_probe import probe_noise
 
     rng = np.random.default_rng(11)
     out = {}
@@ -88,7 +88,7 @@ def _grid(state, step: float = 200.0, half: float = 20000.0, levels: int = 12):
 
 
 def _compare(clouds, state, noise_set, points) -> tuple[np.ndarray, np.ndarray]:
-    from nubis_addon.render.probe import probe_density
+    from gpu_probe import probe_density
 
     got = probe_density(clouds, points)
     want = _oracle(clouds, state, noise_set).density(points)
@@ -121,7 +121,7 @@ def test_oracle_sampler_reproduces_the_gpu_filter(make_scene):
 
 
 def test_remap_on_gpu_and_in_oracle(make_scene):
-    from nubis_addon.render.probe import probe_remap
+    from gpu_probe import probe_remap
 
     clouds, _state, _noise = _inputs(make_scene("default"))
     # SPEC 1.2: the worked example, and the function is unclamped; the shader maps an empty input
@@ -188,7 +188,7 @@ def test_gpu_density_matches_oracle_in_wind(make_scene):
 def test_coarse_bounds_fine(make_scene):
     """SPEC 1.6.4: erosion only removes density, so fine <= coarse and coarse == 0 => fine == 0; this is
     what makes skipping empty space on the coarse sample exact."""
-    from nubis_addon.render.probe import probe_density
+    from gpu_probe import probe_density
 
     scene = make_scene("default")
     clouds, state, _noise = _inputs(scene)
@@ -204,8 +204,9 @@ def test_coarse_bounds_fine(make_scene):
 
 
 def test_zero_coverage_gives_no_density(make_scene):
+    from gpu_probe import probe_density
+
     from nubis_addon.blender import scene_io
-    from nubis_addon.render.probe import probe_density
 
     scene = make_scene("default")
     clouds, state, _noise = _inputs(scene)
@@ -226,8 +227,9 @@ def test_zero_coverage_gives_no_density(make_scene):
 
 def test_density_never_falls_as_coverage_rises(make_scene):
     """GDC22 (SPEC 1.6.1): raising coverage inflates the clouds; nothing may thin out anywhere."""
+    from gpu_probe import probe_density
+
     from nubis_addon.blender import scene_io
-    from nubis_addon.render.probe import probe_density
 
     scene = make_scene("default")
     clouds, state, _noise = _inputs(scene)
@@ -253,8 +255,9 @@ def test_density_never_falls_as_coverage_rises(make_scene):
 def test_time_moves_detail_but_keeps_structure(make_scene):
     """GDC22 (SPEC 1.3.1, 1.7): the noise is animated, the coverage/type field is not, so a minute of
     wind reshapes the clouds in place: the detail changes, the cloudscape's layout does not."""
+    from gpu_probe import probe_density
+
     from nubis_addon.blender import scene_io
-    from nubis_addon.render.probe import probe_density
 
     scene = make_scene("default")  # 10 m/s: in 60 s the shape noise moves 600 m, the detail 1200 m
     clouds, state, noise_set = _inputs(scene)

@@ -155,15 +155,26 @@ def test_uniform_block_matches_the_glsl_struct():
     from nubis_addon.core.state import StormLight
     from nubis_addon.render import uniforms
 
-    fields = uniforms.struct_fields()
-    rows = sum(count or 1 for _name, count in fields)
+    members = uniforms.struct_members()
+    floats = sum(4 * (n or 1) if typ == "vec4" else 1 for _name, typ, n in members)
     state = CloudState(storms=(StormLight(1.0, 2.0, 3000.0),))
     data = uniforms.pack(state)
-    assert data.shape == (rows, 4) and data.dtype == np.float32
-    names = [name for name, _count in fields]
-    start = sum(count or 1 for name, count in fields[: names.index("storm_shape")])
-    assert tuple(data[start]) == (1.0, 2.0, 3000.0, 1.0)  # first storm, then zero padding
-    assert not data[start + 1].any()
+    assert floats % 4 == 0 and data.shape == (floats // 4, 4) and data.dtype == np.float32
+    # std140: vec4 members and arrays start on whole rows; the floats between them fill rows densely.
+    offsets, at = {}, 0
+    for name, typ, n in members:
+        if typ == "vec4":
+            assert at % 4 == 0, name
+        offsets[name] = at
+        at += 4 * (n or 1) if typ == "vec4" else 1
+    flat = data.ravel()
+    start = offsets["storm_shape"]
+    assert tuple(flat[start : start + 4]) == (1.0, 2.0, 3000.0, 1.0)  # first storm, then zero padding
+    assert not flat[start + 4 : start + 8].any()
+    assert flat[offsets["lighting_powder"]] == np.float32(state.params["lighting_powder"])
+    assert flat[offsets["layer_bottom"]] == np.float32(state.params["layer_bottom"])
+    src = uniforms.struct_source()
+    assert "float lighting_powder;" in src and "vec4 storm_shape[4];" in src
     bad = CloudState()
     bad.params = dict(bad.params, density_sigma=float("nan"))
     with pytest.raises(NubisError, match="non-finite"):

@@ -1,20 +1,22 @@
-"""Read the cloud density back from the GPU at arbitrary world points (for tests, never a product path).
+"""Read the cloud density back from the GPU at arbitrary world points: a test instrument, not shipped.
 
-The probe stage (shaders/nubis_probe_frag.glsl) runs the shared `nubis_density` once per texel of a
+The probe stage (tests/shaders/nubis_probe_frag.glsl) runs the shared `nubis_density` once per texel of a
 float texture of points, so tests can compare the exact shader the viewport and the bake use against an
 independent implementation.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import gpu
 import numpy as np
 
-from .engine import STAGES, CloudGPU, Stage, draw_offscreen, draw_stage
+from nubis_addon.render.engine import STAGES, CloudGPU, Stage, draw_offscreen, draw_stage
 
-# Registered here rather than in engine.py: the probe is a test instrument, and a stage only compiles
-# when someone asks for it, so the product never pays for it.
-STAGES.setdefault("probe", Stage((("VEC4", "probe_mode"),), (("FLOAT_2D", "probe_points"),)))
+# Registered by the tests: the extension ships no probe, and a stage only compiles when asked for.
+_FRAGMENT = str(Path(__file__).resolve().parent / "shaders" / "nubis_probe_frag.glsl")
+STAGES.setdefault("probe", Stage((("VEC4", "probe_mode"),), (("FLOAT_2D", "probe_points"),), fragment=_FRAGMENT))
 
 MAX_WIDTH = 1024  # texels per row of the point texture; rows grow as needed
 _MODE_DENSITY = 0.0

@@ -74,8 +74,9 @@ def test_the_anvil_takes_over_without_a_step(make_scene):
     from the steps around it (the old takeover made steps over 4 times the largest of its neighbours;
     the 8-bit noise's own filtering kinks stay near 2). Cloud edges, where the density falls to zero,
     are sharp by design and left out."""
+    from gpu_probe import probe_density
+
     from nubis_addon.blender import runtime, scene_io
-    from nubis_addon.render.probe import probe_density
 
     scene = make_scene("superstorm")
     state = scene_io.state_from_scene(scene)
@@ -107,8 +108,9 @@ def test_the_anvil_takes_over_without_a_step(make_scene):
 def _vortex_angle(scene, frames, where):
     """The angle (radians, unwrapped over `frames`) by which the vortex turns the detail noise at the
     world points `where` (N, 2), the storm's blend, and the simulated time at each frame."""
+    from gpu_probe import probe_vortex
+
     from nubis_addon.blender import runtime, scene_io
-    from nubis_addon.render.probe import probe_vortex
 
     storm = scene.nubis.storms[0]
     cx, cy = scene_io.storm_centre(storm)

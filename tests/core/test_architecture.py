@@ -1,0 +1,167 @@
+"""The package's structure, read from its source (no Blender): the layers import one way, no module
+imports another that imports it back (function-level imports included), and the settings schema is
+consistent."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+from conftest import ROOT
+
+PACKAGE = ROOT / "nubis_addon"
+
+
+def _module_name(path: Path) -> str:
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _modules() -> dict[str, Path]:
+    return {_module_name(p): p for p in PACKAGE.rglob("*.py")}
+
+
+def _resolve(importer: str, is_package: bool, level: int, module: str | None) -> str:
+    base = importer.split(".")
+    if not is_package:
+        base = base[:-1]
+    if level > 1:
+        base = base[: len(base) - (level - 1)]
+    return ".".join([*base, *([module] if module else [])])
+
+
+def import_graph() -> dict[str, set[str]]:
+    """Each module's imports of the package's own modules, at any depth of the source (inside
+    functions too). ``from . import x`` names the module x when there is one, else the package."""
+    modules = _modules()
+    graph: dict[str, set[str]] = {m: set() for m in modules}
+    for name, path in modules.items():
+        is_package = path.name == "__init__.py"
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            targets: list[str] = []
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names if a.name.startswith("nubis_addon")]
+            elif isinstance(node, ast.ImportFrom):
+                if node.level == 0:
+                    if not (node.module or "").startswith("nubis_addon"):
+                        continue
+                    base = node.module
+                else:
+                    base = _resolve(name, is_package, node.level, node.module)
+                for alias in node.names:
+                    sub = f"{base}.{alias.name}"
+                    targets.append(sub if sub in modules else base)
+            graph[name].update(t for t in targets if t in modules and t != name)
+    return graph
+
+
+def _cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(node: str) -> list[str] | None:
+        state[node] = 1
+        stack.append(node)
+        for nxt in sorted(graph[node]):
+            if state.get(nxt) == 1:
+                return stack[stack.index(nxt) :] + [nxt]
+            if nxt not in state:
+                found = visit(nxt)
+                if found:
+                    return found
+        stack.pop()
+        state[node] = 2
+        return None
+
+    for node in sorted(graph):
+        if node not in state:
+            found = visit(node)
+            if found:
+                return found
+    return None
+
+
+def test_no_import_cycle_function_level_imports_included():
+    graph = import_graph()
+    assert len(graph) > 40  # the walk found the package
+    assert "nubis_addon.blender.scene_io" in graph["nubis_addon.blender.viewport"]  # and its edges
+    cycle = _cycle(graph)
+    assert cycle is None, " -> ".join(cycle)
+
+
+def test_the_cycle_finder_finds_a_cycle():
+    assert _cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert _cycle({"a": {"b"}, "b": set()}) is None
+
+
+def _external_imports(path: Path) -> set[str]:
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            out.update(a.name.split(".")[0] for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            out.add(node.module.split(".")[0])
+    return out
+
+
+def test_layers_import_one_way():
+    """core/ imports no bpy, gpu or mathutils; render/ nothing from blender/ or the command line;
+    nothing below cli.py imports it."""
+    graph = import_graph()
+    for name, path in _modules().items():
+        if name.startswith("nubis_addon.core"):
+            assert not _external_imports(path) & {"bpy", "gpu", "gpu_extras", "mathutils", "bmesh"}, name
+            assert all(t.startswith("nubis_addon.core") for t in graph[name]), (name, graph[name])
+        if name.startswith("nubis_addon.render"):
+            assert all(t.startswith(("nubis_addon.core", "nubis_addon.render")) for t in graph[name]), name
+        if name.startswith(("nubis_addon.blender", "nubis_addon.render", "nubis_addon.core")):
+            assert "nubis_addon.cli" not in graph[name], name
+            assert "nubis_addon" not in graph[name], name
+
+
+def test_core_imports_without_blender():
+    """In a fresh interpreter, every core module imports and none pulls in bpy."""
+    code = (
+        "import importlib, pkgutil, sys, nubis_addon.core as c\n"
+        "for m in pkgutil.iter_modules(c.__path__): importlib.import_module('nubis_addon.core.' + m.name)\n"
+        "bad = [m for m in ('bpy', 'gpu', 'mathutils') if m in sys.modules]\n"
+        "print(bad); sys.exit(1 if bad else 0)\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr
+
+
+def test_schema_is_consistent_and_every_setting_has_a_panel_or_a_reason():
+    from nubis_addon.core import schema
+
+    schema.check_schema()
+    assert len(schema.SCENE) > 60 and len(schema.LAYER) > 15 and len(schema.STORM) > 15
+    drawn = [s for s in schema.ALL if s.panel]
+    internal = [s for s in schema.ALL if s.internal]
+    assert len(drawn) + len(internal) == len(schema.ALL)
+    # The settings the review found without UI are drawn now.
+    for key in (
+        "cirrus_altitude",
+        "cirrus_wind_speed",
+        "storm_anvil_shift",
+        "storm_glow_height",
+        "rule_cumulonimbus_top",
+        "rule_horizon_start",
+    ):
+        assert schema.BY_KEY[key].panel, key
+
+
+def test_one_name_per_setting_on_the_gpu():
+    """The shaders read each setting by its key (P.lighting_powder): the uniform block's members are
+    the schema's GPU settings plus the derived values, and no positional packing."""
+    from nubis_addon.core import schema
+    from nubis_addon.render import uniforms
+
+    members = {name for name, _type, _n in uniforms.struct_members()}
+    for s in schema.gpu_settings():
+        assert s.key in members, s.key
+    shaders = "\n".join(p.read_text() for p in (ROOT / "shaders").glob("*.glsl"))
+    for s in schema.gpu_settings():
+        assert f"P.{s.key}" in shaders, f"{s.key} reaches the GPU but no shader reads it"
