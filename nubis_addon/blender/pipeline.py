@@ -154,7 +154,7 @@ def downsample(rgba: np.ndarray, factor: int) -> np.ndarray:
 def render_motion(scene, width: int, height: int) -> np.ndarray:
     """Motion vectors of the scene camera's view for one frame step: dx, dy (pixels), cloud distance, alpha."""
     state = scene_io.state_from_scene(scene)
-    fps = scene.render.fps / scene.render.fps_base
+    fps = scene_io.scene_fps(scene)
     state.motion_dt = scene.nubis.wind_time_scale / fps
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
     clouds.update(state)

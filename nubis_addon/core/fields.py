@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from .errors import NubisError
+from .noise import world_fbm_2d
 
 CHANNELS: dict[str, tuple[str, int]] = {
     "coverage": ("a", 0),
@@ -45,68 +46,6 @@ def pixel_centres(params: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray]:
     xs = params["field_origin_x"] + t * size
     ys = params["field_origin_y"] + t * size
     return np.meshgrid(xs, ys)
-
-
-# ---- 2D noises in world space (hash lattices, so any scale and any extent work) -----------------
-
-
-def _hash(ix: np.ndarray, iy: np.ndarray, seed: int) -> np.ndarray:
-    """32-bit integer hash of lattice coordinates (a mix of multiply and xor-shift rounds)."""
-    h = ix.astype(np.uint32) * np.uint32(0x27D4EB2D) ^ iy.astype(np.uint32) * np.uint32(0x165667B1)
-    h = h + np.uint32((seed * 0x9E3779B9) & 0xFFFFFFFF)
-    h = (h ^ (h >> np.uint32(15))) * np.uint32(0x2C1B3C6D)
-    h = (h ^ (h >> np.uint32(12))) * np.uint32(0x297A2D39)
-    return h ^ (h >> np.uint32(15))
-
-
-def _unit(h: np.ndarray) -> np.ndarray:
-    return (h >> np.uint32(8)).astype(np.float64) / float(1 << 24)
-
-
-def perlin2(x: np.ndarray, y: np.ndarray, seed: int) -> np.ndarray:
-    """Gradient noise, roughly in [-0.7, 0.7], one lattice cell per unit."""
-    x0, y0 = np.floor(x), np.floor(y)
-    fx, fy = x - x0, y - y0
-    ix, iy = x0.astype(np.int64), y0.astype(np.int64)
-
-    def corner(dx: int, dy: int) -> np.ndarray:
-        angle = _unit(_hash(ix + dx, iy + dy, seed)) * (2 * np.pi)
-        return np.cos(angle) * (fx - dx) + np.sin(angle) * (fy - dy)
-
-    # Perlin's quintic fade keeps the second derivative continuous across cells.
-    u = fx * fx * fx * (fx * (fx * 6 - 15) + 10)
-    v = fy * fy * fy * (fy * (fy * 6 - 15) + 10)
-    bottom = corner(0, 0) + u * (corner(1, 0) - corner(0, 0))
-    top = corner(0, 1) + u * (corner(1, 1) - corner(0, 1))
-    return bottom + v * (top - bottom)
-
-
-def worley2(x: np.ndarray, y: np.ndarray, seed: int) -> np.ndarray:
-    """Distance to the nearest of one random feature point per unit cell (F1), about [0, 1]."""
-    x0, y0 = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
-    best = np.full(x.shape, 4.0)
-    for dy in (-1, 0, 1):
-        for dx in (-1, 0, 1):
-            h = _hash(x0 + dx, y0 + dy, seed)
-            px = x0 + dx + _unit(h)
-            py = y0 + dy + _unit(_hash(x0 + dx, y0 + dy, seed + 7919))
-            best = np.minimum(best, (x - px) ** 2 + (y - py) ** 2)
-    return np.sqrt(best)
-
-
-def fbm(kind: str, x: np.ndarray, y: np.ndarray, octaves: int, seed: int) -> np.ndarray:
-    """Octaves of doubling frequency and halving amplitude, normalised to [0, 1]."""
-    total = np.zeros(x.shape)
-    norm = 0.0
-    for o in range(octaves):
-        f, a = 2.0**o, 0.5**o
-        if kind == "perlin":
-            n = np.clip(0.5 + perlin2(x * f, y * f, seed + o) / 1.4, 0.0, 1.0)
-        else:  # inverted Worley: round billows (S15, GDC22 "1 - Worley")
-            n = 1.0 - np.clip(worley2(x * f, y * f, seed + o), 0.0, 1.0)
-        total += a * n
-        norm += a
-    return total / norm
 
 
 _CACHE: dict[tuple, np.ndarray] = {}
@@ -146,12 +85,12 @@ def _procedural_values(layer: Mapping[str, Any], xs: np.ndarray, ys: np.ndarray)
         u, v = xs / layer["scale"], ys / layer["scale"]
         seed, octaves = layer["seed"], layer["octaves"]
         if kind == "perlin":
-            return fbm("perlin", u, v, octaves, seed)
+            return world_fbm_2d("perlin", u, v, octaves, seed)
         if kind == "worley":
-            return fbm("worley", u, v, octaves, seed)
+            return world_fbm_2d("worley", u, v, octaves, seed)
         # SPEC 1.4.2 (GPU Pro 7, S15): Worley dilates the Perlin, keeping its connectedness with billowy rims.
-        p = fbm("perlin", u, v, octaves, seed)
-        w = fbm("worley", u * 2, v * 2, max(1, octaves - 1), seed + 101)
+        p = world_fbm_2d("perlin", u, v, octaves, seed)
+        w = world_fbm_2d("worley", u * 2, v * 2, max(1, octaves - 1), seed + 101)
         return np.clip((p - (w - 1.0)) / (2.0 - w), 0.0, 1.0)
     if kind == "constant":
         return np.full(xs.shape, layer["value"])

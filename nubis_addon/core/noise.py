@@ -108,6 +108,13 @@ def _fade(t: np.ndarray) -> np.ndarray:
     return t * t * t * (t * (t * 6.0 - 15.0) + 10.0)
 
 
+def _lerp2(n00: np.ndarray, n10: np.ndarray, n01: np.ndarray, n11: np.ndarray, u: np.ndarray, v: np.ndarray):
+    """The lattice cell's corner values blended bilinearly by the faded offsets u, v."""
+    a = n00 + u * (n10 - n00)
+    b = n01 + u * (n11 - n01)
+    return a + v * (b - a)
+
+
 def _axes_cells(cells: int | Sequence[int], ndim: int) -> tuple[int, ...]:
     if isinstance(cells, int | np.integer):
         out = (int(cells),) * ndim
@@ -330,10 +337,7 @@ def _perlin_2d_at(x: np.ndarray, y: np.ndarray, grads: np.ndarray) -> np.ndarray
     n10 = gx.take(k10) * tx1 + gy.take(k10) * ty
     n01 = gx.take(k01) * tx + gy.take(k01) * ty1
     n11 = gx.take(k11) * tx1 + gy.take(k11) * ty1
-    u, v = _fade(tx), _fade(ty)
-    a = n00 + u * (n10 - n00)
-    b = n01 + u * (n11 - n01)
-    return (a + v * (b - a)).astype(np.float32, copy=False)
+    return _lerp2(n00, n10, n01, n11, _fade(tx), _fade(ty)).astype(np.float32, copy=False)
 
 
 def _grid_2d(size: int) -> tuple[np.ndarray, np.ndarray]:
@@ -434,6 +438,65 @@ def worley_fbm_2d(
         f1 = tiling_worley_2d(size, c, gen)
         acc += np.float32(wi) * ((1.0 - f1) if invert else f1)
     return acc
+
+
+# --------------------------------------------------------------------------------------------------------------
+# 2D noise in world space: hash lattices, so any scale and any extent work (the data field's layers)
+# --------------------------------------------------------------------------------------------------------------
+
+
+def _hash(ix: np.ndarray, iy: np.ndarray, seed: int) -> np.ndarray:
+    """32-bit integer hash of lattice coordinates (a mix of multiply and xor-shift rounds)."""
+    h = ix.astype(np.uint32) * np.uint32(0x27D4EB2D) ^ iy.astype(np.uint32) * np.uint32(0x165667B1)
+    h = h + np.uint32((seed * 0x9E3779B9) & 0xFFFFFFFF)
+    h = (h ^ (h >> np.uint32(15))) * np.uint32(0x2C1B3C6D)
+    h = (h ^ (h >> np.uint32(12))) * np.uint32(0x297A2D39)
+    return h ^ (h >> np.uint32(15))
+
+
+def _unit(h: np.ndarray) -> np.ndarray:
+    return (h >> np.uint32(8)).astype(np.float64) / float(1 << 24)
+
+
+def world_perlin_2d(x: np.ndarray, y: np.ndarray, seed: int) -> np.ndarray:
+    """Gradient noise, roughly in [-0.7, 0.7], one lattice cell per unit."""
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = x - x0, y - y0
+    ix, iy = x0.astype(np.int64), y0.astype(np.int64)
+
+    def corner(dx: int, dy: int) -> np.ndarray:
+        angle = _unit(_hash(ix + dx, iy + dy, seed)) * (2 * np.pi)
+        return np.cos(angle) * (fx - dx) + np.sin(angle) * (fy - dy)
+
+    return _lerp2(corner(0, 0), corner(1, 0), corner(0, 1), corner(1, 1), _fade(fx), _fade(fy))
+
+
+def world_worley_2d(x: np.ndarray, y: np.ndarray, seed: int) -> np.ndarray:
+    """Distance to the nearest of one random feature point per unit cell (F1), about [0, 1]."""
+    x0, y0 = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
+    best = np.full(x.shape, 4.0)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            h = _hash(x0 + dx, y0 + dy, seed)
+            px = x0 + dx + _unit(h)
+            py = y0 + dy + _unit(_hash(x0 + dx, y0 + dy, seed + 7919))
+            best = np.minimum(best, (x - px) ** 2 + (y - py) ** 2)
+    return np.sqrt(best)
+
+
+def world_fbm_2d(kind: str, x: np.ndarray, y: np.ndarray, octaves: int, seed: int) -> np.ndarray:
+    """Octaves of doubling frequency and halving amplitude, normalised to [0, 1]."""
+    total = np.zeros(x.shape)
+    norm = 0.0
+    for o in range(octaves):
+        f, a = 2.0**o, 0.5**o
+        if kind == "perlin":
+            n = np.clip(0.5 + world_perlin_2d(x * f, y * f, seed + o) / 1.4, 0.0, 1.0)
+        else:  # inverted Worley: round billows (S15, GDC22 "1 - Worley")
+            n = 1.0 - np.clip(world_worley_2d(x * f, y * f, seed + o), 0.0, 1.0)
+        total += a * n
+        norm += a
+    return total / norm
 
 
 def curl_2d(potential: np.ndarray) -> np.ndarray:

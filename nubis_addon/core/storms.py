@@ -16,7 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from .fields import fbm, pixel_centres
+from .fields import pixel_centres
+from .noise import world_fbm_2d
 
 # Width of the stencil's outer fade, as a fraction of the radius: the modelling is fully on inside
 # (1 - EDGE_WIDTH) x radius and fades out with zero slope at the radius. [IMPL]
@@ -128,12 +129,12 @@ def _mesocyclone(storm: Storm, xs: np.ndarray, ys: np.ndarray) -> dict[str, np.n
     c, sn = np.cos(phi), np.sin(phi)
     tx, ty = c * lx - sn * ly, sn * lx + c * ly
     # Distorted noises (SPEC 1.9.4): a low-frequency warp bends the tendril and relief noises.
-    wx = fbm("perlin", tx * 2.5 + 11.3, ty * 2.5 - 4.7, 2, s) - 0.5
-    wy = fbm("perlin", tx * 2.5 - 7.9, ty * 2.5 + 3.1, 2, s + 8) - 0.5
-    edge = fbm("perlin", tx * 2.2 + 5.5, ty * 2.2 + 1.7, 3, s + 16) - 0.5
-    tendril = fbm("perlin", (tx + 0.5 * wx) * 4.0, (ty + 0.5 * wy) * 4.0, 3, s + 24)
-    billow = fbm("worley", tx * 3.5 + 0.37, ty * 3.5 + 0.61, 2, s + 32)
-    relief = fbm("perlin", (tx + 0.6 * wy) * 3.5 - 2.3, (ty + 0.6 * wx) * 3.5 + 8.1, 3, s + 40)
+    wx = world_fbm_2d("perlin", tx * 2.5 + 11.3, ty * 2.5 - 4.7, 2, s) - 0.5
+    wy = world_fbm_2d("perlin", tx * 2.5 - 7.9, ty * 2.5 + 3.1, 2, s + 8) - 0.5
+    edge = world_fbm_2d("perlin", tx * 2.2 + 5.5, ty * 2.2 + 1.7, 3, s + 16) - 0.5
+    tendril = world_fbm_2d("perlin", (tx + 0.5 * wx) * 4.0, (ty + 0.5 * wy) * 4.0, 3, s + 24)
+    billow = world_fbm_2d("worley", tx * 3.5 + 0.37, ty * 3.5 + 0.61, 2, s + 32)
+    relief = world_fbm_2d("perlin", (tx + 0.6 * wy) * 3.5 - 2.3, (ty + 0.6 * wx) * 3.5 + 8.1, 3, s + 40)
     # SPEC 1.9.2, GDC22: "Several noises were composited and blended to their maximum values at the
     # center to produce the characteristic cylindrical foot of the mesocyclone" (the "sombrero").
     comp = np.clip((0.55 * tendril + 0.45 * billow - 0.4) / 0.3, 0.0, 1.0)
@@ -182,8 +183,8 @@ def _anvil(storm: Storm, xs: np.ndarray, ys: np.ndarray) -> dict[str, np.ndarray
     spread = 0.55 + 0.35 * np.clip(0.5 + 0.5 * along, 0.0, 1.0)  # <= 1: stays inside the anvil circle
     re = np.hypot(along, across / spread)
     s = int(storm.seed) * 64
-    edge = fbm("perlin", along * 1.5 + 3.3, across * 4.0 - 1.9, 3, s + 48) - 0.5
-    streak = fbm("perlin", along * 2.0 - 6.1, across * 6.0 + 2.7, 3, s + 56)
+    edge = world_fbm_2d("perlin", along * 1.5 + 3.3, across * 4.0 - 1.9, 3, s + 48) - 0.5
+    streak = world_fbm_2d("perlin", along * 2.0 - 6.1, across * 6.0 + 2.7, 3, s + 56)
     shape = 1.0 - _smoothstep(0.6, 1.0, re + 0.35 * edge)
     blend = float(np.clip(storm.blend, 0.0, 1.0))
     return {

@@ -43,6 +43,7 @@ class Stage:
     outputs: tuple[str, ...] = ("color",)
     blocks: tuple[tuple[str, str], ...] = ()  # extra uniform blocks (struct type, name) after P
     vertex: str = "nubis_fullscreen_vert.glsl"
+    far_plane: bool = False  # the triangle on the far plane: a LESS_EQUAL depth test keeps it behind objects
     fragment: str = ""  # default: shaders/nubis_<name>_frag.glsl
 
 
@@ -75,7 +76,7 @@ STAGES: dict[str, Stage] = {
         (("FLOAT_2D", "hist_color"), ("FLOAT_2D", "hist_flash")),
         libs=("nubis_common_lib.glsl",),
         cloud_inputs=False,
-        vertex="nubis_background_vert.glsl",
+        far_plane=True,
     ),
 }
 _shaders: dict[tuple, gpu.types.GPUShader] = {}
@@ -92,6 +93,7 @@ def _create_info(name: str, defines: dict[str, object]) -> GPUShaderCreateInfo:
     # for the reference light march, the cirrus layer, the naive march and the fetch counter.
     for key, value in defines.items():
         info.define(key, str(value))
+    info.define("NUBIS_FULLSCREEN_DEPTH", "1.0" if stage.far_plane else "0.0")
     info.typedef_source(uniforms.struct_source() + read_shader("nubis_params.glsl"))
     info.uniform_buf(0, "NubisParams", "P")
     for slot, (struct, block) in enumerate(stage.blocks, start=1):

@@ -1,7 +1,0 @@
-/* Full-screen triangle on the far plane: with a LESS_EQUAL depth test the clouds only cover the
- * background, never objects in front of them (SPEC 3.2). */
-void main()
-{
-  uv = pos * 0.5 + 0.5;
-  gl_Position = vec4(pos, 1.0, 1.0);
-}

@@ -1,0 +1,107 @@
+"""The sidebar draws every setting the schema gives a panel: each panel's draw() runs against a layout
+that records what it is asked to show, for every layer kind and with a storm present."""
+
+from __future__ import annotations
+
+import types
+
+
+class RecordingLayout:
+    """Stands in for bpy's UILayout: records every property drawn; sub-layouts share the record."""
+
+    def __init__(self, record: list | None = None):
+        self.drawn: list = [] if record is None else record
+        self.use_property_split = False
+        self.use_property_decorate = False
+        self.active = True
+
+    def _sub(self, *_args, **_kwargs):
+        return RecordingLayout(self.drawn)
+
+    row = column = box = split = _sub
+
+    def prop(self, owner, key, **_kwargs):
+        assert hasattr(owner, key), f"{type(owner).__name__} has no property {key}"
+        self.drawn.append((owner, key))
+
+    def template_list(self, _type, _id, owner, collection, _active_owner, _active, **_kwargs):
+        # The list draws each entry's name.
+        for item in getattr(owner, collection):
+            self.drawn.append((item, "name"))
+
+    def template_ID(self, owner, key, **_kwargs):
+        self.drawn.append((owner, key))
+
+    def operator(self, *_args, **_kwargs):
+        return types.SimpleNamespace()
+
+    def operator_menu_enum(self, *_args, **_kwargs):
+        return None
+
+    def label(self, **_kwargs):
+        return None
+
+
+def _draw_all(panels, context) -> list:
+    drawn: list = []
+    for cls in panels.CLASSES:
+        fake = types.SimpleNamespace(layout=RecordingLayout(drawn), panel=getattr(cls, "panel", ""))
+        for name in ("draw_before", "draw_after"):
+            if hasattr(cls, name):
+                setattr(fake, name, getattr(cls, name).__get__(fake))
+        cls.draw(fake, context)
+    return drawn
+
+
+def test_every_setting_with_a_panel_is_drawn(blender, make_scene):
+    from nubis_addon.blender import panels
+    from nubis_addon.core import schema
+
+    scene = make_scene("default")
+    blender.ops.nubis.storm_add()
+    s = scene.nubis
+    context = types.SimpleNamespace(scene=scene)
+    drawn_keys: set[tuple[str, str]] = set()
+    for kind in ("PERLIN", "GRADIENT", "CONSTANT", "IMAGE"):
+        s.layers[s.active_layer].kind = kind
+        for owner, key in _draw_all(panels, context):
+            group = {"NubisSceneSettings": "scene", "NubisFieldLayer": "layer", "NubisStorm": "storm"}.get(
+                type(owner).__name__, "other"
+            )
+            drawn_keys.add((group, key))
+    for setting in (*schema.SCENE, *schema.LAYER, *schema.STORM):
+        if setting.panel:
+            assert (setting.group if setting.group != "scene" else "scene", setting.key) in drawn_keys, (
+                f"{setting.group} setting {setting.key} is assigned to panel '{setting.panel}' but not drawn"
+            )
+    # ... and the labels are the schema's, not made from keys.
+    prop = type(s).bl_rna.properties["lighting_ms_octaves"]
+    assert prop.name == "Scattering Octaves" and "Wrenninge" in prop.description
+    assert type(s).bl_rna.properties["noise_lf_period"].name == "Shape Noise Size"
+
+
+def test_the_recording_layout_notices_a_missing_setting(blender, make_scene):
+    """The check above can fail: a panel that forgets a setting is caught."""
+    from nubis_addon.blender import panels
+
+    scene = make_scene("default")
+    context = types.SimpleNamespace(scene=scene)
+    drawn = _draw_all(panels, context)
+    keys = {key for _owner, key in drawn}
+    assert "cirrus_altitude" in keys
+    original = panels.NUBIS_PT_cirrus.panel
+    try:
+        panels.NUBIS_PT_cirrus.panel = "nothing"
+        keys = {key for _owner, key in _draw_all(panels, context)}
+        assert "cirrus_altitude" not in keys
+    finally:
+        panels.NUBIS_PT_cirrus.panel = original
+
+
+def test_units_and_soft_ranges_come_from_the_schema(blender):
+    props = blender.types.Scene.bl_rna.properties["nubis"].fixed_type.properties
+    assert props["wind_speed"].unit == "VELOCITY"
+    assert props["wind_time_offset"].unit == "TIME_ABSOLUTE"
+    assert props["wind_direction"].subtype == "ANGLE"
+    assert props["layer_planet_radius"].soft_max < props["layer_planet_radius"].hard_max
+    assert props["ambient_color"].name == "Ambient Color"
