@@ -2,105 +2,161 @@
 
 - "redraw": the clouds are drawn again; the viewport's temporal history restarts by itself when the
   uniform block changes (render/temporal.py).
-- "field": the data field is composited again from the layer stack, the rules and the storms, then drawn.
-Painting an image layer re-composites after a short pause, so a fast brush does not on every dab; frame
-changes re-composite when storms are animated.
+- "field": the data field owes a composite. In the interface it is made a moment after the last of a
+  burst of edits (a slider drag, a brush stroke, an Empty dragged in the viewport), so dragging stays
+  fluid; renders, bakes and the command line make it at once when they read the field.
+Frame changes re-composite when anything feeding the field is animated. The field images are packed
+into the .blend when it is saved, and undo or redo re-composites from the restored settings.
 """
 
 from __future__ import annotations
 
 import bpy
 
+from ..core import schema
 from ..core.errors import NubisError
 from . import scene_io, status, viewport
 
+# Seconds of quiet after the last edit before the field is composited again.
+DEBOUNCE_S = 0.15
 
-def changed(scene, trigger: str) -> None:
-    """Apply what a change with this trigger needs; errors go to the sidebar, never raise into Blender."""
-    if trigger == "none" or scene_io.in_batch_edit():
+
+def changed(scene, trigger: str, key: str = "") -> None:
+    """Apply what a change of `key` with this trigger needs; errors go to the sidebar, never raise into
+    Blender."""
+    if trigger == "none" or scene_io.in_batch_edit() or scene is None:
         return
+    if key:
+        enforce_limits(scene.nubis, key)
     if trigger == "field" and scene_io.has_cloudscape(scene):
-        try:
-            scene_io.generate_fields(scene)
-            status.clear_error()
-        except NubisError as err:
-            status.set_error(str(err))
+        request_composite(scene)
     viewport.invalidate()
     scene_io.redraw_views()
 
 
-def update_callback(trigger: str):
+def update_callback(trigger: str, key: str = ""):
     """The `update=` function of a property whose change has this trigger."""
 
     def update(_self, context) -> None:
-        changed(getattr(context, "scene", None), trigger)
+        changed(getattr(context, "scene", None), trigger, key)
 
     update.__name__ = f"nubis_update_{trigger}"
     return update
 
 
-_pending_images: set[str] = set()
+def enforce_limits(settings, key: str) -> None:
+    """Keep the schema's cross-field limits (a layer top above its bottom, ...): dragging one setting past
+    the other carries the other along, as the preset loader would otherwise refuse the file."""
+    for rule in schema.CROSS_LIMITS:
+        if key not in (rule.low, rule.high):
+            continue
+        low, high = getattr(settings, rule.low), getattr(settings, rule.high)
+        if high - low >= rule.gap:
+            continue
+        with scene_io.batch_edit():
+            if key == rule.low:
+                setattr(settings, rule.high, type(high)(low + rule.gap))
+            else:
+                setattr(settings, rule.low, type(low)(high - rule.gap))
+
+
+def request_composite(scene) -> None:
+    """The field owes a composite: made after DEBOUNCE_S of quiet, or by the next render that reads it."""
+    scene_io.mark_field_stale(scene)
+    if bpy.app.background:
+        return  # no timers run without the interface: readers composite when they need the field
+    if bpy.app.timers.is_registered(composite_stale):
+        bpy.app.timers.unregister(composite_stale)  # restart the wait: a drag composites once, at its end
+    bpy.app.timers.register(composite_stale, first_interval=DEBOUNCE_S)
+
+
+def composite_stale():
+    """Composite every scene that owes one (what the debounce timer runs)."""
+    for scene in scene_io.stale_scenes():
+        if not scene_io.has_cloudscape(scene):
+            continue
+        try:
+            scene_io.generate_fields(scene)
+            status.clear_error()
+        except NubisError as err:
+            scene_io.forget_stale()
+            status.set_error(str(err))
+    viewport.invalidate()
+    scene_io.redraw_views()
+    return None
+
+
 _scene_updates = [0]  # counts depsgraph updates: the scene's geometry (and so its depth) may have changed
-
-
-def scene_updates() -> int:
-    return _scene_updates[0]
 
 
 @bpy.app.handlers.persistent
 def on_load(*_args) -> None:
-    """A new file: forget cached pixels and any paint regeneration pending for the old one."""
+    """A new file: forget cached pixels and any composite owed by the old one."""
     viewport.invalidate()
-    _pending_images.clear()
-    if bpy.app.timers.is_registered(_regenerate_after_paint):
-        bpy.app.timers.unregister(_regenerate_after_paint)
+    scene_io.forget_stale()
+    if bpy.app.timers.is_registered(composite_stale):
+        bpy.app.timers.unregister(composite_stale)
 
 
 @bpy.app.handlers.persistent
 def on_frame_change(scene, _depsgraph=None) -> None:
-    """Animated storms (lifecycle blend, a moving Empty) change the field: re-composite on frame changes."""
-    settings = getattr(scene, "nubis", None)
-    if not scene_io.has_cloudscape(scene) or not settings.storms:
+    """Keyed layers, rules, storms and field settings change the field: composite for the new frame."""
+    if not scene_io.has_cloudscape(scene) or not scene_io.field_animated(scene.nubis):
         return
-    if scene_io.storms_animated(settings):
-        try:
-            scene_io.generate_fields(scene)
-        except NubisError as err:
-            status.set_error(str(err))
+    try:
+        scene_io.generate_fields(scene)
+        status.clear_error()
+    except NubisError as err:
+        status.set_error(str(err))
 
 
 @bpy.app.handlers.persistent
 def on_depsgraph_update(scene, depsgraph) -> None:
-    """Strokes on an image layer arrive as image updates; a short timer gathers them. Any update may
-    move geometry, so the viewport reads its depth again."""
+    """Strokes on an image layer and moves of a storm's Empty owe a composite. Any update may move
+    geometry, so the viewport reads its depth again."""
     _scene_updates[0] += 1
     viewport.geometry_changed(_scene_updates[0])
     if not scene_io.has_cloudscape(scene):
         return
-    used = scene_io.layer_images(scene.nubis)
-    edited = {u.id.name for u in depsgraph.updates if isinstance(u.id, bpy.types.Image) and u.id.name in used}
-    if edited:
-        _pending_images.update(edited)
-        if not bpy.app.timers.is_registered(_regenerate_after_paint):
-            bpy.app.timers.register(_regenerate_after_paint, first_interval=0.25)
+    settings = scene.nubis
+    used = scene_io.layer_images(settings)
+    for u in depsgraph.updates:
+        if isinstance(u.id, bpy.types.Image) and u.id.name in used:
+            request_composite(scene)
+        elif isinstance(u.id, bpy.types.Object) and getattr(u, "is_updated_transform", True):
+            if scene_io.storm_of_object(settings, u.id) is not None:
+                request_composite(scene)
 
 
-def _regenerate_after_paint():
-    _pending_images.clear()
-    scene = bpy.context.scene
-    if scene_io.has_cloudscape(scene):
-        try:
-            scene_io.generate_fields(scene)
-        except NubisError as err:
-            status.set_error(str(err))
-        scene_io.redraw_views()
-    return None
+@bpy.app.handlers.persistent
+def on_save_pre(*_args) -> None:
+    """Pack the field images into the file being saved (composites leave them unpacked)."""
+    for scene in bpy.data.scenes:
+        if scene_io.has_cloudscape(scene):
+            if scene_io.field_stale(scene):
+                try:
+                    scene_io.generate_fields(scene)
+                except NubisError as err:
+                    status.set_error(str(err))
+            scene_io.pack_fields(scene.nubis)
+
+
+@bpy.app.handlers.persistent
+def on_undo_redo(*_args) -> None:
+    """Undo and redo restore the settings, not necessarily the field's pixels: composite from them."""
+    for scene in bpy.data.scenes:
+        if scene_io.has_cloudscape(scene):
+            request_composite(scene)
+    viewport.invalidate()
 
 
 _HANDLERS = (
     (bpy.app.handlers.load_post, on_load),
     (bpy.app.handlers.depsgraph_update_post, on_depsgraph_update),
     (bpy.app.handlers.frame_change_post, on_frame_change),
+    (bpy.app.handlers.save_pre, on_save_pre),
+    (bpy.app.handlers.undo_post, on_undo_redo),
+    (bpy.app.handlers.redo_post, on_undo_redo),
 )
 
 
@@ -114,6 +170,6 @@ def unregister() -> None:
     for handlers, fn in _HANDLERS:
         if fn in handlers:
             handlers.remove(fn)
-    _pending_images.clear()
-    if bpy.app.timers.is_registered(_regenerate_after_paint):
-        bpy.app.timers.unregister(_regenerate_after_paint)
+    scene_io.forget_stale()
+    if bpy.app.timers.is_registered(composite_stale):
+        bpy.app.timers.unregister(composite_stale)

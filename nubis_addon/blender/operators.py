@@ -13,16 +13,26 @@ from ..core.limits import MAX_LAYERS
 from ..core.state import MAX_STORMS
 from . import cycles_setup, pipeline, preview, runtime, scene_io, status, viewport
 
+_PRESET_ITEMS: dict = {}  # (folder listing and times) -> items: Blender keeps pointers to these strings
 
-def _preset_items(_self, _context):
-    items = []
-    for name in presets.list_presets():
-        try:
-            label = presets.load_preset(name).name
-        except NubisError:
-            label = f"{name} (broken)"
-        items.append((name, label, ""))
-    return items or [("default", "Default", "")]
+
+def preset_items(_self=None, _context=None):
+    """The New Cloudscape menu: each preset's name, with its description as the tooltip. Parsed once per
+    change of the presets folder, and the same list returned, so Blender's pointers stay valid."""
+    folder = presets.preset_dir()
+    paths = sorted(folder.glob("*.toml"))
+    key = tuple((p.name, p.stat().st_mtime_ns) for p in paths if p.is_file())
+    if key not in _PRESET_ITEMS:
+        items = []
+        for path in paths:
+            try:
+                preset = presets.load_preset(str(path))
+                items.append((path.stem, preset.name, preset.description or preset.name))
+            except NubisError as err:
+                items.append((path.stem, f"{path.stem} (broken)", str(err)))
+        _PRESET_ITEMS.clear()
+        _PRESET_ITEMS[key] = items or [("default", "Default", "The default cloudscape")]
+    return _PRESET_ITEMS[key]
 
 
 def _absolute(path: str) -> str:
@@ -64,12 +74,36 @@ class NUBIS_OT_new_cloudscape(NubisOperator, bpy.types.Operator):
     bl_label = "New Cloudscape"
     bl_options = {"REGISTER", "UNDO"}
 
-    preset: EnumProperty(name="Preset", items=_preset_items)
+    preset: EnumProperty(name="Preset", items=preset_items)
+    keep_camera: BoolProperty(
+        name="Keep Scene Camera", default=False, description="Render from the scene's camera, unmoved and unchanged"
+    )
+    keep_world: BoolProperty(name="Keep World", default=False, description="Keep the scene's World as the sky")
+    keep_render: BoolProperty(
+        name="Keep Render Settings",
+        default=False,
+        description="Keep resolution, frame, view transform and Cycles samples and bounces",
+    )
+    keep_sun: BoolProperty(
+        name="Use Scene Sun", default=False, description="Light the clouds with the scene's own Sun lamp"
+    )
+
+    def invoke(self, context, _event):
+        """In a scene that already has a camera, World or Sun of the artist's, ask what to keep."""
+        scene = context.scene
+        own_camera = scene.camera is not None and scene.camera.name != scene_io.CAMERA_NAME
+        own_world = scene.world is not None and scene.world.name != scene_io.WORLD_NAME
+        own_sun = any(o.type == "LIGHT" and o.data.type == "SUN" and o.name != scene_io.SUN_NAME for o in scene.objects)
+        if not (own_camera or own_world or own_sun):
+            return self.execute(context)
+        self.keep_camera, self.keep_world, self.keep_render, self.keep_sun = own_camera, own_world, True, own_sun
+        return context.window_manager.invoke_props_dialog(self)
 
     def run(self, context):
         preset = presets.load_preset(self.preset)
+        keep = scene_io.Keep(self.keep_camera, self.keep_world, self.keep_render, self.keep_sun)
         with _field_progress(context) as progress:
-            scene_io.apply_preset(context.scene, preset, progress)
+            scene_io.apply_preset(context.scene, preset, progress, keep)
         return f"Cloudscape '{preset.name}' created"
 
 
@@ -82,6 +116,18 @@ def _field_progress(context):
         yield lambda fraction: wm.progress_update(int(fraction * 100))
     finally:
         wm.progress_end()
+
+
+class NUBIS_OT_view_toggle(NeedsCloudscape, bpy.types.Operator):
+    """Show or hide the clouds in this 3D viewport only"""
+
+    bl_idname = "nubis.view_toggle"
+    bl_label = "Clouds in This Viewport"
+
+    def execute(self, context):
+        viewport.set_view_toggle(context, not viewport.view_toggle(context))
+        scene_io.redraw_views()
+        return {"FINISHED"}
 
 
 class NUBIS_OT_generate_field(NeedsCloudscape, NubisOperator, bpy.types.Operator):
@@ -431,6 +477,7 @@ class NUBIS_OT_benchmark(NeedsCloudscape, NubisOperator, bpy.types.Operator):
 
 CLASSES = (
     NUBIS_OT_new_cloudscape,
+    NUBIS_OT_view_toggle,
     NUBIS_OT_generate_field,
     NUBIS_OT_layer_add,
     NUBIS_OT_layer_remove,

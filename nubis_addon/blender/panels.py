@@ -7,7 +7,7 @@ from __future__ import annotations
 import bpy
 
 from ..core import quality, schema
-from . import scene_io, status
+from . import scene_io, status, viewport
 
 
 def draw_settings(layout, owner, settings) -> None:
@@ -35,7 +35,10 @@ class NUBIS_PT_main(bpy.types.Panel):
         if not scene_io.has_cloudscape(context.scene):
             layout.label(text="No cloudscape in this scene yet")
             return
-        layout.prop(context.scene.nubis, "enabled")
+        row = layout.row(align=True)
+        row.prop(context.scene.nubis, "enabled")
+        shown = viewport.view_toggle(context)
+        row.operator("nubis.view_toggle", text="", icon="HIDE_OFF" if shown else "HIDE_ON", depress=shown)
         if status.last_error():
             layout.label(text=status.last_error(), icon="ERROR")
         layout.operator("nubis.render_image", icon="RENDER_STILL")
@@ -66,6 +69,29 @@ class NubisPanel:
         pass
 
 
+_KIND_ICONS = {
+    "PERLIN": "FORCE_TURBULENCE",
+    "WORLEY": "MOD_OCEAN",
+    "PERLIN_WORLEY": "OUTLINER_DATA_VOLUME",
+    "GRADIENT": "IPO_LINEAR",
+    "CONSTANT": "SNAP_FACE",
+    "IMAGE": "IMAGE_DATA",
+}
+
+
+class NUBIS_UL_layers(bpy.types.UIList):
+    """The layer stack: an enable checkbox, the kind's icon, the name and the channel written."""
+
+    def draw_item(self, _context, layout, _data, item, _icon, _active_data, _active_prop, _index=0):
+        row = layout.row(align=True)
+        row.prop(item, "enabled", text="")
+        row.label(text="", icon=_KIND_ICONS.get(item.kind, "DOT"))
+        row.prop(item, "name", text="", emboss=False)
+        sub = row.row()
+        sub.active = item.enabled
+        sub.label(text=item.channel.replace("_", " ").title())
+
+
 _LAYER_KEYS_BY_KIND = {
     "PERLIN": ("scale", "seed", "octaves"),
     "WORLEY": ("scale", "seed", "octaves"),
@@ -74,7 +100,7 @@ _LAYER_KEYS_BY_KIND = {
     "CONSTANT": ("value",),
     "IMAGE": (),
 }
-_LAYER_COMMON = ("kind", "channel", "blend", "enabled", "opacity", "mask", "invert_mask")
+_LAYER_COMMON = ("kind", "channel", "blend", "enabled", "opacity")
 
 
 class NUBIS_PT_field(NubisPanel, bpy.types.Panel):
@@ -86,7 +112,7 @@ class NUBIS_PT_field(NubisPanel, bpy.types.Panel):
         layout.use_property_split = False
         s = context.scene.nubis
         row = layout.row()
-        row.template_list("UI_UL_list", "nubis_layers", s, "layers", s, "active_layer", rows=4)
+        row.template_list("NUBIS_UL_layers", "", s, "layers", s, "active_layer", rows=4)
         col = row.column(align=True)
         col.operator("nubis.layer_add", icon="ADD", text="")
         col.operator("nubis.layer_remove", icon="REMOVE", text="")
@@ -97,7 +123,14 @@ class NUBIS_PT_field(NubisPanel, bpy.types.Panel):
             layer = s.layers[s.active_layer]
             box = layout.box()
             box.use_property_split = True
-            for key in _LAYER_COMMON + _LAYER_KEYS_BY_KIND[layer.kind]:
+            for key in _LAYER_COMMON:
+                box.prop(layer, key)
+            # The mask is chosen from the layers above this one (the loader refuses any other).
+            box.prop_search(layer, "mask", s, "layers", icon="MOD_MASK")
+            sub = box.row()
+            sub.active = bool(layer.mask)
+            sub.prop(layer, "invert_mask")
+            for key in _LAYER_KEYS_BY_KIND[layer.kind]:
                 box.prop(layer, key)
             if layer.kind == "IMAGE":
                 box.template_ID(layer, "image", open="image.open")
@@ -232,7 +265,7 @@ PANEL_CLASSES = {
     )
 }
 # Sub-panels in the schema's order (the order an artist works in).
-CLASSES = (NUBIS_PT_main, *(PANEL_CLASSES[p] for p in schema.PANEL_IDS))
+CLASSES = (NUBIS_UL_layers, NUBIS_PT_main, *(PANEL_CLASSES[p] for p in schema.PANEL_IDS))
 
 
 register, unregister = bpy.utils.register_classes_factory(CLASSES)

@@ -34,6 +34,17 @@ def _enum_items(s: schema.Setting) -> list[tuple[str, str, str]]:
     return _ENUM_ITEMS[key]
 
 
+def _is_sun(_self, obj) -> bool:
+    return obj.type == "LIGHT" and obj.data.type == "SUN"
+
+
+def _is_empty(_self, obj) -> bool:
+    return obj.type == "EMPTY"
+
+
+_OBJECT_POLLS = {"SUN": _is_sun, "EMPTY": _is_empty}
+
+
 def _float_kw(s: schema.Setting) -> dict:
     kw = {"default": float(s.default)}
     for name in ("min", "max", "soft_min", "soft_max"):
@@ -49,7 +60,8 @@ def _float_kw(s: schema.Setting) -> dict:
 def prop_for(s: schema.Setting):
     """The bpy property of one setting."""
     common = {"name": s.label, "description": s.description}
-    update = {"update": events.update_callback(s.trigger)} if s.trigger != "none" else {}
+    key = s.key if s.group == "scene" else ""
+    update = {"update": events.update_callback(s.trigger, key)} if s.trigger != "none" else {}
     if s.kind == "float":
         return FloatProperty(**common, **update, **_float_kw(s))
     if s.kind == "int":
@@ -72,7 +84,8 @@ def prop_for(s: schema.Setting):
     if s.kind == "image":
         return PointerProperty(**common, **update, type=bpy.types.Image)
     if s.kind == "object":
-        return PointerProperty(**common, **update, type=bpy.types.Object)
+        poll = _OBJECT_POLLS.get(s.object_type)
+        return PointerProperty(**common, **update, type=bpy.types.Object, **({"poll": poll} if poll else {}))
     raise TypeError(f"{s.key}: no property for kind {s.kind}")
 
 

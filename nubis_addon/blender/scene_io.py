@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import bpy
@@ -23,6 +24,8 @@ FIELD_IMAGES = {
     "cirrus": ("field_cirrus", "Nubis Cirrus"),
 }
 SUN_NAME = "Nubis Sun"
+STORM_TAG = "nubis_storm"
+WORLD_NAME = "Nubis Sky"
 CAMERA_NAME = "Nubis Camera"
 
 
@@ -116,7 +119,9 @@ def field_generation() -> int:
 
 
 def write_field_image(settings, which: str, data: np.ndarray):
-    """Store a field array in its image, creating, resizing and packing it so it survives save and reload."""
+    """Store a field array in its image, creating or resizing it. The image is packed into the .blend
+    when the file is saved (blender/events.py), not on every composite: a slider drag re-composites
+    many times a second."""
     attr, name = FIELD_IMAGES[which]
     h, w = data.shape[:2]
     img = getattr(settings, attr)
@@ -128,9 +133,38 @@ def write_field_image(settings, which: str, data: np.ndarray):
     img.alpha_mode = "CHANNEL_PACKED"
     img.pixels.foreach_set(np.ascontiguousarray(data, dtype=np.float32).ravel())
     img.update()
-    img.pack()
     _field_generation[0] += 1
     return img
+
+
+def pack_fields(settings) -> None:
+    """Pack the field images whose pixels changed since they were last packed, so they survive save and reload."""
+    for attr, _name in FIELD_IMAGES.values():
+        img = getattr(settings, attr)
+        if img is not None and (img.packed_file is None or img.is_dirty):
+            img.pack()
+
+
+# ---- a composite owed: the field's inputs changed since the last one ---------------------------------
+
+_stale: set[int] = set()
+
+
+def mark_field_stale(scene) -> None:
+    """The field's inputs changed: the next read of the field (or the debounced timer) composites."""
+    _stale.add(scene.as_pointer())
+
+
+def field_stale(scene) -> bool:
+    return scene.as_pointer() in _stale
+
+
+def stale_scenes() -> list:
+    return [scene for scene in bpy.data.scenes if scene.as_pointer() in _stale]
+
+
+def forget_stale() -> None:
+    _stale.clear()
 
 
 def read_field_image(img, which: str, resolution: int) -> np.ndarray:
@@ -147,7 +181,11 @@ def read_field_image(img, which: str, resolution: int) -> np.ndarray:
     return arr
 
 
-def read_fields(settings) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def read_fields(settings, flush: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The field images' pixels; with `flush`, a composite owed is made first (renders and bakes must
+    see the edits; the interactive viewport waits for the debounced one instead)."""
+    if flush and field_stale(settings.id_data):
+        generate_fields(settings.id_data)
     res = settings.field_resolution
     return tuple(read_field_image(getattr(settings, attr), which, res) for which, (attr, _n) in FIELD_IMAGES.items())
 
@@ -188,6 +226,7 @@ def generate_fields(scene, progress=None) -> None:
         stormgen.apply_storms(result, params, storms)
     for which, data in result.items():
         write_field_image(settings, which, data)
+    _stale.discard(scene.as_pointer())
 
 
 # ---- superstorms ------------------------------------------------------------------------------------
@@ -282,6 +321,7 @@ def storm_lights(settings, scene=None, time: float = 0.0) -> tuple[StormLight, .
 def add_storm(scene, data: dict):
     """A storm entry and the Empty that positions it."""
     empty = bpy.data.objects.new(data.get("name", "Superstorm"), None)
+    empty[STORM_TAG] = True  # made by Nubis: removed with its storm, unlike an Empty the artist assigns
     empty.empty_display_type = "CIRCLE"
     empty.empty_display_size = data.get("radius", 12000.0)
     empty.location = (data.get("x", 0.0), data.get("y", 0.0), scene.nubis.layer_bottom)
@@ -295,11 +335,26 @@ def add_storm(scene, data: dict):
     return storm
 
 
-def storms_animated(settings) -> bool:
+# F-curve paths on the scene whose values feed the field: the layers, the storms and the scene settings
+# whose change re-composites (schema trigger "field").
+_FIELD_PATHS = ("nubis.layers[", "nubis.storms[") + tuple(
+    f"nubis.{s.key}" for s in schema.SCENE if s.trigger == "field"
+)
+
+
+def field_animated(settings) -> bool:
+    """Whether the field changes from frame to frame: keyed layers, rules, storms or field settings, or
+    a storm Empty with an animation of its own."""
     for s in settings.storms:
         if s.empty is not None and s.empty.animation_data and s.empty.animation_data.action:
             return True
-    return any(fc.data_path.startswith("nubis.storms[") for fc in fcurves(settings.id_data))
+    return any(fc.data_path.startswith(_FIELD_PATHS) for fc in fcurves(settings.id_data))
+
+
+def storm_of_object(settings, obj):
+    """The storm whose Empty `obj` is (or its evaluated copy), or None."""
+    original = getattr(obj, "original", obj)
+    return next((s for s in settings.storms if s.empty is not None and s.empty == original), None)
 
 
 def remove_storm_animation(scene, index: int) -> None:
@@ -352,10 +407,22 @@ def layer_images(settings) -> set[str]:
 # ---- presets ---------------------------------------------------------------------------------------
 
 
-def apply_preset(scene, preset: Preset, progress=None) -> None:
-    """Make `scene` the preset's cloudscape: settings, layer stack, field images, sun, world, camera;
-    ``progress`` follows the field composite."""
+@dataclass(frozen=True)
+class Keep:
+    """What New Cloudscape leaves as the artist had it. Everything not kept is set up from the preset."""
+
+    camera: bool = False  # the scene camera: not moved, not re-lensed
+    world: bool = False  # the scene's World: not replaced or recolored
+    render: bool = False  # resolution, frame, view transform, Cycles samples and bounces
+    sun: bool = False  # light the clouds with the scene's own Sun lamp rather than the preset's
+
+
+def apply_preset(scene, preset: Preset, progress=None, keep: Keep = Keep()) -> None:
+    """Make `scene` the preset's cloudscape: settings, layer stack, field images, and (unless `keep`
+    says otherwise) its sun, world, camera and render settings; ``progress`` follows the field
+    composite. Storm Empties an artist made stay in the scene; those Nubis made for the old storms go."""
     settings = scene.nubis
+    own_sun = settings.sun if keep.sun and settings.sun is not None else (find_sun(scene) if keep.sun else None)
     with batch_edit():
         for key, value in preset.params.items():
             s = schema.BY_KEY[key]
@@ -367,16 +434,20 @@ def apply_preset(scene, preset: Preset, progress=None) -> None:
             if data["kind"] == "image":
                 data["image"] = _load_layer_image(data["image"], preset.path)
             layer_from_dict(settings.layers.add(), data)
-        _setup_sun(scene, preset.extra["sun"])
-        _setup_world(scene, preset.extra["world"])
-        _setup_camera(scene, preset.extra["camera"])
+        settings.sun = own_sun or _setup_sun(scene, preset.extra["sun"])
+        if not keep.world or scene.world is None:
+            _setup_world(scene, preset.extra["world"])
+        if not keep.camera or scene.camera is None:
+            _setup_camera(scene, preset.extra["camera"])
         for storm in list(settings.storms):
-            if storm.empty is not None:
+            if storm.empty is not None and storm.empty.get(STORM_TAG):
                 bpy.data.objects.remove(storm.empty)
         settings.storms.clear()
         for data in preset.storms:
             add_storm(scene, data)
     generate_fields(scene, progress)  # after the camera and storms: the rules and stencils are placed by them
+    if keep.render:
+        return
     r = preset.extra["render"]
     scene.render.resolution_x, scene.render.resolution_y = r["width"], r["height"]
     scene.render.resolution_percentage = 100
@@ -418,7 +489,7 @@ def _load_layer_image(ref: str, preset_path: Path | None) -> str:
     return img.name
 
 
-def _setup_sun(scene, sun: dict) -> None:
+def _setup_sun(scene, sun: dict):
     obj = scene.objects.get(SUN_NAME)
     if obj is None or obj.type != "LIGHT":
         data = bpy.data.lights.new(SUN_NAME, type="SUN")
@@ -431,10 +502,14 @@ def _setup_sun(scene, sun: dict) -> None:
     obj.data.color = sun["color"]
     obj.data.energy = sun["strength"]
     obj.data.angle = math.radians(sun["angle"])
+    return obj
 
 
 def _setup_world(scene, world_cfg: dict) -> None:
-    world = scene.world or bpy.data.worlds.new("Nubis Sky")
+    """The preset's sky as the World "Nubis Sky"; an artist's own World is kept in the file (fake user)."""
+    world = bpy.data.worlds.get(WORLD_NAME) or bpy.data.worlds.new(WORLD_NAME)
+    if scene.world is not None and scene.world != world:
+        scene.world.use_fake_user = True
     scene.world = world
     world.color = world_cfg["color"]
     if world.node_tree is None:  # worlds made before 5.0 may lack a node tree
@@ -450,13 +525,13 @@ def _setup_world(scene, world_cfg: dict) -> None:
 
 
 def _setup_camera(scene, cam: dict) -> None:
-    obj = scene.camera
-    if obj is None:
-        obj = scene.objects.get(CAMERA_NAME)
-        if obj is None:
-            obj = bpy.data.objects.new(CAMERA_NAME, bpy.data.cameras.new(CAMERA_NAME))
-            scene.collection.objects.link(obj)
-        scene.camera = obj
+    """The preset's view from the camera "Nubis Camera", made the scene camera; an artist's own camera
+    is left where it was."""
+    obj = scene.objects.get(CAMERA_NAME)
+    if obj is None or obj.type != "CAMERA":
+        obj = bpy.data.objects.new(CAMERA_NAME, bpy.data.cameras.new(CAMERA_NAME))
+        scene.collection.objects.link(obj)
+    scene.camera = obj
     obj.location = cam["location"]
     obj.rotation_euler = Euler([math.radians(a) for a in cam["rotation"]], "XYZ")
     obj.data.lens = cam["lens"]
@@ -467,6 +542,10 @@ def _setup_camera(scene, cam: dict) -> None:
 
 
 def find_sun(scene):
+    """The Sun lamp lighting the clouds: the cloudscape's own (Lighting > Sun), else the first visible one."""
+    chosen = getattr(scene.nubis, "sun", None) if getattr(scene, "nubis", None) is not None else None
+    if chosen is not None and chosen.type == "LIGHT" and chosen.data.type == "SUN" and chosen.name in scene.objects:
+        return chosen
     for obj in scene.objects:
         if obj.type == "LIGHT" and obj.data.type == "SUN" and not obj.hide_render:
             return obj

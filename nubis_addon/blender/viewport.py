@@ -11,7 +11,7 @@ import numpy as np
 from ..core import camera
 from ..core.errors import NubisError
 from ..render import temporal
-from . import runtime, scene_io, status
+from . import cycles_setup, runtime, scene_io, status
 
 _handle = None
 _fields_cache: dict = {}  # scene pointer -> (key, field arrays)
@@ -42,7 +42,9 @@ def _state(scene, view_origin):
     if cached is None or cached[0] != key:
         if len(_fields_cache) >= _MAX_VIEWS:
             _fields_cache.clear()
-        cached = _fields_cache[scene.as_pointer()] = (key, scene_io.read_fields(s))
+        # Headless there is no debounce timer: a composite owed is made here. In the interface the
+        # timer makes it (blender/events.py) and the draw shows the last field until then.
+        cached = _fields_cache[scene.as_pointer()] = (key, scene_io.read_fields(s, flush=bpy.app.background))
     return scene_io.state_from_scene(scene, camera_location=view_origin, fields=cached[1])
 
 
@@ -132,20 +134,75 @@ def _keep_converging() -> None:
         bpy.app.timers.register(_converging_tick, first_interval=1.0 / 60.0)
 
 
-def _draw_callback() -> None:
-    context = bpy.context
+# Shading modes the clouds are drawn in: not Wireframe, where they would hide the wires.
+DRAWN_SHADING = {"SOLID", "MATERIAL", "RENDERED"}
+HIDDEN_KEY = "nubis_hidden_views"  # a Screen's ID property: the indices of its areas that hide the clouds
+
+
+def view_shows_clouds(context) -> bool:
+    """Whether this 3D view draws the live clouds: the scene has them switched on, the view's own toggle
+    is on, the shading is not Wireframe, and in Rendered mode no baked Nubis volume stands in for them
+    (the render engine draws that one: the clouds would show twice)."""
     scene = context.scene
     if not scene_io.has_cloudscape(scene) or not scene.nubis.enabled:
+        return False
+    if not view_toggle(context):
+        return False
+    shading = getattr(getattr(context, "space_data", None), "shading", None)
+    mode = getattr(shading, "type", "SOLID")
+    if mode not in DRAWN_SHADING:
+        return False
+    if mode == "RENDERED":
+        baked = scene.objects.get(cycles_setup.VOLUME_NAME)
+        if baked is not None and not baked.hide_get() and not baked.hide_viewport:
+            return False
+    return True
+
+
+def _area_index(context) -> int | None:
+    screen, area = getattr(context, "screen", None), getattr(context, "area", None)
+    if screen is None or area is None:
+        return None
+    return next((i for i, a in enumerate(screen.areas) if a == area), None)
+
+
+def view_toggle(context) -> bool:
+    """This 3D view's own Show Clouds toggle (kept in its screen, so it is saved with the file)."""
+    index = _area_index(context)
+    if index is None:
+        return True
+    return index not in list(context.screen.get(HIDDEN_KEY, ()))
+
+
+def set_view_toggle(context, show: bool) -> None:
+    index = _area_index(context)
+    if index is None:
         return
+    hidden = {int(i) for i in context.screen.get(HIDDEN_KEY, ())} - {index}
+    if not show:
+        hidden.add(index)
+    context.screen[HIDDEN_KEY] = sorted(hidden)
+
+
+def _draw_callback() -> None:
+    draw_in_context(bpy.context)
+
+
+def draw_in_context(context) -> bool:
+    """The draw handler's body: draws this view's clouds if it shows them; returns whether it drew."""
+    if not view_shows_clouds(context):
+        return False
+    scene = context.scene
     region, rv3d = context.region, context.region_data
     if region is None or rv3d is None:
-        return
+        return False
     try:
         draw_region(scene, region, rv3d)
         status.clear_error()
     except NubisError as err:
         # A draw callback cannot report; remember the message for the sidebar instead of spamming the console.
         status.set_error(str(err))
+    return True
 
 
 def draw_region(scene, region, rv3d) -> temporal.TemporalViewport:

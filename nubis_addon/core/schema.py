@@ -67,6 +67,7 @@ class Setting:
     in_preset: bool = True  # presets read and write it
     quality: str = ""  # its column in presets/quality/quality.toml, if a quality level sets it
     key_override: str = ""
+    object_type: str = ""  # for object settings: the kind of object allowed ("SUN": Sun lamps, "EMPTY")
 
     @property
     def key(self) -> str:
@@ -935,6 +936,18 @@ SCENE: tuple[Setting, ...] = (
     ),
     S(
         "",
+        "sun",
+        "object",
+        None,
+        "Sun",
+        "The Sun lamp that lights the clouds (New Cloudscape sets its own)",
+        panel="lighting",
+        in_preset=False,
+        key_override="sun",
+        object_type="SUN",
+    ),
+    S(
+        "",
         "ambient_source",
         "enum",
         "world",
@@ -1270,7 +1283,7 @@ STORM: tuple[Setting, ...] = _table(
             None,
             "Position",
             "An Empty whose location is the storm's center; move it in the viewport",
-            {**_ST, "in_preset": False},
+            {"object_type": "EMPTY", **_ST, "in_preset": False},
         ),
         (
             "flash",

@@ -37,7 +37,7 @@ def test_new_cloudscape_operator_and_layer_stack(blender):
 
 
 def test_painting_an_image_layer_updates_the_field(make_scene, blender):
-    from nubis_addon.blender import events
+    from nubis_addon.blender import events, scene_io
 
     scene = make_scene("default")
     s = scene.nubis
@@ -52,8 +52,9 @@ def test_painting_an_image_layer_updates_the_field(make_scene, blender):
     img.pixels.foreach_set(px.ravel())
     fake = types.SimpleNamespace(updates=[types.SimpleNamespace(id=img)])
     events.on_depsgraph_update(scene, fake)
-    assert events._pending_images == {"Paint"}
-    events._regenerate_after_paint()  # what the timer runs a moment later
+    assert scene_io.field_stale(scene)  # a composite is owed ...
+    events.composite_stale()  # ... and made by the debounce timer a moment later
+    assert not scene_io.field_stale(scene)
     cov = _coverage(scene)
     assert cov[:, :200].max() < 0.01 and cov[:, 312:].min() > 0.99
 

@@ -29,6 +29,9 @@ class RecordingLayout:
         for item in getattr(owner, collection):
             self.drawn.append((item, "name"))
 
+    def prop_search(self, owner, key, _search_owner, _search_collection, **_kwargs):
+        self.prop(owner, key)
+
     def template_ID(self, owner, key, **_kwargs):
         self.drawn.append((owner, key))
 
@@ -45,6 +48,8 @@ class RecordingLayout:
 def _draw_all(panels, context) -> list:
     drawn: list = []
     for cls in panels.CLASSES:
+        if not hasattr(cls, "bl_label"):  # the layer list draws its items itself
+            continue
         fake = types.SimpleNamespace(layout=RecordingLayout(drawn), panel=getattr(cls, "panel", ""))
         for name in ("draw_before", "draw_after"):
             if hasattr(cls, name):
