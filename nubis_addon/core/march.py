@@ -14,7 +14,8 @@ MAX_LIGHT_TAPS = 16
 CONE_STEPS = 5.0
 LONG_REACH = 3.0
 
-# GPU Pro 7's six random offsets in [-1, 1]^3 that widen the light march into a cone.
+# Six random offsets in [-1, 1]^3 that widen the light march into a cone: GPU Pro 7 uses six but does not
+# print them, so these are the project's own (docs/sources.md#light-march).
 _GPU_PRO_7_KERNEL = np.array(
     [
         (0.38051305, 0.92453449, -0.02111345),

@@ -15,7 +15,7 @@ from .params import defaults
 @dataclass(frozen=True)
 class StormLight:
     """What the renderer needs of a superstorm beyond the field: its centre and radius for the vortex
-    and the storm lighting (SPEC 1.9.5, 2.10), and the lifecycle blend."""
+    and the storm lighting (GDC22), and the lifecycle blend."""
 
     x: float
     y: float
@@ -65,7 +65,7 @@ class CloudState:
         return self.field_c is not None and self.params["cirrus_coverage"] > 0 and float(self.field_c[..., 0].max()) > 0
 
     def shell(self) -> tuple[float, float]:
-        """Lowest and highest altitude a cloud can occupy, from the min/max height channels (SPEC 1.9.4)."""
+        """Lowest and highest altitude a cloud can occupy, from the min/max height channels (GDC22)."""
         bottom, top = self.params["layer_bottom"], self.params["layer_top"]
         if self.field_b is None:
             return bottom, top
