@@ -1,5 +1,5 @@
 /* Full-screen triangle on the far plane: with a LESS_EQUAL depth test the clouds only cover the
- * background, never objects in front of them (SPEC 3.2). */
+ * background, never objects in front of them (GDC22's culling; docs/sources.md#pixel-culling). */
 void main()
 {
   uv = pos * 0.5 + 0.5;
