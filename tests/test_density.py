@@ -1,4 +1,4 @@
-"""The cloud density on the GPU (issue 3): the shader against the numpy oracle, and the density's
+"""The cloud density on the GPU: the shader against the numpy oracle, and the density's
 contract (GPU Pro 7, GDC22; docs/sources.md) checked on GPU read-backs.
 
 The GPU side is the probe stage (render/probe.py), which runs the very `nubis_density` the viewport,
