@@ -16,5 +16,6 @@ if __name__ == "__main__":
     if tmp is not None:
         shutil.rmtree(tmp, ignore_errors=True)
     # Skip interpreter teardown: nanobind's "leaked instance" notices from Blender's bundled OpenVDB and
-    # OpenImageIO would otherwise follow the summary line (PLATFORM.md). Files are all closed by now.
+    # OpenImageIO would otherwise follow the summary line (docs/platform-notes.md#nanobind-leak-notices).
+    # Files are all closed by now.
     os._exit(code)

@@ -4,11 +4,28 @@
 
 #define NUBIS_PI 3.14159265358979
 
-/* The colour of a lightning flash (GDC22). */
+/* Named constants used by more than one stage live here: the libraries are concatenated into each
+ * stage's source (render/sources.py), so each name is defined in exactly one file. */
+
+/* The colour of a lightning flash: GDC22 gives none; a cold white (docs/sources.md#lightning-flashes). */
 const vec3 NUBIS_FLASH_COLOUR = vec3(0.85, 0.9, 1.0);
 /* The flash mask is a radiance per unit flash intensity, far below half float's normal range (which
- * GPUs flush to zero): the temporal buffers store it scaled by this. */
+ * GPUs flush to zero): the temporal buffers store it scaled by this (docs/sources.md#flash-mask). */
 const float NUBIS_FLASH_MASK_SCALE = 4096.0;
+
+/* Temporal upscaling (S15, GDC22): one pixel of every NUBIS_BLOCK x NUBIS_BLOCK block is marched per
+ * redraw, so a full image takes NUBIS_BLOCK_PIXELS redraws. */
+const int NUBIS_BLOCK = 4;
+const int NUBIS_BLOCK_PIXELS = 16;
+
+/* The superstorm vortex (GDC22: "6 rings"), shared by the density and the motion vectors; the ring
+ * layout is the project's (docs/sources.md#vortex-rings). Rings are equally wide, radius / rings. */
+const float NUBIS_VORTEX_RINGS = 6.0;
+/* Neighbouring rings overlap by this many ring widths, where both are sampled and blended. */
+const float NUBIS_VORTEX_OVERLAP = 0.3;
+/* The rotation grows in with the storm's blend factor, fully from this blend on (GDC22: the storm
+ * forms seamlessly from cloud; docs/sources.md#vortex-time). */
+const float NUBIS_VORTEX_GROW_BLEND = 0.25;
 
 vec2 nubis_rotate_about(vec2 xy, vec2 centre, float angle)
 {
@@ -18,8 +35,8 @@ vec2 nubis_rotate_about(vec2 xy, vec2 centre, float angle)
 }
 
 /* The order in which the 16 pixels of a 4x4 block are marched by the temporal upscaler (S15: one pixel
- * of every 4x4 block per frame): the 4x4 Bayer matrix, so consecutive redraws land far apart in the
- * block and a partly converged image is evenly spread. */
+ * of every 4x4 block per frame): the 4x4 Bayer matrix (Bayer 1973; docs/sources.md#temporal-upscaling),
+ * so consecutive redraws land far apart in the block and a partly converged image is evenly spread. */
 int nubis_bayer4(ivec2 pixel)
 {
   /* The matrix 0 8 2 10 / 12 4 14 6 / 3 11 1 9 / 15 7 13 5 by its bits (no array constructor, which
@@ -33,28 +50,46 @@ float clamp01(float x)
   return clamp(x, 0.0, 1.0);
 }
 
-/* SPEC 1.2 (GPU Pro 7, GDC22, HABR agree): unclamped; a zero-width input range maps to new_min. */
+/* Input ranges narrower than this count as empty in remap(). */
+const float NUBIS_REMAP_EMPTY_SPAN = 1e-8;
+
+/* GPU Pro 7's and GDC22's remap (the Habr implementation agrees): unclamped; a zero-width input range
+ * maps to new_min. */
 float remap(float value, float old_min, float old_max, float new_min, float new_max)
 {
   float span = old_max - old_min;
-  if (abs(span) < 1e-8) {
+  if (abs(span) < NUBIS_REMAP_EMPTY_SPAN) {
     return new_min;
   }
   return new_min + (value - old_min) / span * (new_max - new_min);
 }
+
+/* The PCG hash (Jarzynski and Olano 2020, after O'Neill's PCG; docs/sources.md#numerical-methods):
+ * PCG's LCG multiplier and increment mix the two coordinates, then PCG's RXS-M-XS output permutation
+ * (its shifts 28, 4, 22 and multiplier) scrambles the bits. */
+const uint NUBIS_PCG_MULTIPLIER = 747796405u;
+const uint NUBIS_PCG_INCREMENT = 2891336453u;
+const uint NUBIS_PCG_RXS_M_XS_MULTIPLIER = 277803737u;
+/* 2^24: the hash's top 24 bits, the most a float's mantissa holds exactly, scaled to [0, 1). */
+const float NUBIS_HASH_24_BITS = 16777216.0;
 
 /* A per-pixel value in [0, 1) from an integer hash (PCG-style): white noise, so undersampled steps
  * show as grain rather than the diagonal hatching of interleaved gradient noise. */
 float nubis_pixel_hash(vec2 pixel)
 {
   uvec2 q = uvec2(ivec2(pixel));
-  uint h = q.x * 747796405u + q.y * 2891336453u;
-  h = ((h >> ((h >> 28u) + 4u)) ^ h) * 277803737u;
+  uint h = q.x * NUBIS_PCG_MULTIPLIER + q.y * NUBIS_PCG_INCREMENT;
+  h = ((h >> ((h >> 28u) + 4u)) ^ h) * NUBIS_PCG_RXS_M_XS_MULTIPLIER;
   h = (h >> 22u) ^ h;
-  return float(h >> 8u) / 16777216.0;
+  return float(h >> 8u) / NUBIS_HASH_24_BITS;
 }
 
-/* Ray against a sphere centred on the planet, for rays starting near sea level.
+/* Below this the quadratic's root (in metres) counts as zero: the ray starts on the sphere and is
+ * tangent to it. */
+const float NUBIS_RAY_DEGENERATE = 1e-12;
+
+/* Ray against a sphere centred on the planet, for rays starting near sea level (GPU Pro 7, GDC22:
+ * the march's segment comes from sphere intersections; docs/sources.md#spherical-height-fraction).
  * `oc` is the ray origin relative to the planet centre minus (0, 0, R) (i.e. the world position),
  * so that |oc|^2 - r^2 is formed without the catastrophic cancellation of 6.4e6^2 in float.
  * Returns the two distances (near, far); near > far when the sphere is missed. */
@@ -68,9 +103,9 @@ vec2 nubis_ray_sphere(vec3 origin, vec3 dir, float planet_radius, float altitude
   if (disc < 0.0) {
     return vec2(1.0, -1.0);
   }
-  /* Stable quadratic roots (Numerical Recipes 5.6). */
+  /* Stable quadratic roots (Numerical Recipes 5.6; docs/sources.md#numerical-methods). */
   float q = -(b + (b >= 0.0 ? 1.0 : -1.0) * sqrt(disc)); /* sign(0) would be 0: a perpendicular ray */
-  if (abs(q) < 1e-12) {
+  if (abs(q) < NUBIS_RAY_DEGENERATE) {
     return vec2(0.0, 0.0);
   }
   float t0 = q;
@@ -86,7 +121,7 @@ float nubis_altitude(vec3 p, float planet_radius)
 }
 
 /* The noise textures are stored with one extra wrapped texel per axis because Blender's Python
- * textures clamp at the edge; this maps a repeating coordinate onto that padded layout so the
+ * textures clamp at the edge (docs/platform-notes.md#python-made-textures); this maps a repeating coordinate onto that padded layout so the
  * hardware's linear filter blends across the seam exactly as a REPEAT sampler would. */
 vec3 nubis_tile_uvw(vec3 uvw, vec3 padded_size)
 {

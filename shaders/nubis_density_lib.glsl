@@ -15,8 +15,51 @@ int nubis_view_samples = 0;
 #  define NUBIS_COUNT_3D(n)
 #endif
 
-/* SPEC 1.4.2, GPU Pro 7: the weights of the pre-built Worley fBm. */
+/* GPU Pro 7: the weights of the pre-built Worley fBm (low_freq_FBM, high_freq_FBM). */
 const vec3 NUBIS_FBM_WEIGHTS = vec3(0.625, 0.25, 0.125);
+
+/* The vertical profile's trapezoids (docs/sources.md#vertical-profile): the height fractions over which
+ * the top ramp falls from 1 to 0 for stratus (type 0), stratocumulus (0.5) and cumulus (1, GPU Pro 7's
+ * type scale), and where the bottom ramp reaches 1 for bottom type 0 (a crisp flat base) and 1 (relaxed,
+ * GDC22). */
+const vec2 NUBIS_PROFILE_TOP_STRATUS = vec2(0.10, 0.20);
+const vec2 NUBIS_PROFILE_TOP_STRATOCUMULUS = vec2(0.40, 0.60);
+const vec2 NUBIS_PROFILE_TOP_CUMULUS = vec2(0.70, 1.00);
+const float NUBIS_PROFILE_BASE_CRISP = 0.05;
+const float NUBIS_PROFILE_BASE_RELAXED = 0.35;
+
+/* The phase skew of successive vortex rings, in radians: an irrational step, so no two rings line up
+ * (docs/sources.md#vortex-rings). */
+const float NUBIS_VORTEX_RING_SKEW = 1.913;
+
+/* The anvil (GDC22's flipped profile; docs/sources.md#anvil): its band under the shell's top, as a
+ * share of the span from the layer base to that top; the cloud type of its flipped profile; its
+ * coverage relative to the storm coverage; how much further inside a storm the noise leans downwind
+ * (times the cloud-top offset, growing with height); the range of profile difference over which it
+ * takes over from the column; and the height fraction its detail is shaped as (billows, not wisps). */
+const float NUBIS_ANVIL_BAND = 0.22;
+const float NUBIS_ANVIL_TYPE = 0.3;
+const float NUBIS_ANVIL_COVERAGE = 0.85;
+const float NUBIS_ANVIL_LEAN = 4.0;
+const float NUBIS_ANVIL_TAKEOVER = 0.1;
+const float NUBIS_ANVIL_DETAIL_HEIGHT = 0.9;
+
+/* GPU Pro 7 turns the eroding Worley from wisps to billows over the lowest tenth of the layer,
+ * saturate(h * 10); a rising bottom type slows that to the lowest half, so ragged undersides keep their
+ * wisps (GDC22; docs/sources.md#wispy-and-billowy-detail). */
+const float NUBIS_BILLOW_RATE = 10.0;
+const float NUBIS_BILLOW_RATE_RAGGED = 2.0;
+
+/* The draft quality's per-position hashes (the common sine one-liner; the constants only scatter):
+ * one jitters the ring boundary, the other picks turned or unturned detail
+ * (docs/sources.md#jittered-ring-boundary). */
+const vec2 NUBIS_RING_HASH_DIR = vec2(12.9898, 78.233);
+const float NUBIS_RING_HASH_SCALE = 43758.5453;
+const vec2 NUBIS_TURN_HASH_DIR = vec2(39.3468, 11.135);
+const float NUBIS_TURN_HASH_SCALE = 24634.6345;
+
+/* A grazing ray's slant through a thin layer is capped at 1 / this cosine (docs/sources.md#cirrus-lighting). */
+const float NUBIS_MIN_SLANT_COS = 0.05;
 
 struct NubisFieldSample {
   vec4 a;
@@ -28,11 +71,12 @@ struct NubisFieldSample {
  * their edges, and 0 outside a comparison's clip box. Shared by the volume and the cirrus. */
 float nubis_inside(vec2 xy, vec2 uv)
 {
-  /* Nothing outside the painted field: repeating it would invent clouds nobody authored. */
+  /* Nothing outside the painted field: repeating it would invent clouds nobody authored
+   * (docs/sources.md#field-extent). */
   vec2 edge = min(uv, 1.0 - uv) * P.field_size;
   float in_field = clamp01(min(edge.x, edge.y) / max(P.draw_fade, 1.0));
-  /* SPEC 1.1, S15: clouds are drawn within the draw radius; the fade lives in the density itself so
-   * that the bake holds exactly what the viewport shows. */
+  /* S15: clouds are drawn within the draw radius; the fade lives in the density itself so that the
+   * bake holds exactly what the viewport shows (docs/sources.md#draw-radius-fade). */
   float in_radius = clamp01((P.layer_draw_radius - length(xy - vec2(P.draw_center_x, P.draw_center_y))) / max(P.draw_fade, 1.0));
   if (P.clip_box.z >= P.clip_box.x && (any(lessThan(xy, P.clip_box.xy)) || any(greaterThan(xy, P.clip_box.zw)))) {
     return 0.0;
@@ -50,22 +94,24 @@ NubisFieldSample nubis_sample_field(vec2 xy)
   return f;
 }
 
-/* Vertical profile: SPEC 1.5. The sources show the curves only as figures; these trapezoids follow
- * SPEC 1.5's community defaults. HFW split (GDC22): the top ramp follows the top type (0 stratus,
- * 0.5 stratocumulus, 1 cumulus), the bottom ramp follows the bottom type and relaxes as it rises,
- * and the two lookups multiply. Bottom type 0 is the crisp flat base of fair-weather clouds. */
+/* Vertical profile. The sources show the curves only as figures; these are trapezoids of our own
+ * (docs/sources.md#vertical-profile). Horizon Forbidden West's split (GDC22): the top ramp follows the
+ * top type (0 stratus, 0.5 stratocumulus, 1 cumulus), the bottom ramp follows the bottom type and
+ * relaxes as it rises, and the two lookups multiply. Bottom type 0 is the crisp flat base of
+ * fair-weather clouds. */
 float nubis_vertical_profile(float h, float top_type, float bottom_type)
 {
   float t = clamp01(top_type);
-  vec2 top_ramp = t < 0.5 ? mix(vec2(0.10, 0.20), vec2(0.40, 0.60), t * 2.0) :
-                            mix(vec2(0.40, 0.60), vec2(0.70, 1.00), t * 2.0 - 1.0);
-  float bottom_end = mix(0.05, 0.35, clamp01(bottom_type));
+  vec2 top_ramp = t < 0.5 ? mix(NUBIS_PROFILE_TOP_STRATUS, NUBIS_PROFILE_TOP_STRATOCUMULUS, t * 2.0) :
+                            mix(NUBIS_PROFILE_TOP_STRATOCUMULUS, NUBIS_PROFILE_TOP_CUMULUS, t * 2.0 - 1.0);
+  float bottom_end = mix(NUBIS_PROFILE_BASE_CRISP, NUBIS_PROFILE_BASE_RELAXED, clamp01(bottom_type));
   float bottom = clamp01(h / bottom_end);
   float top = clamp01(remap(h, top_ramp.x, top_ramp.y, 1.0, 0.0));
   return bottom * top;
 }
 
-/* Height fraction in the column's own layer (SPEC 1.2 on the spherical shell; SPEC 1.9.4 min/max field). */
+/* Height fraction in the column's own layer: GPU Pro 7's height fraction on the spherical shell, between
+ * the min and max height of GDC22's field (docs/sources.md#spherical-height-fraction). */
 float nubis_height_fraction(float altitude, vec4 field_b_sample)
 {
   float thickness = P.layer_top - P.layer_bottom;
@@ -74,15 +120,15 @@ float nubis_height_fraction(float altitude, vec4 field_b_sample)
   return (altitude - lo) / max(hi - lo, 1.0);
 }
 
-/* ---- superstorm vortex (SPEC 1.9.5, GDC22; sine/cosine rotation after Matthew D. Roach) ---------- */
+/* ---- superstorm vortex (GDC22; sine/cosine rotation after Matthew D. Roach) ------------------------ */
 
 /* Angle of ring `ring` (0 = innermost of 6) at ring coordinate u = 6 * dist / radius: speeds fall
  * ring by ring from the centre, each ring has its own phase (skew), and rings outside faster ones are
- * twisted with the radius for the spiral tendrils of a boundary layer. */
+ * twisted with the radius for the spiral tendrils of a boundary layer (docs/sources.md#vortex-rings). */
 float nubis_ring_angle(int ring, float u, float spin, float time)
 {
-  float speed = spin * (1.0 - float(ring) / 6.0);
-  float skew = float(ring) * 1.913;
+  float speed = spin * (1.0 - float(ring) / NUBIS_VORTEX_RINGS);
+  float skew = float(ring) * NUBIS_VORTEX_RING_SKEW;
   float twist = ring > 0 ? P.storm_twist * (float(ring) + 1.0 - u) : 0.0;
   return time * speed + skew + twist;
 }
@@ -108,25 +154,26 @@ vec2 nubis_vortex(vec2 xy, out vec2 second, out float weight, out float unturned
     if (shape.w <= 0.0 || dist >= shape.z) {
       continue;
     }
-    float u = 6.0 * dist / shape.z;
-    turned_share = max(turned_share, (1.0 - smoothstep(5.0, 6.0, u)) * smoothstep(0.0, 0.25, shape.w));
+    float u = NUBIS_VORTEX_RINGS * dist / shape.z;
+    /* The rotation dies out over the outermost ring and grows in with the blend factor. */
+    turned_share = max(turned_share, (1.0 - smoothstep(NUBIS_VORTEX_RINGS - 1.0, NUBIS_VORTEX_RINGS, u)) *
+                                         smoothstep(0.0, NUBIS_VORTEX_GROW_BLEND, shape.w));
     float spin = P.storm_light[i].x;
     float time = P.storm_flash[i].w;
-    const float overlap = 0.3; /* in ring widths */
     float boundary = floor(u + 0.5);
     float e = u - boundary;
     int ring = int(floor(u));
     if (P.storm_jittered_rings > 0.5) {
       /* PS4 quality (GDC22): one sample, the ring boundary jittered instead of blended. */
-      float jitter = fract(sin(dot(xy, vec2(12.9898, 78.233))) * 43758.5453) - 0.5;
-      ring = clamp(int(floor(u + jitter * overlap)), 0, 5);
+      float jitter = fract(sin(dot(xy, NUBIS_RING_HASH_DIR)) * NUBIS_RING_HASH_SCALE) - 0.5;
+      ring = clamp(int(floor(u + jitter * NUBIS_VORTEX_OVERLAP)), 0, int(NUBIS_VORTEX_RINGS) - 1);
       float angle = nubis_ring_angle(ring, u, spin, time);
       xy = nubis_rotate_about(xy, shape.xy, angle);
       second = nubis_rotate_about(second, shape.xy, angle); /* an earlier storm's second sample turns too */
     }
-    else if (abs(e) < 0.5 * overlap && boundary >= 1.0 && boundary <= 5.0) {
+    else if (abs(e) < 0.5 * NUBIS_VORTEX_OVERLAP && boundary >= 1.0 && boundary <= NUBIS_VORTEX_RINGS - 1.0) {
       int inner = int(boundary) - 1;
-      weight = smoothstep(-0.5 * overlap, 0.5 * overlap, e);
+      weight = smoothstep(-0.5 * NUBIS_VORTEX_OVERLAP, 0.5 * NUBIS_VORTEX_OVERLAP, e);
       second = nubis_rotate_about(xy, shape.xy, nubis_ring_angle(inner + 1, u, spin, time));
       xy = nubis_rotate_about(xy, shape.xy, nubis_ring_angle(inner, u, spin, time));
     }
@@ -163,14 +210,14 @@ float nubis_detail_fbm(vec3 p_hf, float h, int level)
 
 struct NubisDensity {
   float fine;   /* the full sample, detail erosion included */
-  float coarse; /* the cheap sample: never below `fine` (SPEC 1.6.4) */
+  float coarse; /* the cheap sample: never below `fine` (erosion only removes density, GPU Pro 7, S15) */
   float h;      /* height fraction */
   float precipitation;
 };
 
-/* SPEC 1.6.5 (the add-on's canonical sampler), following GPU Pro 7's order: base shape, profile,
- * coverage, then detail erosion. `cheap` stops after the coverage step (GPU Pro 7's cheap sample:
- * one 3D fetch). `lod` is a whole mip level: 0 reads the full-resolution noise, 1 the half-resolution
+/* The density, in GPU Pro 7's order (docs/sources.md#density-order): base shape, profile, coverage,
+ * then detail erosion. `cheap` stops after the coverage step (GPU Pro 7's cheap sample: one 3D fetch;
+ * docs/sources.md#coarse-sample). `lod` is a whole mip level: 0 reads the full-resolution noise, 1 the half-resolution
  * copies, 2 the quarter-resolution base shape (the detail noise has two levels). */
 NubisDensity nubis_density(vec3 p, bool cheap, float lod)
 {
@@ -199,8 +246,8 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
   d.precipitation = f.a.g;
   float coverage = clamp01(f.a.r * P.density_coverage) * f.inside;
   float profile = (h > 0.0 && h < 1.0) ? nubis_vertical_profile(h, f.a.b, f.a.a) : 0.0;
-  /* SPEC 1.9.6 (GDC22): where storm coverage is non-zero, the flipped vertical profile joins the
-   * normal one to spread the top into an anvil. We place the flipped lookup in a band under the
+  /* GDC22: where storm coverage is non-zero, the flipped vertical profile joins the normal one to
+   * spread the top into an anvil (docs/sources.md#anvil). We place the flipped lookup in a band under the
    * shell's top (the storm's tropopause), so the anvil is flat and reaches across the whole stencil,
    * with the storm coverage as its coverage. max() leaves storm-free clouds exactly as they were. */
   float storm = clamp01(f.b.r) * f.inside;
@@ -209,7 +256,7 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
   float anvil = 0.0;
   float anvil_coverage = 0.0;
 #if NUBIS_STORMS
-  float band = 0.22 * (P.shell_top - P.layer_bottom);
+  float band = NUBIS_ANVIL_BAND * (P.shell_top - P.layer_bottom);
   float anvil_h = (altitude - (P.shell_top - band)) / band;
   if (P.storm_count > 0.0 && anvil_h > 0.0 && anvil_h < 1.0) {
     /* The anvil "flattens out and spreads in the wind direction" (GDC22): its storm coverage is read
@@ -217,8 +264,8 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
     vec2 upwind = p.xy - vec2(P.wind_dir_x, P.wind_dir_y) * (P.storm_anvil_shift * anvil_h);
     vec2 upwind_uv = (upwind - vec2(P.field_origin_x, P.field_origin_y)) * P.field_inv_size + 0.5;
     float anvil_storm = clamp01(textureLod(field_b, clamp(upwind_uv, 0.0, 1.0), 0.0).r) * f.inside;
-    anvil = nubis_vertical_profile(1.0 - anvil_h, 0.3, 0.0) * anvil_storm;
-    anvil_coverage = max(coverage, 0.85 * anvil_storm);
+    anvil = nubis_vertical_profile(1.0 - anvil_h, NUBIS_ANVIL_TYPE, 0.0) * anvil_storm;
+    anvil_coverage = max(coverage, NUBIS_ANVIL_COVERAGE * anvil_storm);
   }
 #endif
 #if !NUBIS_NAIVE
@@ -227,14 +274,15 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
   }
 #endif
 
-  /* SPEC 1.7, GPU Pro 7: tops skew downwind and both noises drift with the wind and slightly
-   * upward, each at its own speed. We subtract the offsets (GDC22, SPEC 6 Q16) so features move
-   * downwind and rise; the coverage/type field itself never moves (GDC22, SPEC 1.3.1). */
+  /* GPU Pro 7: tops skew downwind and both noises drift with the wind and slightly upward, each at its
+   * own speed. We subtract the offsets (GDC22) and put the upward bias on z, so features move downwind
+   * and rise (docs/sources.md#wind-direction-and-sign); the coverage/type field itself never moves
+   * (GDC22). */
   vec3 wind_dir = vec3(vec2(P.wind_dir_x, P.wind_dir_y), 0.0);
   vec3 drift = (wind_dir + vec3(0.0, 0.0, P.wind_upward_bias)) * P.wind_distance;
   /* The anvil also leans downwind (GDC22: noises rotated and skewed for a wind-swept look), from the
    * column's own height and storm coverage, which are smooth where the anvil takes over. */
-  vec3 skewed = p - h * wind_dir * (P.wind_top_offset + storm * h * 4.0 * P.wind_top_offset);
+  vec3 skewed = p - h * wind_dir * (P.wind_top_offset + storm * h * NUBIS_ANVIL_LEAN * P.wind_top_offset);
   vec3 p_lf = skewed - drift;
 
   vec3 lf_uvw = p_lf / P.noise_lf_period;
@@ -250,10 +298,10 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
     lf = textureLod(noise_lf_mip2, nubis_tile_uvw(lf_uvw, vec3(NUBIS_LF2_SIZE)), 0.0);
   }
   float lf_fbm = dot(lf.gba, NUBIS_FBM_WEIGHTS);
-  /* SPEC 1.6.2, GPU Pro 7: the Worley fBm dilates the Perlin-Worley base shape. */
+  /* GPU Pro 7: the Worley fBm dilates the Perlin-Worley base shape (docs/sources.md#perlin-worley). */
   float shape = remap(lf.r, -(1.0 - lf_fbm), 1.0, 0.0, 1.0);
   /* GDC22's 1 - coverage, so clouds inflate as coverage rises; GPU Pro 7's "smaller clouds are
-   * lighter" multiply is the option in P.density_multiply_coverage. */
+   * lighter" multiply is the option in P.density_multiply_coverage (docs/sources.md#coverage-erosion). */
   float with_coverage = clamp01(remap(shape * profile, 1.0 - coverage, 1.0, 0.0, 1.0));
   with_coverage *= mix(1.0, coverage, P.density_multiply_coverage);
   /* The height the detail noise is shaped by: where the anvil is the larger shape its detail turns
@@ -263,9 +311,10 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
   float anvil_density = clamp01(remap(shape * anvil, 1.0 - anvil_coverage, 1.0, 0.0, 1.0));
   /* Only where the anvil's profile reaches past the column's, as GDC22's max of the two profiles,
    * faded in over a short range of profile instead of switched. */
-  anvil_density *= mix(1.0, anvil_coverage, P.density_multiply_coverage) * smoothstep(-0.1, 0.1, anvil - profile);
+  anvil_density *= mix(1.0, anvil_coverage, P.density_multiply_coverage) *
+                   smoothstep(-NUBIS_ANVIL_TAKEOVER, NUBIS_ANVIL_TAKEOVER, anvil - profile);
   if (anvil_density > 0.0) {
-    detail_h = mix(h, max(h, 0.9), anvil_density / (anvil_density + with_coverage));
+    detail_h = mix(h, max(h, NUBIS_ANVIL_DETAIL_HEIGHT), anvil_density / (anvil_density + with_coverage));
     with_coverage = max(with_coverage, anvil_density);
   }
 #endif
@@ -280,8 +329,9 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
     return d;
   }
 
-  /* SPEC 1.6.2, GPU Pro 7: animated curl noise twists the detail at the base, fading to none at the top.
-   * Inside a superstorm the detail turns with the vortex; two rings overlap -> two samples (GDC22). */
+  /* GPU Pro 7: animated curl noise twists the detail at the base, fading to none at the top
+   * (docs/sources.md#curl-noise). Inside a superstorm the detail turns with the vortex; two rings
+   * overlap -> two samples (GDC22). */
   vec3 p_hf = skewed - drift * P.wind_detail_speed;
   /* The rings are decided by where the sample is, not by where the wind has carried its noise, so
    * nothing outside a storm's radius ever turns. */
@@ -298,26 +348,27 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
     if (P.storm_jittered_rings < 0.5) {
       hf_fbm = mix(hf_fbm, nubis_detail_fbm(p_hf, detail_h, hf_level), unturned);
     }
-    else if (fract(sin(dot(p.xy, vec2(39.3468, 11.135))) * 24634.6345) < unturned) {
+    else if (fract(sin(dot(p.xy, NUBIS_TURN_HASH_DIR)) * NUBIS_TURN_HASH_SCALE) < unturned) {
       /* PS4 quality: one sample, the turned or the unturned detail by a hashed choice. */
       hf_fbm = nubis_detail_fbm(p_hf, detail_h, hf_level);
     }
   }
 #endif
   /* GPU Pro 7: the stored (inverted) Worley fBm erodes the base into wisps, and flipped back it carves
-   * billows above the lowest 10 %. SPEC 7.1: a
-   * rising bottom type keeps the wisps higher up the cloud, for ragged undersides (GDC22). */
-  float billow = clamp01(detail_h * mix(10.0, 2.0, clamp01(f.a.a)));
+   * billows above the lowest 10 %. A rising bottom type keeps the wisps higher up the cloud, for ragged
+   * undersides (GDC22; docs/sources.md#wispy-and-billowy-detail). */
+  float billow = clamp01(detail_h * mix(NUBIS_BILLOW_RATE, NUBIS_BILLOW_RATE_RAGGED, clamp01(f.a.a)));
   float hf_modifier = mix(hf_fbm, 1.0 - hf_fbm, billow);
-  /* GPU Pro 7: erosion strength 0.2; the remap never raises a value, so fine <= coarse. */
+  /* GPU Pro 7: erosion strength 0.2 (P.density_erosion); the remap never raises a value, so fine <= coarse. */
   float eroded = clamp01(remap(with_coverage, hf_modifier * P.density_erosion, 1.0, 0.0, 1.0));
   d.fine = eroded * multiplier;
   return d;
 }
 
-/* SPEC 1.8 (GDC22): the cirrus layer is 2D: three tiling cloudscapes from wispy cirrostratus (type 0)
- * through cirrus (0.5) to billowy cirrocumulus (1), blended by type and eroded by the inverse of
- * coverage; it scrolls with its own wind (GPU Pro 7, S15). Returns the density at world xy. */
+/* GDC22: the cirrus layer is 2D: three tiling cloudscapes from wispy cirrostratus (type 0) through
+ * cirrus (0.5) to billowy cirrocumulus (1), blended by type and eroded by the inverse of coverage; it
+ * scrolls with its own wind (GPU Pro 7, S15; docs/sources.md#cirrus-layer). Returns the density at
+ * world xy. */
 /* One level of the cirrus texture's mip atlas (render/textures.py): level 0 at the left, the smaller
  * levels stacked in a column to its right, each with its own wrapped edge texel. */
 vec3 nubis_cirrus_level(vec2 uv, int level)
@@ -333,6 +384,12 @@ vec3 nubis_cirrus_level(vec2 uv, int level)
   vec2 texel = origin + fract(uv) * n + 0.5;
   return textureLod(noise_cirrus, texel / vec2(NUBIS_CIRRUS_ATLAS), 0.0).rgb;
 }
+
+/* Averaging the noise before the erosion's non-linear remap flattens the detail, so a level is only
+ * dropped once a pixel covers two texels of it: measured against 8x supersampling, blurring sooner
+ * cost more than the aliasing it removed (docs/viewport.md#mip-levels). Used by the view ray's noise
+ * level (nubis_view_lod) and the cirrus's. */
+#define NUBIS_LOD_BIAS 1.0
 
 /* `lod` is the mip level as a fraction (the texels one pixel covers, log2): two levels are blended, so
  * distant cirrus seen at a grazing angle filters instead of aliasing into streaks. */
@@ -376,14 +433,14 @@ float nubis_cirrus_optical_depth(vec3 p, vec3 dir, float lod)
   }
   vec3 q = p + dir * t;
   vec3 up = normalize(q + vec3(0.0, 0.0, P.layer_planet_radius));
-  float slant = 1.0 / max(abs(dot(dir, up)), 0.05);
+  float slant = 1.0 / max(abs(dot(dir, up)), NUBIS_MIN_SLANT_COS);
   /* lod >= 0 is the caller's fixed level; lod < 0 asks for the view's own: the pixel's footprint on
    * the layer (P.view: metres per metre of distance, plus a constant for orthographic views),
    * stretched by the slant, in texels, one level late as for the 3D noise (nubis_view_lod). */
   float level = lod;
   if (lod < 0.0) {
     float footprint = (P.pixel_angle * t + P.pixel_size) * slant;
-    level = max(log2(max(footprint * P.cirrus_inv_period * float(NUBIS_CIRRUS_SIZE), 1.0)) - 1.0, 0.0);
+    level = max(log2(max(footprint * P.cirrus_inv_period * float(NUBIS_CIRRUS_SIZE), 1.0)) - NUBIS_LOD_BIAS, 0.0);
   }
   float density = nubis_cirrus_density(q.xy, level);
   return density * P.cirrus_opacity * slant;

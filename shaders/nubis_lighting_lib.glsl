@@ -1,6 +1,57 @@
 /* Cloud lighting. Requires nubis_common_lib.glsl and nubis_density_lib.glsl. */
 
-/* SPEC 2.3, GDC22: normalised Henyey-Greenstein (GPU Pro 7's listing multiplies by pi; not used). */
+/* GDC22's internal glow: the exponent of its powered linear distance to the light, and the factor of
+ * its pseudo-attenuation by the local fine density (docs/sources.md#storm-glow). */
+const float NUBIS_GLOW_FALLOFF = 12.0;
+const float NUBIS_GLOW_DENSITY_ABSORPTION = 5.0;
+
+/* Lightning (docs/sources.md#lightning-flashes): a flash lights this share of its storm's radius around
+ * its position; a ground discharge's external flash reaches this share of the radius around the strike,
+ * falls off with this power and adds this much energy at the cloud base. */
+const float NUBIS_FLASH_REACH = 0.6;
+const float NUBIS_EXTERNAL_FLASH_REACH = 0.5;
+const float NUBIS_EXTERNAL_FLASH_FALLOFF = 4.0;
+const float NUBIS_EXTERNAL_FLASH_STRENGTH = 0.05;
+
+/* The reference march (docs/sources.md#reference-march): samples towards the sun, directions of the sky
+ * light and samples along each, within llvmpipe's loop limit (docs/platform-notes.md#shader-loop-limit;
+ * core/march.py counts the same numbers); no light path is followed beyond this many draw radii. */
+const int NUBIS_REFERENCE_SUN_SAMPLES = 48;
+const int NUBIS_REFERENCE_SKY_DIRECTIONS = 12;
+const int NUBIS_REFERENCE_SKY_SAMPLES = 16;
+const float NUBIS_REFERENCE_REACH = 2.0;
+
+/* Below this eccentricity a Henyey-Greenstein lobe is sampled as isotropic (its inverse distribution
+ * divides by g). */
+const float NUBIS_ISOTROPIC_G = 1e-3;
+/* A view direction closer to vertical than this cosine builds its frame on the x axis instead of z. */
+const float NUBIS_NEAR_VERTICAL = 0.9;
+/* The sky directions' per-pixel turn: 2 pi times a hash, offset from the step jitter's hash, stepped by
+ * Roberts' R2 constant (1 / the plastic number) per accumulation pass; successive directions are spread
+ * by the golden angle (docs/sources.md#numerical-methods). */
+const float NUBIS_TWO_PI = 6.2831853;
+const vec2 NUBIS_SKY_HASH_OFFSET = vec2(0.5, 17.5);
+const float NUBIS_R2_STEP = 0.7548777;
+const float NUBIS_GOLDEN_ANGLE = 2.39996323;
+
+/* Wrenninge et al.'s multiple-scattering octaves: at most this many (two vec4 of phases per ray). */
+const int NUBIS_MAX_OCTAVES = 8;
+
+/* S15 and GPU Pro 7 switch the light march to cheap samples at 0.3; measured, 0.5 keeps 40 dB against
+ * full samples where 0.3 gave 35.9 dB (docs/sources.md#cheap-light-samples). */
+const float NUBIS_CHEAP_LIGHT_ALPHA = 0.5;
+/* GPU Pro 7: light samples read the noise one mip level coarser than the view sample, at most the
+ * coarsest level stored (docs/sources.md#light-mip-level). */
+const float NUBIS_LIGHT_LOD_OFFSET = 1.0;
+const float NUBIS_LIGHT_COARSEST_LOD = 2.0;
+
+/* GPU Pro 7's Beer's powder 2 e^-d (1 - e^-2d): the factor that restores the energy, and the rate of the
+ * in-scattering probability (docs/sources.md#powder). */
+const float NUBIS_POWDER_GAIN = 2.0;
+const float NUBIS_POWDER_RATE = 2.0;
+
+/* GDC22: normalised Henyey-Greenstein (GPU Pro 7's listing multiplies by pi; not used;
+ * docs/sources.md#henyey-greenstein-normalisation). */
 float nubis_henyey_greenstein(float cos_angle, float g)
 {
   float g2 = g * g;
@@ -8,8 +59,9 @@ float nubis_henyey_greenstein(float cos_angle, float g)
   return (1.0 - g2) / (4.0 * NUBIS_PI * denom * sqrt(denom));
 }
 
-/* SPEC 2.3: GDC22 combines lobes of different eccentricity for an art-directed silver lining.
- * `eccentricity_scale` < 1 flattens both lobes for the multiple-scattering octaves. */
+/* GDC22 combines lobes of different eccentricity for an art-directed silver lining; two lobes mixed by
+ * a weight (docs/sources.md#phase-lobes). `eccentricity_scale` < 1 flattens both lobes for the
+ * multiple-scattering octaves. */
 float nubis_phase(float cos_angle, float eccentricity_scale)
 {
   return mix(nubis_henyey_greenstein(cos_angle, P.lighting_phase_g0 * eccentricity_scale),
@@ -17,7 +69,8 @@ float nubis_phase(float cos_angle, float eccentricity_scale)
              P.lighting_phase_mix);
 }
 
-/* SPEC 2.5, GPU Pro 7: raining clouds absorb more light. Modelled as absorption added to the
+/* GPU Pro 7: raining clouds absorb more light (docs/sources.md#rain-and-storm-absorption). Modelled as
+ * absorption added to the
  * scattering, so extinction grows by this factor and the albedo is its inverse; the view march, the
  * light march and the bake (an `absorption` grid for Cycles) all use it, so Cycles sees the same
  * dark rain cores. */
@@ -26,11 +79,11 @@ float nubis_rain_extinction(float precipitation)
   return mix(1.0, P.lighting_rain_absorption, clamp01(precipitation));
 }
 
-/* ---- superstorm lighting (SPEC 2.10, GDC22) -------------------------------------------------------- */
+/* ---- superstorm lighting (GDC22) -------------------------------------------------------------------- */
 
-/* SPEC 2.10.1: near a storm's centre the cloud counts as denser, so the storm reads darker and
- * thicker (as absorption, see nubis_extinction_factor). GDC22's printed min() never exceeds 1 (SPEC 6 Q13); we keep its pow(., 0.5) falloff and
- * scale towards the storm's darkening factor. */
+/* GDC22: near a storm's centre the cloud counts as denser, so the storm reads darker and thicker (as
+ * absorption, see nubis_extinction_factor). GDC22's printed min() never exceeds 1; we keep its
+ * pow(., 0.5) falloff and scale towards the storm's darkening factor (docs/sources.md#storm-darkening). */
 float nubis_storm_darkening(vec3 q)
 {
   float scale = 1.0;
@@ -52,9 +105,9 @@ float nubis_extinction_factor(vec3 p, float precipitation)
   return nubis_rain_extinction(precipitation) * nubis_storm_darkening(p);
 }
 
-/* SPEC 2.10.2: a cylindrical field, fading with height, that blends the ambient to the storm's own
- * (ground bounce under a low, dark mesocyclone). GDC22's printed blend is <= 0 (SPEC 6 Q14); this is
- * the described intent: 1 at the storm's foot and centre, 0 at its radius or top. */
+/* GDC22: a cylindrical field, fading with height, that blends the ambient to the storm's own (ground
+ * bounce under a low, dark mesocyclone). GDC22's printed blend is <= 0; this is the described intent: 1
+ * at the storm's foot and centre, 0 at its radius or top (docs/sources.md#storm-ambient). */
 float nubis_storm_ambient(vec3 p, float h)
 {
   float factor = 1.0;
@@ -69,18 +122,19 @@ float nubis_storm_ambient(vec3 p, float h)
   return factor;
 }
 
-/* SPEC 2.10.3: the internal glow without a second light march: a powered linear distance to the
- * light, a height gradient below it, and a pseudo-attenuation from the local fine density.
+/* GDC22: the internal glow without a second light march: a powered linear distance to the light, a
+ * height gradient below it, and a pseudo-attenuation from the local fine density (its undefined terms
+ * are chosen in docs/sources.md#storm-glow).
  * `centre` is the light, `radius` its reach. Returns the unitless energy factor. */
 float nubis_glow_energy(vec3 p, vec3 centre, float radius, float fine_density, float thickness)
 {
-  float potential = pow(clamp01(1.0 - distance(p, centre) / radius), 12.0);
+  float potential = pow(clamp01(1.0 - distance(p, centre) / radius), NUBIS_GLOW_FALLOFF);
   float below = clamp01((centre.z - nubis_altitude(p, P.layer_planet_radius) + thickness) / (2.0 * thickness));
-  float pseudo_attenuation = 1.0 - clamp01(fine_density * 5.0);
+  float pseudo_attenuation = 1.0 - clamp01(fine_density * NUBIS_GLOW_DENSITY_ABSORPTION);
   return potential * below * pseudo_attenuation;
 }
 
-/* Lightning (GDC22, after Uman's *Lightning*): an intra-cloud flash is the internal glow at the flash's own position
+/* Lightning (GDC22, after Uman's *Lightning*; docs/sources.md#lightning-flashes): an intra-cloud flash is the internal glow at the flash's own position
  * with its animated intensity; a ground discharge adds the external flash that lights the underside
  * around the strike. This returns each storm's flash energy at unit intensity, so the temporal viewport
  * can accumulate it as GDC22's flash mask and scale it by the intensity of the frame being shown. */
@@ -98,12 +152,13 @@ vec4 nubis_flash_energy(vec3 p, float fine_density)
     float height = P.layer_bottom + P.storm_glow_height * thickness;
     vec4 where = P.storm_flash[i]; /* offset x, y from the centre; 1 for a ground discharge */
     vec3 at = vec3(shape.xy + where.xy, height);
-    float e = nubis_glow_energy(p, at, 0.6 * shape.z, fine_density, thickness);
+    float e = nubis_glow_energy(p, at, NUBIS_FLASH_REACH * shape.z, fine_density, thickness);
     if (where.z > 0.5) {
       /* The external flash: highlights on the underside features near the strike. */
       float h = clamp01((nubis_altitude(p, P.layer_planet_radius) - P.layer_bottom) / thickness);
-      float near = pow(clamp01(1.0 - distance(p.xy, at.xy) / (0.5 * shape.z)), 4.0);
-      e += 0.05 * near * (1.0 - h) * (1.0 - h);
+      float near = pow(clamp01(1.0 - distance(p.xy, at.xy) / (NUBIS_EXTERNAL_FLASH_REACH * shape.z)),
+                       NUBIS_EXTERNAL_FLASH_FALLOFF);
+      e += NUBIS_EXTERNAL_FLASH_STRENGTH * near * (1.0 - h) * (1.0 - h);
     }
     energy[i] = e * shape.w;
   }
@@ -157,7 +212,7 @@ float nubis_reference_depth(vec3 p, vec3 dir, int samples, out float plain)
   if (altitude > P.shell_bottom && bottom.x <= bottom.y && bottom.x > 0.0) {
     len = min(len, bottom.x); /* heading down out of the layer's floor */
   }
-  len = min(len, 2.0 * P.layer_draw_radius);
+  len = min(len, NUBIS_REFERENCE_REACH * P.layer_draw_radius);
   /* Samples crowd near the point (t = len u^2): the nearby cloud decides most of the shadowing,
    * while a horizontal ray may cross tens of kilometres of layer. */
   float depth = 0.0;
@@ -178,7 +233,7 @@ float nubis_reference_depth(vec3 p, vec3 dir, int samples, out float plain)
  * Henyey-Greenstein lobe of eccentricity g (inverse of its cumulative distribution). */
 float nubis_henyey_greenstein_sample(float g, float u)
 {
-  if (abs(g) < 1e-3) {
+  if (abs(g) < NUBIS_ISOTROPIC_G) {
     return 1.0 - 2.0 * u;
   }
   float s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u);
@@ -196,13 +251,13 @@ float nubis_reference_sky_visibility(vec3 p, vec3 view_dir, vec2 pixel)
   /* Budget: Mesa's llvmpipe stops a shader's loops after 65535 iterations in total (its loop
    * limiter), which silently cut long reference marches short; 12 x 16 + 48 per cloud sample keeps
    * a 128-step view ray under it. */
-  const int count = 12;
+  const int count = NUBIS_REFERENCE_SKY_DIRECTIONS;
   int silver = int(floor(float(count) * P.lighting_phase_mix + 0.5));
   silver = clamp(silver, P.lighting_phase_mix > 0.0 ? 1 : 0, P.lighting_phase_mix < 1.0 ? count - 1 : count);
-  vec3 side = normalize(abs(view_dir.z) < 0.9 ? cross(view_dir, vec3(0.0, 0.0, 1.0)) :
+  vec3 side = normalize(abs(view_dir.z) < NUBIS_NEAR_VERTICAL ? cross(view_dir, vec3(0.0, 0.0, 1.0)) :
                                                 cross(view_dir, vec3(1.0, 0.0, 0.0)));
   vec3 up = cross(view_dir, side);
-  float spin = 6.2831853 * fract(nubis_pixel_hash(pixel + vec2(0.5, 17.5)) + 0.7548777 * P.jitter_pass);
+  float spin = NUBIS_TWO_PI * fract(nubis_pixel_hash(pixel + NUBIS_SKY_HASH_OFFSET) + NUBIS_R2_STEP * P.jitter_pass);
   float main_lobe = 0.0, silver_lobe = 0.0;
   for (int i = 0; i < count; i++) {
     bool in_silver = i < silver;
@@ -211,10 +266,10 @@ float nubis_reference_sky_visibility(vec3 p, vec3 view_dir, vec2 pixel)
     float g = in_silver ? P.lighting_phase_g1 : P.lighting_phase_g0;
     float cos_t = nubis_henyey_greenstein_sample(g, (float(k) + 0.5) / float(n));
     float sin_t = sqrt(max(0.0, 1.0 - cos_t * cos_t));
-    float phi = spin + float(i) * 2.39996323; /* the golden angle */
+    float phi = spin + float(i) * NUBIS_GOLDEN_ANGLE;
     vec3 dir = view_dir * cos_t + (side * cos(phi) + up * sin(phi)) * sin_t;
     float plain;
-    float tau = nubis_reference_depth(p, dir, 16, plain) * P.density_sigma + nubis_cirrus_optical_depth(p, dir, 0.0);
+    float tau = nubis_reference_depth(p, dir, NUBIS_REFERENCE_SKY_SAMPLES, plain) * P.density_sigma + nubis_cirrus_optical_depth(p, dir, 0.0);
     if (in_silver) {
       silver_lobe += exp(-tau) / float(n);
     }
@@ -242,7 +297,7 @@ NubisRayLight nubis_ray_light(vec3 view_dir)
   l.phase_lo = vec4(0.0);
   l.phase_hi = vec4(0.0);
   float c = 1.0;
-  int octaves = min(int(P.lighting_ms_octaves), 8);
+  int octaves = min(int(P.lighting_ms_octaves), NUBIS_MAX_OCTAVES);
   for (int i = 0; i < octaves; i++) {
     float ph = nubis_phase(l.cos_angle, c);
     if (i < 4) {
@@ -254,12 +309,12 @@ NubisRayLight nubis_ray_light(vec3 view_dir)
     c *= P.lighting_ms_eccentricity;
   }
   /* GPU Pro 7's "Beer's powder" with S15's view dependence: the in-scatter probability darkens
-   * the edges facing the sun, visible only with the sun behind the viewer. */
+   * the edges facing the sun, visible only with the sun behind the viewer (docs/sources.md#powder). */
   l.powder_weight = P.lighting_powder * clamp01(0.5 - 0.5 * l.cos_angle);
   return l;
 }
 
-/* Optical depth towards the sun. Real time: the march of GPU Pro 7 / S15, samples in a widening cone
+/* Optical depth towards the sun (docs/sources.md#light-march). Real time: the march of GPU Pro 7 / S15, samples in a widening cone
  * plus one long-distance sample (GPU Pro 7 fig 4.36) at the coarse density. The taps (offset from the
  * point, and the length each stands for) are the same for every sample of a frame, so Python computes
  * them once (core/march.py) into P.light_taps; P.march_light_samples counts them, the long one last. Samples
@@ -272,16 +327,16 @@ float nubis_light_optical_depth(vec3 p, float view_alpha, float lod, out float p
   float tau = 0.0;
   powder_depth = 0.0;
 #if NUBIS_REFERENCE
-  tau = nubis_reference_depth(p, P.sun_dir.xyz, 48, powder_depth);
+  tau = nubis_reference_depth(p, P.sun_dir.xyz, NUBIS_REFERENCE_SUN_SAMPLES, powder_depth);
 #else
 #  if NUBIS_NAIVE
   bool cheap = false;
 #  else
   /* GPU Pro 7 and S15 switch at 0.3 with "almost no visual difference"; measured against full light
    * samples on the default sky that was 35.9 dB PSNR, 0.5 keeps 40 dB (docs/viewport.md). */
-  bool cheap = view_alpha > 0.5;
+  bool cheap = view_alpha > NUBIS_CHEAP_LIGHT_ALPHA;
 #  endif
-  float light_lod = min(lod + 1.0, 2.0);
+  float light_lod = min(lod + NUBIS_LIGHT_LOD_OFFSET, NUBIS_LIGHT_COARSEST_LOD);
   int taps = int(P.march_light_samples);
   for (int i = 0; i < taps - 1; i++) {
     vec4 tap = P.light_taps[i];
@@ -313,7 +368,8 @@ vec3 nubis_in_scattering(
    * dark sun-facing rim. */
   float powder_depth;
   float tau = nubis_light_optical_depth(p, view_alpha, lod, powder_depth);
-  /* SPEC 2.9: NOT from the Guerrilla sources. Wrenninge's octaves (Oz, 2013) stand in for the light
+  /* NOT from the Guerrilla sources: Wrenninge et al.'s octaves (Oz, 2013; docs/sources.md#multiple-scattering)
+   * stand in for the light
    * that scatters more than once: each octave sees a thinner cloud and a flatter phase. Octave 1 alone
    * is plain single scattering (Beer-Lambert x phase). Octave i stands for light scattered once more
    * than octave i - 1, so it loses another factor of the albedo where the cloud absorbs: without it
@@ -321,7 +377,7 @@ vec3 nubis_in_scattering(
   float direct_energy = 0.0;
   float a = 1.0, b = 1.0;
   float albedo = 1.0 / max(extinction_factor, 1.0);
-  int octaves = min(int(P.lighting_ms_octaves), 8);
+  int octaves = min(int(P.lighting_ms_octaves), NUBIS_MAX_OCTAVES);
   for (int i = 0; i < octaves; i++) {
     float phase = i < 4 ? ray.phase_lo[i] : ray.phase_hi[i - 4];
     direct_energy += b * exp(-a * tau) * phase;
@@ -329,15 +385,15 @@ vec3 nubis_in_scattering(
     b *= P.lighting_ms_contribution * albedo;
   }
   /* GPU Pro 7's factor 2 restores the energy where the powder term applies. */
-  direct_energy *= mix(1.0, 2.0 * (1.0 - exp(-2.0 * powder_depth)), ray.powder_weight);
+  direct_energy *= mix(1.0, NUBIS_POWDER_GAIN * (1.0 - exp(-NUBIS_POWDER_RATE * powder_depth)), ray.powder_weight);
 #if NUBIS_CIRRUS
   /* High cirrus dims the sun on the clouds below it by its own transmittance, as its baked slab does in
    * Cycles: a separate factor, so it neither hides the powder rim nor thins the octaves. */
   direct_energy *= exp(-nubis_cirrus_optical_depth(p, P.sun_dir.xyz, 0.0));
 #endif
   vec3 direct = P.sun_radiance.rgb * direct_energy;
-  /* SPEC 2.7: GDC22's ambient probability from the coarse density, growing with height (S15); the
-   * reference permutation measures the sky's visibility instead. */
+  /* GDC22's ambient probability pow(1 - coarse, 0.5), growing with height (S15;
+   * docs/sources.md#ambient); the reference permutation measures the sky's visibility instead. */
 #if NUBIS_REFERENCE
   float ambient_probability = nubis_reference_sky_visibility(p, view_dir, pixel);
 #else

@@ -1,7 +1,30 @@
-/* The view-ray march: premultiplied scene-linear radiance and alpha (SPEC 2.12, 3.1, 3.3), shared by
- * the raymarch and motion stages. Requires the cloud libraries. */
+/* The view-ray march: premultiplied scene-linear radiance and alpha (GDC22's colour and alpha, GPU Pro
+ * 7's spherical shell and step counts; docs/sources.md#output-colour), shared by the raymarch and motion
+ * stages. Requires the cloud libraries. */
 
-/* SPEC 3.7: the cirrus layer, sampled once where the ray crosses its sphere. Its light is the exact
+/* Two slants closer than this count as equal in the cirrus's single scattering (its formula divides by
+ * their difference). */
+const float NUBIS_EQUAL_SLANTS = 1e-3;
+
+/* The view ray's mip level never passes the coarsest base-shape level stored (noise_lf_mip2). */
+const float NUBIS_COARSEST_LOD = 2.0;
+
+/* The march's loop bound: far above any step count, only a guard for the compiler. */
+const int NUBIS_MAX_ITERATIONS = 4096;
+/* Each accumulation pass shifts the step jitter by the golden ratio's fractional part, so N passes cover
+ * the step evenly (docs/sources.md#step-jitter); the mip dither is the jitter scrambled by this factor. */
+const float NUBIS_GOLDEN_RATIO_FRACT = 0.61803399;
+const float NUBIS_DITHER_SCRAMBLE = 7.0;
+/* GPU Pro 7: back to the cheap search after six empty fine samples in a row (docs/sources.md#coarse-to-fine). */
+const int NUBIS_EMPTY_FINE_SAMPLES = 6;
+/* S15 stops at alpha 1: the march stops once this little light gets through (docs/sources.md#early-exit). */
+const float NUBIS_OPAQUE_TRANSMITTANCE = 0.005;
+/* A ray whose horizontal direction is shorter than this (squared) is vertical: it never leaves the draw
+ * radius sideways. */
+const float NUBIS_VERTICAL_RAY = 1e-12;
+
+/* GPU Pro 7, S15: the cirrus layer, sampled once where the ray crosses its sphere
+ * (docs/sources.md#cirrus-layer, docs/sources.md#cirrus-lighting). Its light is the exact
  * single scattering of a thin homogeneous slab (the layer Cycles renders from the bake): with slant
  * factors m = 1 / cos(zenith) for the view and the sun and vertical optical depth tau, sunlight
  * that passes through the slab towards the eye gives m_v / (m_v - m_s) (e^(-tau m_s) - e^(-tau m_v)),
@@ -24,13 +47,13 @@ vec4 nubis_cirrus(vec3 origin, vec3 dir)
   vec3 up = normalize(origin + dir * t + vec3(0.0, 0.0, P.layer_planet_radius));
   float mu_v = dot(dir, up);
   float mu_s = dot(P.sun_dir.xyz, up);
-  float m_v = 1.0 / max(abs(mu_v), 0.05);
-  float m_s = 1.0 / max(abs(mu_s), 0.05);
+  float m_v = 1.0 / max(abs(mu_v), NUBIS_MIN_SLANT_COS);
+  float m_s = 1.0 / max(abs(mu_s), NUBIS_MIN_SLANT_COS);
   float tau = tau_view / m_v;
   float sun_fraction;
   if ((mu_v > 0.0) == (mu_s > 0.0)) {
     float dm = m_v - m_s;
-    sun_fraction = abs(dm) < 1e-3 ? m_v * tau * exp(-tau * m_v) :
+    sun_fraction = abs(dm) < NUBIS_EQUAL_SLANTS ? m_v * tau * exp(-tau * m_v) :
                                     m_v / dm * (exp(-tau * m_s) - exp(-tau * m_v));
   }
   else {
@@ -60,18 +83,15 @@ vec4 nubis_with_cirrus(vec4 clouds, vec3 origin, vec3 dir, out float behind)
  * metres per metre of distance, P.pixel_size for orthographic views) in texels of the base-shape noise,
  * plus the quality's base level (GDC22: PS4 reads MIP 1, PS5 MIP 0). The fractional part is dithered
  * per pixel, so neighbouring levels blend as the passes accumulate. */
-/* Averaging the noise before the erosion's non-linear remap flattens the detail, so a level is only
- * dropped once a pixel covers two texels of it: measured against 8x supersampling, blurring sooner
- * cost more than the aliasing it removed (docs/viewport.md). */
-#define NUBIS_LOD_BIAS 1.0
+/* The level is one late (NUBIS_LOD_BIAS, nubis_density_lib.glsl; docs/sources.md#noise-mip-levels). */
 float nubis_view_lod(float t, float dither)
 {
   float footprint = P.pixel_angle * t + P.pixel_size;
   float level = log2(max(footprint * float(NUBIS_LF_SIZE - 1) / P.noise_lf_period, 1.0)) - NUBIS_LOD_BIAS + P.march_mip;
-  return min(floor(level + dither), 2.0);
+  return min(floor(level + dither), NUBIS_COARSEST_LOD);
 }
 
-/* The view-ray march (GPU Pro 7, S15, Hillaire 2016): premultiplied radiance and alpha. `cloud_depth` returns the
+/* The view-ray march (GPU Pro 7, S15, Hillaire 2016; docs/sources.md#integration): premultiplied radiance and alpha. `cloud_depth` returns the
  * transmittance-weighted distance of what the ray saw (GDC22's cloud distance), 0 where it
  * saw nothing; `flash_mask` each storm's lightning at unit intensity, integrated like the radiance
  * (GDC22's flash mask): the radiance leaves the flashes out, and callers add
@@ -88,7 +108,8 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out v
   cloud_depth = 0.0;
   flash_mask = vec4(0.0);
   float R = P.layer_planet_radius;
-  /* SPEC 3.1: segment between the shell's spheres; rays that meet the ground see no clouds. */
+  /* GPU Pro 7, GDC22: the segment between the shell's spheres; rays that meet the ground see no clouds
+   * (docs/sources.md#pixel-culling). */
   vec2 ground = nubis_ray_sphere(origin, dir, R, 0.0);
   vec2 inner = nubis_ray_sphere(origin, dir, R, P.shell_bottom);
   vec2 outer = nubis_ray_sphere(origin, dir, R, P.shell_top);
@@ -117,7 +138,7 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out v
   vec2 dxy = dir.xy;
   vec2 oxy = origin.xy - vec2(P.draw_center_x, P.draw_center_y);
   float a = dot(dxy, dxy);
-  if (a > 1e-12) {
+  if (a > NUBIS_VERTICAL_RAY) {
     float b = dot(oxy, dxy);
     float c = dot(oxy, oxy) - P.layer_draw_radius * P.layer_draw_radius;
     float disc = b * b - a * c;
@@ -130,21 +151,22 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out v
     return vec4(0.0);
   }
 
-  /* SPEC 3.3, GPU Pro 7: 64 steps looking up, up to 128 towards the horizon. */
+  /* GPU Pro 7, S15: 64 steps looking up, up to 128 towards the horizon (P.march.xy), by the segment's
+   * length (docs/sources.md#view-steps). */
   float seg = t1 - t0;
   float thickness = P.shell_top - P.shell_bottom;
   float k = clamp01((seg - thickness) / max(P.layer_draw_radius - thickness, 1.0));
   int steps = int(mix(P.march_steps_min, P.march_steps_max, k));
-  /* Within the platform's loop limit (core/march.py, max_steps, in P.max_view_steps): longer steps, never a
-   * ray cut short. */
+  /* Within the platform's loop limit (core/march.py, max_steps, in P.max_view_steps;
+   * docs/platform-notes.md#shader-loop-limit): longer steps, never a ray cut short. */
   steps = min(steps, int(P.max_view_steps));
   float dt = seg / float(steps);
   /* Per-pixel start offset, hiding step banding as fine grain; each accumulation pass (options.z)
    * shifts it by the golden ratio so N passes cover the step evenly. */
-  float jitter = P.jitter > 0.5 ? fract(nubis_pixel_hash(pixel) + 0.61803399 * P.jitter_pass) : 0.5;
+  float jitter = P.jitter > 0.5 ? fract(nubis_pixel_hash(pixel) + NUBIS_GOLDEN_RATIO_FRACT * P.jitter_pass) : 0.5;
 
   /* A second per-pixel value for the mip dither, independent of the step jitter. */
-  float dither = P.jitter > 0.5 ? fract(jitter * 7.0 + 0.5) : 0.5;
+  float dither = P.jitter > 0.5 ? fract(jitter * NUBIS_DITHER_SCRAMBLE + 0.5) : 0.5;
   NubisRayLight ray = nubis_ray_light(dir);
 
   vec3 radiance = vec3(0.0);
@@ -154,7 +176,7 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out v
   int uncovered = 0;            /* the first step that no empty cheap sample has cleared */
   bool fine = NUBIS_NAIVE != 0; /* taking fine samples (true) or searching with cheap ones */
   int empty_fine = 0;
-  for (int iteration = 0; iteration < 4096; iteration++) {
+  for (int iteration = 0; iteration < NUBIS_MAX_ITERATIONS; iteration++) {
     if (i >= steps) {
       break;
     }
@@ -180,11 +202,11 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out v
 #endif
     NubisDensity d = nubis_density(p, false, lod);
     i++;
-    /* SPEC 2.8, GPU Pro 7: no light march where there is no cloud. */
+    /* GPU Pro 7: no light march where there is no cloud. */
     if (d.fine <= 0.0) {
 #if !NUBIS_NAIVE
       empty_fine++;
-      if (empty_fine >= 6) {
+      if (empty_fine >= NUBIS_EMPTY_FINE_SAMPLES) {
         fine = false;
         uncovered = i;
       }
@@ -207,13 +229,14 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out v
     depth_sum += t * transmittance * (1.0 - step_t);
     transmittance *= step_t;
     /* S15: stop once the ray is practically opaque. */
-    if (transmittance < 0.005) {
+    if (transmittance < NUBIS_OPAQUE_TRANSMITTANCE) {
       break;
     }
   }
   float alpha = 1.0 - transmittance;
   cloud_depth = alpha > 0.0 ? depth_sum / alpha : 0.0;
-  /* SPEC 2.11 (S15): clouds fade into the atmosphere with the depth of what the ray saw. */
+  /* S15: clouds fade into the atmosphere with the depth of what the ray saw
+   * (docs/sources.md#aerial-perspective). */
   if (P.lighting_fade_distance > 0.0 && alpha > 0.0) {
     float fade = exp(-(depth_sum / alpha) / P.lighting_fade_distance);
     radiance = mix(P.ambient.rgb * alpha, radiance, fade);

@@ -1,4 +1,4 @@
-/* Motion vectors for the temporal resolve (SPEC 3.9.4, GDC22): for each pixel, the screen offset in
+/* Motion vectors for the temporal resolve (GDC22; docs/sources.md#motion-vectors): for each pixel, the screen offset in
  * pixels from where its cloud was one timestep ago to where it is now, from the cloud distance the march
  * reports. Output: (dx, dy) pixels, the cloud distance in metres, the clouds' alpha. */
 void main()

@@ -1,8 +1,6 @@
 /* Declarations shared by every Nubis shader. The NubisParams uniform block itself, one member per
  * setting named after its key (P.lighting_powder), is generated from core/schema.py by
  * render/uniforms.py and declared ahead of this file. Units are meters, seconds and radiance. */
-#define NUBIS_MAX_STORMS 4
-
 /* The temporal resolve's inputs (render/temporal.py), one block per redraw. */
 struct NubisTemporal {
   mat4 inv_view_proj;  /* this redraw's camera, as the march's rays */

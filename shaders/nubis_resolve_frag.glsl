@@ -1,4 +1,4 @@
-/* Temporal upscaling, step 2 (S15, GDC22; docs/viewport.md): the full-resolution history of this
+/* Temporal upscaling, step 2 (S15, GDC22; docs/viewport.md, docs/sources.md#temporal-upscaling): the full-resolution history of this
  * redraw, from the working buffer just marched and the history of the previous redraw.
  *   - The pixel marched now takes the new sample; once every pixel has one (16 redraws after a
  *     change), later passes average into it with weight T.frame.z.
@@ -11,18 +11,21 @@
  *     res buffers"), so a pan shows no black or stale edges.
  * Outputs: colour, (cloud distance, valid, -, -), flash mask, as the march's. */
 
+/* A reprojected pixel that saw no cloud is reprojected as a direction this far away (metres). */
+const float NUBIS_FAR_DEPTH = 1e6;
+
 /* Where history pixel centre `p` falls in the working buffer, in texels: texel (i, j) holds the pixel
  * 4 (i, j) + the offset marched this redraw (T.flags.zw). */
 vec2 nubis_work_position(vec2 p)
 {
-  return (p - (T.flags.zw + 0.5)) / 4.0;
+  return (p - (T.flags.zw + 0.5)) / float(NUBIS_BLOCK);
 }
 
 /* The last working-buffer texel in each axis that holds a marched pixel (sizes need not be multiples of
  * 4: beyond it the buffer holds nothing). */
 vec2 nubis_work_last()
 {
-  return floor((T.size.xy - 1.0 - T.flags.zw) / 4.0);
+  return floor((T.size.xy - 1.0 - T.flags.zw) / float(NUBIS_BLOCK));
 }
 
 vec4 nubis_work_bilinear(sampler2D tex, vec2 history_pixel)
@@ -33,7 +36,8 @@ vec4 nubis_work_bilinear(sampler2D tex, vec2 history_pixel)
 
 /* The history at `uv` through a Catmull-Rom filter: a pan resamples the history every redraw, and the
  * bilinear filter's blur would pile up over the frames. Five bilinear taps (the corner taps of the full
- * 4x4 kernel carry little weight and are left out, then the weights renormalised). */
+ * 4x4 kernel carry little weight and are left out, then the weights renormalised). The polynomials are
+ * the Catmull-Rom basis (Catmull and Rom 1974; docs/sources.md#numerical-methods). */
 vec4 nubis_history_cubic(sampler2D tex, vec2 uv, vec2 size)
 {
   vec2 p = uv * size - 0.5;
@@ -59,8 +63,9 @@ vec4 nubis_history_cubic(sampler2D tex, vec2 uv, vec2 size)
 void main()
 {
   ivec2 q = ivec2(gl_FragCoord.xy);
-  ivec2 block = q / 4;
-  int age = (int(T.frame.x) - nubis_bayer4(q) + 16) & 15; /* redraws since this pixel was marched */
+  ivec2 block = q / NUBIS_BLOCK;
+  /* redraws since this pixel was marched */
+  int age = (int(T.frame.x) - nubis_bayer4(q) + NUBIS_BLOCK_PIXELS) & (NUBIS_BLOCK_PIXELS - 1);
   int since_change = int(T.frame.y);
   bool valid = T.flags.x > 0.5;
   vec4 hist_c = texelFetch(hist_color, q, 0);
@@ -70,7 +75,7 @@ void main()
     vec4 new_c = texelFetch(work_color, block, 0);
     vec4 new_a = texelFetch(work_attr, block, 0);
     vec4 new_f = texelFetch(work_flash, block, 0);
-    float w = (valid && since_change >= 16) ? T.frame.z : 1.0;
+    float w = (valid && since_change >= NUBIS_BLOCK_PIXELS) ? T.frame.z : 1.0;
     color = mix(hist_c, new_c, w);
     flash = mix(hist_f, new_f, w);
     attr = vec4(new_a.x, 1.0, 0.0, 0.0);
@@ -119,7 +124,7 @@ void main()
   if (depth <= 0.0) {
     /* No cloud seen here: reproject at the middle of the cloud layer, or as a direction far away. */
     vec2 mid = nubis_ray_sphere(origin, dir, P.layer_planet_radius, 0.5 * (P.shell_bottom + P.shell_top));
-    depth = mid.y > 0.0 ? (mid.x > 0.0 ? mid.x : mid.y) : 1e6;
+    depth = mid.y > 0.0 ? (mid.x > 0.0 ? mid.x : mid.y) : NUBIS_FAR_DEPTH;
   }
   vec3 world = origin + dir * depth;
   vec4 before = T.prev_view_proj * vec4(nubis_previous_position(world, T.frame.w), 1.0);

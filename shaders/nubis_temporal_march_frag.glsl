@@ -4,10 +4,10 @@
  * still view converges to that image. Outputs: the clouds and cirrus without the lightning flashes,
  * (cloud distance, 1 = marched, -, -), and the per-storm flash mask (nubis_march). Pixels the scene's
  * geometry hides are not marched (GDC22: "if objects render in front of the clouds, we do not march
- * from those pixels"): cull.x = 1 when a depth is bound, cull.yz scale history pixels to its pixels. */
+ * from those pixels"; docs/sources.md#pixel-culling): cull.x = 1 when a depth is bound, cull.yz scale history pixels to its pixels. */
 void main()
 {
-  ivec2 pixel = ivec2(gl_FragCoord.xy) * 4 + ivec2(block.xy);
+  ivec2 pixel = ivec2(gl_FragCoord.xy) * NUBIS_BLOCK + ivec2(block.xy);
   attr = vec4(0.0);
   flash = vec4(0.0);
   color = vec4(0.0);

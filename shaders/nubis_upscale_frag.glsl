@@ -1,5 +1,5 @@
 /* Temporal upscaling, step 3: the history onto the view, premultiplied, with GDC22's upscale blur
- * (filter_size.x: 1 = the history's own texels, 2 = twice as wide, the PS4 setting), and the
+ * (docs/sources.md#upscale-blur; filter_size.x: 1 = the history's own texels, 2 = twice as wide, the PS4 setting), and the
  * lightning of this frame added from the flash mask at its full intensity (GDC22's flash mask). */
 void main()
 {

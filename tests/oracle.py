@@ -1,6 +1,6 @@
 """A numpy oracle of the cloud density (tests only, never a product path).
 
-An independent port of `nubis_density` (shaders/nubis_density_lib.glsl, SPEC 1.2-1.7) that the GPU
+An independent port of `nubis_density` (shaders/nubis_density_lib.glsl; GPU Pro 7, GDC22) that the GPU
 read-backs are compared against. The constants are not copied: they come from the same CloudState, the
 same NoiseSet and the same uniform vectors (render/uniforms.member_values) the shader is fed, rounded to
 float32 as the uniform block stores them.
@@ -48,7 +48,8 @@ def fract(x):
 
 
 def remap(value, old_min, old_max, new_min, new_max):
-    """SPEC 1.2 (GPU Pro 7, GDC22, HABR): unclamped; a zero-width input range gives new_min, as the shader."""
+    """GPU Pro 7, GDC22 and the Habr implementation agree: unclamped; a zero-width input range gives new_min,
+    as the shader."""
     value, old_min, old_max, new_min, new_max = np.broadcast_arrays(
         *(np.asarray(a, np.float64) for a in (value, old_min, old_max, new_min, new_max))
     )
@@ -59,7 +60,7 @@ def remap(value, old_min, old_max, new_min, new_max):
 
 
 def altitude(p: np.ndarray, planet_radius: float) -> np.ndarray:
-    """Height above the sphere of radius R centred at (0, 0, -R) (SPEC 1.2 [IMPL], spherical shell)."""
+    """Height above the sphere of radius R centred at (0, 0, -R) (docs/sources.md#spherical-height-fraction)."""
     centre_dist = np.sqrt(p[:, 0] ** 2 + p[:, 1] ** 2 + (p[:, 2] + planet_radius) ** 2)
     # |p + c| - R without cancelling two 6e6 numbers: (|p + c|^2 - R^2) / (|p + c| + R).
     return (np.einsum("ij,ij->i", p, p) + 2.0 * planet_radius * p[:, 2]) / (centre_dist + planet_radius)
@@ -141,7 +142,7 @@ def padded_texture(arr: np.ndarray, spatial_axes: int) -> np.ndarray:
 
 
 def vertical_profile(h, top_type, bottom_type):
-    """SPEC 1.5 [IMPL] trapezoids (community defaults), HFW split into bottom x top ramps (GDC22)."""
+    """Trapezoids (docs/sources.md#vertical-profile), split into bottom x top ramps (GDC22)."""
     t = clamp01(np.asarray(top_type, np.float64))
     low_half = t < 0.5
     ramp_start = np.where(low_half, mix(0.10, 0.40, t * 2.0), mix(0.40, 0.70, t * 2.0 - 1.0))
@@ -200,7 +201,7 @@ class DensityOracle:
         uv = (xy - field[:2]) * field[3] + 0.5
         a = sample_linear(self.field_a, clamp01(uv))
         b = sample_linear(self.field_b, clamp01(uv))
-        # Nothing outside the painted field, and the draw-radius fade (SPEC 1.1, S15).
+        # Nothing outside the painted field, and the draw-radius fade (S15; docs/sources.md#draw-radius-fade).
         edge = np.minimum(uv, 1.0 - uv) * field[2]
         fade = max(draw[2], 1.0)
         in_field = clamp01(np.minimum(edge[:, 0], edge[:, 1]) / fade)
@@ -229,7 +230,7 @@ class DensityOracle:
         alt = altitude(p, layer[0])
         in_shell = (alt >= v["shell"][0]) & (alt <= v["shell"][1])
         a, b, inside = self.sample_fields(p[:, :2])
-        # SPEC 1.2 on the spherical shell, with the min/max height field (SPEC 1.9.4).
+        # The height fraction on the spherical shell, with the min/max height field (GDC22).
         thickness = layer[2] - layer[1]
         lo = layer[1] + b[:, 1] * thickness
         hi = layer[1] + b[:, 2] * thickness
@@ -243,8 +244,8 @@ class DensityOracle:
         # here in float32 with the shader's operations, everything else is float64.
         f = self.v32
         p32, h32 = p.astype(np.float32), h.astype(np.float32)
-        # SPEC 1.7 (GPU Pro 7 skew and drift, GDC22 sign): offsets are subtracted so features move downwind;
-        # the field sample above uses the unmoved p (GDC22, SPEC 1.3.1).
+        # GPU Pro 7 skew and drift, GDC22 sign (docs/sources.md#wind-direction-and-sign): offsets are subtracted
+        # so features move downwind; the field sample above uses the unmoved p (GDC22).
         wind_dir = np.array([f["wind"][0], f["wind"][1], 0.0], np.float32)
         drift = (wind_dir + np.array([0.0, 0.0, f["wind2"][1]], np.float32)) * f["wind"][2]
         skewed = p32 - h32[:, None] * wind_dir * f["wind2"][0]
@@ -253,15 +254,15 @@ class DensityOracle:
         lf_tex = self.lf if lod < 1 else self.lf_mip1
         lf = sample_linear(lf_tex, tile_coords(p_lf / f["noise"][0], _size(lf_tex, 3)), self.unorm8)
         lf_fbm = lf[:, 1:4] @ _FBM
-        # SPEC 1.6.2, GPU Pro 7: Worley fBm dilates the Perlin-Worley base shape, then the profile.
+        # GPU Pro 7: Worley fBm dilates the Perlin-Worley base shape, then the profile.
         base = remap(lf[:, 0], -(1.0 - lf_fbm), 1.0, 0.0, 1.0) * profile
-        # SPEC 1.6.1 / 6 Q1 (GDC22's 1 - coverage), GPU Pro 7's optional multiply by coverage.
+        # GDC22's 1 - coverage, GPU Pro 7's optional multiply by coverage (docs/sources.md#coverage-erosion).
         with_coverage = clamp01(remap(base, 1.0 - coverage, 1.0, 0.0, 1.0))
         with_coverage = with_coverage * mix(1.0, coverage, dens[3])
         multiplier = np.maximum(b[:, 3], 0.0)
         coarse = with_coverage * multiplier
 
-        # SPEC 1.6.2, GPU Pro 7: curl noise displaces the detail at the base, (1 - h) weighted.
+        # GPU Pro 7: curl noise displaces the detail at the base, (1 - h) weighted.
         p_hf = skewed - drift * f["wind"][3]
         curl = sample_linear(self.curl, tile_coords(p_hf[:, :2] / f["noise"][2], _size(self.curl, 2)), self.unorm8)
         curl32 = curl[:, :2].astype(np.float32) * 2.0 - 1.0

@@ -60,7 +60,8 @@ def build_material(settings, with_glow: bool = False, with_absorption: bool = Fa
     out = nt.nodes.new("ShaderNodeOutputMaterial")
     volume_out = scatter
     if with_absorption:
-        # SPEC 2.5: the viewport's rain raises extinction by absorbing; black absorbs all of it.
+        # docs/sources.md#rain-and-storm-absorption: the viewport's rain raises extinction by absorbing; black
+        # absorbs all of it.
         _absorb_attr, absorb_scale = _grid_times(nt, "absorption", settings.density_sigma)
         absorb = nt.nodes.new("ShaderNodeVolumeAbsorption")
         absorb.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)

@@ -220,7 +220,8 @@ def generate_fields(scene, progress=None) -> None:
         fieldgen.apply_rain_rule(result, settings.rule_cumulonimbus_top)
     if settings.rule_horizon:
         fieldgen.apply_horizon_rule(result, params, _camera_xy(scene), settings.rule_horizon_start)
-    # SPEC 1.9.1: superstorm stencils override the field inside their radius, after everything else.
+    # GDC22: superstorm stencils override the field inside their radius, after everything else
+    # (docs/sources.md#storm-stencil).
     storms = storm_stencils(settings, params)
     if storms:
         stormgen.apply_storms(result, params, storms)

@@ -1,7 +1,8 @@
 """Reach the OpenVDB and OpenImageIO modules that ship inside Blender, without importing bpy.
 
 Inside a Blender executable they are already importable. The bpy wheel keeps them in
-``bpy/<version>/python/lib/python3.X/site-packages``, which is not on sys.path (PLATFORM.md).
+``bpy/<version>/python/lib/python3.X/site-packages``, which is not on sys.path
+(docs/platform-notes.md#openvdb-and-openimageio-in-the-bpy-wheel).
 We never vendor or pip-install a second copy.
 """
 

@@ -1,9 +1,9 @@
-"""The Nubis Data Field generator (GDC22, SPEC 1.3): a stack of layers composited into the field images.
+"""The Nubis Data Field generator (GDC22): a stack of layers composited into the field images.
 
-Images (SPEC 1.3.5): A = coverage, precipitation, top type, bottom type;
+Images (docs/sources.md#field-layout): A = coverage, precipitation, top type, bottom type;
 B = storm coverage, min height, max height (fractions of the layer, may exceed 1), density multiplier;
 cirrus = cirrus coverage, cirrus type. Arrays are (H, W, 4) float32, bottom row first like Blender images.
-The field is not animated by wind (GDC22, SPEC 1.3.1): only the 3D noise moves.
+The field is not animated by wind (GDC22): only the 3D noise moves.
 """
 
 from __future__ import annotations
@@ -88,7 +88,8 @@ def _procedural_values(layer: Mapping[str, Any], xs: np.ndarray, ys: np.ndarray)
             return world_fbm_2d("perlin", u, v, octaves, seed)
         if kind == "worley":
             return world_fbm_2d("worley", u, v, octaves, seed)
-        # SPEC 1.4.2 (GPU Pro 7, S15): Worley dilates the Perlin, keeping its connectedness with billowy rims.
+        # GPU Pro 7, S15: Worley dilates the Perlin, keeping its connectedness with billowy rims
+        # (docs/sources.md#perlin-worley).
         p = world_fbm_2d("perlin", u, v, octaves, seed)
         w = world_fbm_2d("worley", u * 2, v * 2, max(1, octaves - 1), seed + 101)
         return np.clip((p - (w - 1.0)) / (2.0 - w), 0.0, 1.0)
@@ -220,7 +221,8 @@ def clamp_fields(fields: dict[str, np.ndarray]) -> None:
 
 
 def apply_rain_rule(fields: dict[str, np.ndarray], cumulonimbus_top: float = 1.0) -> None:
-    """SPEC 1.3.1 (GPU Pro 7, S15): where it rains, clouds turn to cumulonimbus, covering at least 70 %.
+    """GPU Pro 7, S15: where it rains, clouds turn to cumulonimbus, covering at least 70 %
+    (docs/sources.md#rain-rule).
 
     ``cumulonimbus_top`` is the raised max-height fraction for full rain (e.g. 8 km in a 1.5-4 km layer)."""
     a, b = fields["a"], fields["b"]
@@ -233,8 +235,8 @@ def apply_rain_rule(fields: dict[str, np.ndarray], cumulonimbus_top: float = 1.0
 def apply_horizon_rule(
     fields: dict[str, np.ndarray], params: Mapping[str, Any], center: tuple[float, float], start: float = 15000.0
 ) -> None:
-    """SPEC 1.3.1 (S15): from 15 km out to the draw radius, blend towards cumulus at about 50 % coverage,
-    so the horizon always holds clouds that poke above the mountains."""
+    """S15: from 15 km out to the draw radius, blend towards cumulus at about 50 % coverage, so the
+    horizon always holds clouds that poke above the mountains (docs/sources.md#horizon-rule)."""
     xs, ys = pixel_centres(params)
     end = max(params["layer_draw_radius"], start + 1.0)
     t = np.clip((np.hypot(xs - center[0], ys - center[1]) - start) / (end - start), 0.0, 1.0)

@@ -17,7 +17,7 @@ SAMPLES_RANGE = (1, 65536)
 BOUNCES_RANGE = (0, 1024)  # Cycles' own limit on volume bounces
 SIZE_RANGE = (4, 16384)
 PASSES_RANGE = (1, 1024)
-VOXEL_MAX = 10000.0  # metres: the bake_voxel_size setting's maximum (params.py)
+VOXEL_MAX = 10000.0  # metres: the bake_voxel_size setting's maximum (core/schema.py)
 # Positions (camera, storms, field centre) within 10,000 km of the origin: the GPU gets float32
 # offsets from the camera, and the view rays a float64 inverse that stays well conditioned there.
 POSITION_MAX = 1e7

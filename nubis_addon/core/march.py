@@ -14,8 +14,9 @@ MAX_LIGHT_TAPS = 16
 CONE_STEPS = 5.0
 LONG_REACH = 3.0
 
-# GPU Pro 7's six random offsets in [-1, 1]^3 that widen the light march into a cone.
-_GPU_PRO_7_KERNEL = np.array(
+# Six random offsets in [-1, 1]^3 that widen the light march into a cone: GPU Pro 7 uses six but does not
+# print them, so these are the project's own (docs/sources.md#light-march).
+_CONE_KERNEL = np.array(
     [
         (0.38051305, 0.92453449, -0.02111345),
         (-0.50625799, -0.03590792, -0.86163418),
@@ -30,11 +31,11 @@ _GPU_PRO_7_KERNEL = np.array(
 def cone_kernel(count: int) -> np.ndarray:
     """`count` unit offsets: GPU Pro 7's six first, then directions of our own (a fixed seed), so a
     quality with more light samples keeps the first taps where the standard quality has them."""
-    if count <= len(_GPU_PRO_7_KERNEL):
-        return _GPU_PRO_7_KERNEL[:count]
-    extra = np.random.default_rng(7).normal(size=(count - len(_GPU_PRO_7_KERNEL), 3))
+    if count <= len(_CONE_KERNEL):
+        return _CONE_KERNEL[:count]
+    extra = np.random.default_rng(7).normal(size=(count - len(_CONE_KERNEL), 3))
     extra /= np.linalg.norm(extra, axis=1, keepdims=True)
-    return np.concatenate([_GPU_PRO_7_KERNEL, extra])
+    return np.concatenate([_CONE_KERNEL, extra])
 
 
 def light_taps(sun_direction, light_step: float, samples: int) -> np.ndarray:

@@ -1,6 +1,6 @@
-"""Tiling noise textures for the Nubis cloud model (SPEC 1.4), in pure numpy.
+"""Tiling noise textures for the Nubis cloud model, in pure numpy.
 
-The set follows Guerrilla's layout (SPEC 1.4.1, GPU Pro 7 / S15 / GDC22):
+The set follows Guerrilla's layout (GPU Pro 7, S15, GDC22):
 
 * ``lf``     128^3 RGBA: R = Perlin-Worley, G/B/A = inverted Worley fBm at increasing frequency.
 * ``hf``     32^3 RGB: inverted Worley fBm at increasing frequency.
@@ -62,17 +62,17 @@ __all__ = [
 #: Bump whenever any generator changes its output; cached files of other versions are regenerated.
 NOISE_VERSION = 1
 
-#: SPEC 1.4.2, GPU Pro 7 low/high_freq_FBM (HABR identical): octave weights of every Worley fBm.
+#: GPU Pro 7's low_freq_FBM and high_freq_FBM (the Habr implementation agrees): octave weights of every Worley fBm.
 FBM_WEIGHTS = (0.625, 0.25, 0.125)
 
-# SPEC 1.4.1: Guerrilla's resolutions.
+# Guerrilla's resolutions (S15, GPU Pro 7).
 LF_SIZE = 128
 HF_SIZE = 32
 CURL_SIZE = 128
 CIRRUS_SIZE = 512
 
-# SPEC 1.4.2 [IMPL]: the sources give no cell counts; these follow the recommendation there (doubling per
-# channel) and were tuned by eye on slices (connected blobs for R, billows for G/B/A).
+# The sources give no cell counts (docs/sources.md#noise-octaves-and-cells): they double per channel and
+# were tuned by eye on slices (connected blobs for R, billows for G/B/A).
 LF_PERLIN_CELLS = 4  # lowest Perlin frequency: a few blobs per tile keeps Perlin's connectedness
 LF_PERLIN_OCTAVES = 7  # GPU Pro 7 fig 4.5 "seven-octave Perlin"; octaves finer than 2 texels are dropped
 LF_PERLIN_WORLEY_CELLS = 8  # the billows on the Perlin rims are a little smaller than the blobs
@@ -202,7 +202,7 @@ def tiling_worley_3d(size: int, cells: int | Sequence[int], rng: RngLike = None)
 
     One feature point per cell (Worley 1996); the value is the distance to the nearest one in cell units,
     clipped to [0, 1] (distances above 1 cell are very rare). 0 at feature points, high on the cell walls;
-    use ``1 - value`` for the billowy "inverted Worley" of SPEC 1.4.2.
+    use ``1 - value`` for the billowy "inverted Worley" of GPU Pro 7, S15 and GDC22.
     """
     cz, cy, cx = _axes_cells(cells, 3)
     sz, sy, sx = _block_layout(size, (cz, cy, cx))
@@ -251,7 +251,7 @@ def _weights(n: int, gain: float) -> np.ndarray:
 def perlin_fbm_3d(
     size: int, cells: int | Sequence[int], octaves: int = 7, rng: RngLike = None, gain: float = 0.5
 ) -> np.ndarray:
-    """Tiling Perlin fBm (SPEC 1.4.2, GPU Pro 7), float32 in [0, 1] with mean 0.5.
+    """Tiling Perlin fBm (GPU Pro 7), float32 in [0, 1] with mean 0.5.
 
     Octave ``o`` has ``cells * 2**o`` lattice cells and amplitude ``gain**o``; weights are normalised to sum 1.
     Octaves with fewer than 2 texels per cell are dropped.
@@ -274,8 +274,8 @@ def worley_fbm_3d(
 ) -> np.ndarray:
     """Tiling Worley fBm, float32 in [0, 1]: octave ``o`` has ``cells * 2**o`` cells and weight ``weights[o]``.
 
-    With ``invert`` (default) each octave is ``1 - F1``, the billowy form (SPEC 1.4.2: "If it is inverted...
-    it makes tightly packed billow shapes. We layered it like the standard Perlin fBm approach", GPU Pro 7).
+    With ``invert`` (default) each octave is ``1 - F1``, the billowy form (S15: "If it is inverted...
+    it makes tightly packed billow shapes. We layered it like the standard Perlin fBm approach"; GPU Pro 7 alike).
     Octaves finer than 2 texels per cell are dropped and the remaining weights renormalised.
     """
     gen = _rng(rng)
@@ -290,15 +290,15 @@ def worley_fbm_3d(
 
 
 def perlin_worley(perlin: np.ndarray, inverted_worley: np.ndarray, strength: float = 1.0) -> np.ndarray:
-    """Perlin-Worley (SPEC 1.4.2): Perlin dilated by billowy (inverted) Worley, in [0, 1].
+    """Perlin-Worley (docs/sources.md#perlin-worley): Perlin dilated by billowy (inverted) Worley, in [0, 1].
 
     ``remap(perlin, -strength * inverted_worley, 1, 0, 1)``.
     """
-    # SPEC 1.4.2, GPU Pro 7 / S15 "dilate", GDC22 "subtract the web like shapes of Worley": GPU Pro 7 remaps
+    # GPU Pro 7 / S15 "dilate", GDC22 "subtract the web like shapes of Worley": GPU Pro 7 remaps
     # Perlin with the Worley fBm as the old minimum. Using minus the *inverted* Worley as that minimum lowers
     # the bar exactly at the Worley feature points, so any Perlin iso-surface bulges outward into round
     # billows there while staying where Perlin put it between them: Perlin's connected blobs, cauliflower
-    # rims. (The literal "+inverted Worley" minimum dents the rims inward instead; SPEC 6 Q38.) Where Perlin is 1
+    # rims. (The literal "+inverted Worley" minimum dents the rims inward instead.) Where Perlin is 1
     # the result stays 1, so cores keep full density.
     old_min = -np.float32(strength) * inverted_worley
     return np.clip((perlin - old_min) / (1.0 - old_min), 0.0, 1.0).astype(np.float32, copy=False)
@@ -514,8 +514,8 @@ def curl_2d(potential: np.ndarray) -> np.ndarray:
 def encode_curl(v: np.ndarray) -> np.ndarray:
     """Encode a curl field ``(H, W, 2)`` as float32 RGB in [0, 1]: ``0.5 + 0.5 * v / max|v|`` and the speed.
 
-    Decode with ``rg * 2 - 1`` (SPEC 1.4.2). Both components share one scale: scaling them separately would
-    stretch the field anisotropically and make it divergent again. B is the speed normalised to [0, 1].
+    Decode with ``rg * 2 - 1`` (docs/sources.md#curl-noise). Both components share one scale: scaling them
+    separately would stretch the field anisotropically and make it divergent again. B is the speed normalised to [0, 1].
     """
     scale = float(np.max(np.abs(v))) or 1.0
     rg = 0.5 + 0.5 * v / scale
@@ -707,7 +707,8 @@ def _make_curl(seed: int, size: int) -> np.ndarray:
 
 
 def cirrus_layers(size: int = CIRRUS_SIZE, rng: RngLike = None) -> np.ndarray:
-    """The three tiling cirrus-level cloudscapes (SPEC 1.4.1, GDC22), float32 ``(size, size, 3)`` in [0, 1].
+    """The three tiling cirrus-level cloudscapes (GDC22), float32 ``(size, size, 3)`` in [0, 1]; their look
+    is the project's own (docs/sources.md#cirrus-textures).
 
     R = cirrostratus (soft veil with long streaks), G = cirrus (thin fibrous strands), B = cirrocumulus (small
     puffy cells in patches). ``size`` must be a power of two of at least 64.
@@ -741,7 +742,7 @@ def cirrus_layers(size: int = CIRRUS_SIZE, rng: RngLike = None) -> np.ndarray:
     fibres = (0.7 * normalise(ridge) + 0.3 * normalise(glow)) * _remap(mask, 0.4, 0.9)
     fibres = normalise(fibres)
 
-    # B: cirrocumulus, small puffy cells (inverted Worley, SPEC 1.4.2) with dark gaps, in ripple rows and
+    # B: cirrocumulus, small puffy cells (inverted Worley) with dark gaps, in ripple rows and
     # patches.
     cells = worley_fbm_2d(size, c(32), gen, weights=(0.75, 0.25))
     puffs = _remap(normalise(cells), 0.15, 1.0) ** 1.2

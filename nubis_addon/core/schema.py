@@ -521,7 +521,7 @@ SCENE: tuple[Setting, ...] = (
         gpu=True,
     ),
     # Not from the Guerrilla sources: Wrenninge et al.'s multiple-scattering octaves. Ambient, octave and
-    # powder defaults were tuned against Cycles with 8 volume bounces (docs/sources.md#lighting-tuning).
+    # powder defaults were tuned against Cycles with 8 volume bounces (docs/sources.md#multiple-scattering).
     S(
         "lighting",
         "ms_octaves",

@@ -9,23 +9,27 @@ from typing import Any
 
 import numpy as np
 
+from . import schema
 from .schema import defaults
+
+_STORM = {s.name: s.default for s in schema.STORM}
 
 
 @dataclass(frozen=True)
 class StormLight:
     """What the renderer needs of a superstorm beyond the field: its centre and radius for the vortex
-    and the storm lighting (SPEC 1.9.5, 2.10), and the lifecycle blend."""
+    and the storm lighting (GDC22), and the lifecycle blend."""
 
     x: float
     y: float
     radius: float
-    blend: float = 1.0
-    spin: float = 0.02  # radians per second at the centre
-    darkening: float = 3.0  # optical-depth scale of the light march at the centre
-    glow: float = 0.0  # internal glow intensity
-    ambient_boost: float = 1.5  # ambient under the storm relative to the clouds'
-    glow_color: tuple[float, float, float] = (1.0, 0.08, 0.03)
+    # Defaults are the settings schema's (core/schema.py).
+    blend: float = _STORM["blend"]
+    spin: float = _STORM["spin"]  # radians per second at the centre
+    darkening: float = _STORM["darkening"]  # optical-depth scale of the light march at the centre
+    glow: float = _STORM["glow"]  # internal glow intensity
+    ambient_boost: float = _STORM["ambient_boost"]  # ambient under the storm relative to the clouds'
+    glow_color: tuple[float, float, float] = _STORM["glow_color"]
     flash: float = 0.0  # lightning: intensity of this frame's flash
     flash_x: float = 0.0  # the flash's offset from the storm centre (m)
     flash_y: float = 0.0
@@ -65,7 +69,7 @@ class CloudState:
         return self.field_c is not None and self.params["cirrus_coverage"] > 0 and float(self.field_c[..., 0].max()) > 0
 
     def shell(self) -> tuple[float, float]:
-        """Lowest and highest altitude a cloud can occupy, from the min/max height channels (SPEC 1.9.4)."""
+        """Lowest and highest altitude a cloud can occupy, from the min/max height channels (GDC22)."""
         bottom, top = self.params["layer_bottom"], self.params["layer_top"]
         if self.field_b is None:
             return bottom, top

@@ -1,10 +1,11 @@
-"""Superstorm stencils of the Nubis Data Field generator (SPEC 1.9, GDC22): rasterise each storm's
+"""Superstorm stencils of the Nubis Data Field generator (GDC22): rasterise each storm's
 mesocyclone into the tropospheric field images ("a", "b") and its anvil into the cirrus image.
 
-A storm is defined by "Position, Radius and blend factor" (GDC22, SPEC 1.9.1); the blend factor is
-animated over the storm's lifecycle (SPEC 1.9.8, :func:`lifecycle_keys`). Pure numpy: no bpy, no gpu.
+A storm is defined by "Position, Radius and blend factor" (GDC22); the blend factor is animated over
+the storm's lifecycle (:func:`lifecycle_keys`). Pure numpy: no bpy, no gpu.
 The renderer's share of the storm (vortex rotation, flipped profile, darkening, glow) lives in the
-shaders and reads the storm coverage channel written here (SPEC 1.9.6, 2.10).
+shaders and reads the storm coverage channel written here. Where GDC22 gives no shape or number, the
+choices are in docs/sources.md#superstorms.
 """
 
 from __future__ import annotations
@@ -16,14 +17,16 @@ from typing import Any
 
 import numpy as np
 
+from . import schema
 from .fields import pixel_centres
 from .noise import world_fbm_2d
 
 # Width of the stencil's outer fade, as a fraction of the radius: the modelling is fully on inside
-# (1 - EDGE_WIDTH) x radius and fades out with zero slope at the radius. [IMPL]
+# (1 - EDGE_WIDTH) x radius and fades out with zero slope at the radius (docs/sources.md#storm-stencil).
 EDGE_WIDTH = 0.4
 ANVIL_EDGE_WIDTH = 0.3
-# [IMPL] Shape constants of the mesocyclone, in fractions of the radius (not given by the sources).
+# Shape constants of the mesocyclone, in fractions of the radius, not given by GDC22
+# (docs/sources.md#mesocyclone-shape).
 COLUMN_RADIUS = (0.18, 0.42)  # coverage column: fully covered inside .18, gone by .42 (noisy radius)
 TOWER_RADIUS = (0.12, 0.5)  # the raised max height spreads a little wider than the coverage column
 FOOT_RADIUS = (0.55, 0.95)  # the flat, spread-out foot (the sombrero's brim)
@@ -31,25 +34,29 @@ ANVIL_COVERAGE = 0.95
 ANVIL_TYPE = (0.75, 0.35)  # billowy above the storm, wispy at the downwind tail (0 cirrostratus, 1 cirrocumulus)
 
 
+_D = {s.name: s.default for s in schema.STORM}
+
+
 @dataclass
 class Storm:
-    """One superstorm stencil (SPEC 1.9.1). Heights are fractions of the layer thickness above the
-    layer bottom, like the field's min/max height channels (SPEC 1.9.4)."""
+    """One superstorm stencil (GDC22). Heights are fractions of the layer thickness above the layer
+    bottom, like the field's min/max height channels (docs/sources.md#storm-heights)."""
 
     x: float  # world centre, metres
     y: float
     radius: float  # metres
-    coverage: float = 1.0  # peak cloud coverage at the centre
-    blend: float = 1.0  # lifecycle blend factor (GDC22 animates it: 0 = no storm)
-    height: float = 3.2  # max height at the centre: 3.2 raises a 1.5-4 km layer's top to ~9.5 km
-    base: float = -0.15  # min height at the foot: < 0 lowers the flat foot below the layer bottom
-    bottom_type: float = 0.85  # ragged, wispy underside (SPEC 1.3.3)
+    # Defaults are the settings schema's (core/schema.py): one value for presets, the sidebar and here.
+    coverage: float = _D["coverage"]  # peak cloud coverage at the centre
+    blend: float = _D["blend"]  # lifecycle blend factor (GDC22 animates it: 0 = no storm)
+    height: float = _D["height"]  # max height at the centre: 3.0 raises a 1.5-4 km layer's top to ~9 km
+    base: float = _D["base"]  # min height at the foot: < 0 lowers the flat foot below the layer bottom
+    bottom_type: float = _D["bottom_type"]  # ragged, wispy underside (GDC22's bottom type)
     seed: int = 0
     anvil_offset: float | None = None  # metres downwind of the centre; None = 1.0 x radius
     wind_x: float = 1.0  # wind direction (normalised here) that carries the anvil
     wind_y: float = 0.0
     anvil_size: float = 1.6  # anvil radius / storm radius
-    twist: float = 2.2  # radians the noises are twisted about the centre (SPEC 1.9.2 vortex tendrils)
+    twist: float = 2.2  # radians the noises are twisted about the centre (GDC22's vortex tendrils)
 
     def wind(self) -> tuple[float, float]:
         n = math.hypot(self.wind_x, self.wind_y)
@@ -114,7 +121,7 @@ def _inside(
     return (win, inside) if inside.any() else None
 
 
-# ---- the mesocyclone (SPEC 1.9.2, 1.9.4) ------------------------------------------------------
+# ---- the mesocyclone (GDC22) --------------------------------------------------------------------
 
 
 def _mesocyclone(storm: Storm, xs: np.ndarray, ys: np.ndarray) -> dict[str, np.ndarray]:
@@ -123,19 +130,19 @@ def _mesocyclone(storm: Storm, xs: np.ndarray, ys: np.ndarray) -> dict[str, np.n
     lx, ly = (xs - storm.x) / storm.radius, (ys - storm.y) / storm.radius
     r = np.hypot(lx, ly)
     s = int(storm.seed) * 64  # each noise below gets its own 8 seeds (fbm uses seed + octave)
-    # SPEC 1.9.2, GDC22: "We twisted these noises around the center of the mesocyclone to produce the
+    # GDC22: "We twisted these noises around the center of the mesocyclone to produce the
     # characteristic vortex tendrils": the twist grows towards the centre, where the vortex is fastest.
     phi = storm.twist * (1.0 - np.minimum(r, 1.0)) ** 2
     c, sn = np.cos(phi), np.sin(phi)
     tx, ty = c * lx - sn * ly, sn * lx + c * ly
-    # Distorted noises (SPEC 1.9.4): a low-frequency warp bends the tendril and relief noises.
+    # Distorted noises (GDC22): a low-frequency warp bends the tendril and relief noises.
     wx = world_fbm_2d("perlin", tx * 2.5 + 11.3, ty * 2.5 - 4.7, 2, s) - 0.5
     wy = world_fbm_2d("perlin", tx * 2.5 - 7.9, ty * 2.5 + 3.1, 2, s + 8) - 0.5
     edge = world_fbm_2d("perlin", tx * 2.2 + 5.5, ty * 2.2 + 1.7, 3, s + 16) - 0.5
     tendril = world_fbm_2d("perlin", (tx + 0.5 * wx) * 4.0, (ty + 0.5 * wy) * 4.0, 3, s + 24)
     billow = world_fbm_2d("worley", tx * 3.5 + 0.37, ty * 3.5 + 0.61, 2, s + 32)
     relief = world_fbm_2d("perlin", (tx + 0.6 * wy) * 3.5 - 2.3, (ty + 0.6 * wx) * 3.5 + 8.1, 3, s + 40)
-    # SPEC 1.9.2, GDC22: "Several noises were composited and blended to their maximum values at the
+    # GDC22: "Several noises were composited and blended to their maximum values at the
     # center to produce the characteristic cylindrical foot of the mesocyclone" (the "sombrero").
     comp = np.clip((0.55 * tendril + 0.45 * billow - 0.4) / 0.3, 0.0, 1.0)
     rc = r + 0.22 * edge  # noisy, twisted radius: a round column with ragged edges, not a disc
@@ -146,14 +153,14 @@ def _mesocyclone(storm: Storm, xs: np.ndarray, ys: np.ndarray) -> dict[str, np.n
     coverage = storm.coverage * (brim + (1.0 - brim) * column)
     # "increase cloud coverage and type radially toward a point": cumulonimbus (1) at the centre.
     top_type = (0.55 + 0.35 * comp) * (1.0 - column) + column
-    # SPEC 1.3.3 / 1.9.2: a raised bottom type relaxes the bottom profile into ragged, wispy shapes.
+    # GDC22: a raised bottom type relaxes the bottom profile into ragged, wispy shapes.
     bottom_type = storm.bottom_type * (0.8 + 0.2 * np.maximum(comp, column))
-    # SPEC 1.9.4: variable heights. The tower reaches `height` with a slightly domed top; the brim
+    # GDC22: variable heights. The tower reaches `height` with a slightly domed top; the brim
     # rises a little above the layer where its noise is dense.
     dome = storm.height * (1.0 - 0.1 * np.clip(rc / TOWER_RADIUS[1], 0.0, 1.0) ** 2)
     brim_top = 1.0 + 0.3 * comp * foot
     max_height = brim_top + (dome - brim_top) * tower
-    # SPEC 1.9.4, GDC22: "a set of distorted noises and radial gradients to use as signals for a height
+    # GDC22: "a set of distorted noises and radial gradients to use as signals for a height
     # adjustment to give the underside more definition"; "the bottom of a mesocyclone flattens out, [but]
     # the underside is anything but flat": small relief at the foot growing outwards, and a slight
     # lowering (wall cloud) under the column.
@@ -170,9 +177,10 @@ def _mesocyclone(storm: Storm, xs: np.ndarray, ys: np.ndarray) -> dict[str, np.n
 
 
 def _anvil(storm: Storm, xs: np.ndarray, ys: np.ndarray) -> dict[str, np.ndarray]:
-    """SPEC 1.9.7, GDC22: "We used the superstorm position, radius and wind vector to create a cirrus cloud
-    formation above the superstorm mesocyclone and offset in the wind direction." [IMPL] An ellipse that
-    fans out downwind, inside the circle of `anvil_radius` around `anvil_centre`, streaked along the wind."""
+    """GDC22: "We used the superstorm position, radius and wind vector to create a cirrus cloud
+    formation above the superstorm mesocyclone and offset in the wind direction." An ellipse that
+    fans out downwind, inside the circle of `anvil_radius` around `anvil_centre`, streaked along the wind
+    (docs/sources.md#cirrus-anvil)."""
     ax, ay = storm.anvil_centre()
     ra = storm.anvil_radius()
     wx, wy = storm.wind()
@@ -203,11 +211,11 @@ def _order_key(storm: Storm) -> tuple:
 
 
 def apply_storms(fields: dict[str, np.ndarray], params: Mapping[str, Any], storms: Sequence[Storm]) -> None:
-    """Rasterise the storms into the field images in place (SPEC 1.9.1, 1.3.5 "Apply stencils").
+    """Rasterise the storms into the field images in place (GDC22; docs/sources.md#storm-stencil).
 
     "Using a position, radius and coverage, stencils would only affect the region that they occupied"
     (GDC22): in "a" and "b" a storm changes only pixels whose centres lie strictly inside its radius, and it
-    fades to nothing at the radius. The anvil (SPEC 1.9.7) is offset downwind and larger than the storm,
+    fades to nothing at the radius. The anvil (GDC22) is offset downwind and larger than the storm,
     so it necessarily reaches outside the radius -- but only in the "cirrus" image, up to
     ``storm.reach()`` from the centre. A storm with blend 0 changes nothing; pixels no storm touches keep
     their exact bits.
@@ -216,7 +224,7 @@ def apply_storms(fields: dict[str, np.ndarray], params: Mapping[str, Any], storm
     storm's result is computed from the original fields and the storms are max-combined); min height and
     cirrus type move towards each storm's target by its weight, averaged by weight where storms overlap.
     Both are independent of the order of ``storms``. Precipitation and the density multiplier are left
-    alone (the sources give HFW no precipitation channel, SPEC 1.3.3). Min height may go below 0 (under
+    alone (GDC22 gives Horizon Forbidden West no precipitation channel). Min height may go below 0 (under
     the layer bottom) down to the ground, so call this after :func:`fields.clamp_fields`, which would clip it.
     """
     a, b, ci = fields["a"], fields["b"], fields["cirrus"]
@@ -243,7 +251,7 @@ def apply_storms(fields: dict[str, np.ndarray], params: Mapping[str, Any], storm
             win, inside = sel
             m = _mesocyclone(storm, xs_all[win][inside], ys_all[win][inside])
             wgt = m["weight"]
-            targets = dict(m, storm=wgt)  # SPEC 1.3.3: storm coverage = the stencil's weight x blend
+            targets = dict(m, storm=wgt)  # GDC22's storm coverage = the stencil's weight x blend
             for key in raised:
                 o = orig[key][win][inside]
                 cand = o + (np.maximum(o, targets[key]) - o) * (1.0 if key == "storm" else wgt)
@@ -276,15 +284,15 @@ def apply_storms(fields: dict[str, np.ndarray], params: Mapping[str, Any], storm
     ci[..., 1][c_touch] = np.clip(ctype_new[c_touch], 0.0, 1.0)
 
 
-# ---- lifecycle (SPEC 1.9.8) -------------------------------------------------------------------
+# ---- lifecycle (GDC22) ------------------------------------------------------------------------
 
 
 def lifecycle_keys(
     start_frame: int, fps: float, ramp_in_s: float = 120.0, hold_s: float = 180.0, ramp_out_s: float = 120.0
 ) -> list[tuple[int, float]]:
-    """(frame, blend) keyframes of a storm's life, SPEC 1.9.8, GDC22: the system "begins to load a
+    """(frame, blend) keyframes of a storm's life, GDC22: the system "begins to load a
     superstorm there over a period of 2 minutes. The Storm persists for a few minutes [...] And then it
-    dissipates over 2 minutes". The hold ("a few minutes") defaults to 3 [IMPL]."""
+    dissipates over 2 minutes". The hold ("a few minutes") defaults to 3 (docs/sources.md#storm-lifecycle)."""
     t1 = start_frame + round(ramp_in_s * fps)
     t2 = t1 + round(hold_s * fps)
     t3 = t2 + round(ramp_out_s * fps)
@@ -294,12 +302,12 @@ def lifecycle_keys(
 def lightning_keys(
     start_frame: int, fps: float, flashes: int = 4, discharges: int = 2, peak: float = 20.0, seed: int = 0
 ) -> list[dict[str, float]]:
-    """Keyframes of a lightning sequence, SPEC 2.10.4 (GDC22 after Uman, *Lightning*): "several intra-cloud
+    """Keyframes of a lightning sequence (GDC22 after Uman, *Lightning*): "several intra-cloud
     effects while increasing the intensity of the flashes each time. Then it would fire off 1 to 2 Ground
     discharge effects". Each key: frame, flash intensity, the flash position as a fraction of the storm
     radius (x, y; GDC22 feeds "a variable position for each flash") and ground (1 for a discharge).
     Each flash lasts a handful of frames (GDC22: 4-8) and flickers with a re-stroke; the pauses between
-    flashes (0.4-1.5 s) and positions are our choice, seeded."""
+    flashes (0.4-1.5 s) and positions are our choice, seeded (docs/sources.md#lightning-sequence)."""
     rng = np.random.default_rng(seed)
     keys: list[dict[str, float]] = []
     frame = int(start_frame)

@@ -1,4 +1,4 @@
-"""A GPU context for the `gpu` module in background mode (PLATFORM.md's verified recipe)."""
+"""A GPU context for the `gpu` module in background mode (docs/platform-notes.md#gpu-in-background-mode)."""
 
 from __future__ import annotations
 

@@ -128,9 +128,12 @@ def struct_source() -> str:
     docs.update({n: d for n, d, _f in _VEC4 + _FLOATS})
     docs.update({n: d for n, _c, d, _f in _ARRAYS})
     lines = ["/* Generated from core/schema.py by render/uniforms.py: one member per setting, by its key. */"]
+    lines.append(f"#define NUBIS_MAX_STORMS {MAX_STORMS}")
+    lines.append(f"#define NUBIS_MAX_LIGHT_TAPS {march.MAX_LIGHT_TAPS}")
+    sizes = {MAX_STORMS: "NUBIS_MAX_STORMS", march.MAX_LIGHT_TAPS: "NUBIS_MAX_LIGHT_TAPS"}
     lines.append("struct NubisParams {")
     for name, typ, n in struct_members():
-        decl = f"{typ} {name}[{n}];" if n else f"{typ} {name};"
+        decl = f"{typ} {name}[{sizes[n]}];" if n else f"{typ} {name};"
         lines.append(f"  {decl:<40} /* {docs.get(name, 'padding to whole vec4s')} */")
     lines.append("};")
     return "\n".join(lines) + "\n"

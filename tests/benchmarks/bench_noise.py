@@ -1,4 +1,4 @@
-"""Benchmark of the noise generator (SPEC 1.4): generation time and texture memory.
+"""Benchmark of the noise generator (the GPU Pro 7 / S15 texture set): generation time and texture memory.
 
 Run from anywhere: ``python tests/benchmarks/bench_noise.py [--repeat N] [--seed S]``. Not collected by pytest.
 """

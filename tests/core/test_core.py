@@ -174,7 +174,7 @@ def test_uniform_block_matches_the_glsl_struct():
     assert flat[offsets["lighting_powder"]] == np.float32(state.params["lighting_powder"])
     assert flat[offsets["layer_bottom"]] == np.float32(state.params["layer_bottom"])
     src = uniforms.struct_source()
-    assert "float lighting_powder;" in src and "vec4 storm_shape[4];" in src
+    assert "float lighting_powder;" in src and "vec4 storm_shape[NUBIS_MAX_STORMS];" in src
     bad = CloudState()
     bad.params = dict(bad.params, density_sigma=float("nan"))
     with pytest.raises(NubisError, match="non-finite"):

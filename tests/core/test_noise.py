@@ -1,4 +1,4 @@
-"""Tests of the tiling noise textures (SPEC 1.4) and their cache."""
+"""Tests of the tiling noise textures (GPU Pro 7, S15) and their cache."""
 
 from __future__ import annotations
 
@@ -255,7 +255,7 @@ def test_mip_chain(full_set: noise.NoiseSet) -> None:
 
 
 def test_texture_memory_with_mips_is_within_budget(full_set: noise.NoiseSet) -> None:
-    # SPEC 4.5 / S15: the whole cloud system takes 20 MB; the textures must leave most of it free.
+    # S15: the whole cloud system takes 20 MB; the textures must leave most of it free.
     total = sum(sum(m.nbytes for m in noise.mip_chain(a)) for a in full_set.arrays().values())
     assert total == full_set.nbytes_with_mips
     assert total < 20 * 1000 * 1000

@@ -1,4 +1,4 @@
-"""core/storms.py: superstorm stencils rasterised into the data fields (SPEC 1.9, GDC22). No Blender."""
+"""core/storms.py: superstorm stencils rasterised into the data fields (GDC22). No Blender."""
 
 import math
 
@@ -84,7 +84,7 @@ def test_centre_is_a_towering_cumulonimbus(sky):
     assert out["b"][..., 0][core].min() == pytest.approx(1.0)  # storm coverage = weight x blend
     # ragged underside: bottom type raised towards the storm's
     assert out["a"][..., 3][core].min() >= 0.8 * storm.bottom_type
-    # SPEC 1.9.4: the foot is lowered by `base`, mostly flat near the centre, never below the ground
+    # GDC22's variable heights: the foot is lowered by `base`, mostly flat near the centre, never below the ground
     foot = _dist(params, storm) < 0.4 * storm.radius
     mins = out["b"][..., 1][foot]
     assert mins.mean() == pytest.approx(storm.base - 0.03, abs=0.06)

@@ -104,8 +104,9 @@ def test_flash_renders_offline_through_the_glow_grid(make_scene, tmp_path):
 
 
 def test_rain_absorbs_in_the_viewport_the_bake_and_cycles(make_scene, tmp_path):
-    """SPEC 2.5 rain darkening is absorption: the viewport's raining clouds get darker and no thinner,
-    the bake carries it as an `absorption` grid (density x (rain - 1)) and Cycles adds it."""
+    """Rain darkening is absorption (docs/sources.md#rain-and-storm-absorption): the viewport's raining
+    clouds get darker and no thinner, the bake carries it as an `absorption` grid (density x (rain - 1))
+    and Cycles adds it."""
     from nubis_addon.blender import cycles_setup, pipeline, scene_io
     from nubis_addon.core import metrics, vdbio
 

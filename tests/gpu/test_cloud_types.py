@@ -1,4 +1,5 @@
-"""Cloud types measured on the baked VDB: stratus sits in a thinner band than cumulus (SPEC 1.5)."""
+"""Cloud types measured on the baked VDB: stratus sits in a thinner band than cumulus
+(docs/sources.md#vertical-profile)."""
 
 import numpy as np
 

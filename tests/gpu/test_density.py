@@ -1,5 +1,5 @@
-"""The cloud density on the GPU (issue 3): the shader against the numpy oracle, and the density's
-contract (SPEC 1.2, 1.3.1, 1.6, 1.7) checked on GPU read-backs.
+"""The cloud density on the GPU: the shader against the numpy oracle, and the density's
+contract (GPU Pro 7, GDC22; docs/sources.md) checked on GPU read-backs.
 
 The GPU side is the probe stage (tests/gpu_probe.py), which runs the very `nubis_density` the viewport,
 the render and the bake call. The oracle (tests/oracle.py) is an independent port fed the same state.
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from oracle import DensityOracle, padded_texture, remap, sample_linear
 
-# SPEC 1.6.5: the viewport and the VDB bake share the density; 1e-3 is far below anything visible
+# The viewport and the VDB bake share the density; 1e-3 is far below anything visible
 # (the default extinction 0.1 / m turns it into 1e-4 / m) yet catches any formula or constant slip.
 TOLERANCE = 1e-3
 
@@ -124,7 +124,7 @@ def test_remap_on_gpu_and_in_oracle(make_scene):
     from gpu_probe import probe_remap
 
     clouds, _state, _noise = _inputs(make_scene("default"))
-    # SPEC 1.2: the worked example, and the function is unclamped; the shader maps an empty input
+    # GPU Pro 7's remap: a worked example, and the function is unclamped; the shader maps an empty input
     # range to new_min rather than dividing by zero.
     cases = np.array(
         [
@@ -186,7 +186,7 @@ def test_gpu_density_matches_oracle_in_wind(make_scene):
 
 
 def test_coarse_bounds_fine(make_scene):
-    """SPEC 1.6.4: erosion only removes density, so fine <= coarse and coarse == 0 => fine == 0; this is
+    """GPU Pro 7, S15: erosion only removes density, so fine <= coarse and coarse == 0 => fine == 0; this is
     what makes skipping empty space on the coarse sample exact."""
     from gpu_probe import probe_density
 
@@ -226,7 +226,7 @@ def test_zero_coverage_gives_no_density(make_scene):
 
 
 def test_density_never_falls_as_coverage_rises(make_scene):
-    """GDC22 (SPEC 1.6.1): raising coverage inflates the clouds; nothing may thin out anywhere."""
+    """GDC22: raising coverage inflates the clouds; nothing may thin out anywhere."""
     from gpu_probe import probe_density
 
     from nubis_addon.blender import scene_io
@@ -253,7 +253,7 @@ def test_density_never_falls_as_coverage_rises(make_scene):
 
 
 def test_time_moves_detail_but_keeps_structure(make_scene):
-    """GDC22 (SPEC 1.3.1, 1.7): the noise is animated, the coverage/type field is not, so a minute of
+    """GDC22: the noise is animated, the coverage/type field is not, so a minute of
     wind reshapes the clouds in place: the detail changes, the cloudscape's layout does not."""
     from gpu_probe import probe_density
 

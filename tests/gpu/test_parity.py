@@ -8,7 +8,7 @@ measures its noise, which must sit well below the limits for the comparison to m
 
 import pytest
 
-# The issue's targets for single scattering (measured 2026-11-22 on llvmpipe: alpha RMSE 0.006,
+# The targets for single scattering (measured 2026-11-22 on llvmpipe: alpha RMSE 0.006,
 # luminance error 0.030, bias +0.001, IoU 0.99; Cycles' own noise 0.0024 / 0.018).
 ALPHA_RMSE_MAX = 0.02
 LUMINANCE_ERROR_MAX = 0.05

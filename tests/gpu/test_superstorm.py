@@ -109,7 +109,7 @@ def test_baked_glow_grid_stays_inside_the_storm(storm_scene, tmp_path):
     scene, storm = storm_scene
     result = pipeline.bake(scene, tmp_path / "storm.vdb", voxel_size=500.0)
     info = vdbio.read_grid_info(result.path)
-    # The storm's darkening bakes as absorption (SPEC 2.10.1), its glow as emission.
+    # The storm's darkening bakes as absorption (GDC22; docs/sources.md#storm-darkening), its glow as emission.
     assert set(info) == {"density", "glow", "absorption"}
     glow, lo = vdbio.read_grid_array(result.path, "glow")
     z, y, x = np.nonzero(glow > 0)

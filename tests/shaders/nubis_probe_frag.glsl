@@ -2,11 +2,11 @@
  * the render and the bake share can be read back and compared with an independent implementation.
  * probe_mode.x picks what is written, t being the fragment's texel of probe_points:
  *   0: vec4(fine density, coarse density, height fraction, 0) at the world point t.xyz;
- *   1: vec4(remap(t.x, t.y, t.z, t.w, probe_mode.y), 0, 0, 0): the shared helper (SPEC 1.2) as compiled;
+ *   1: vec4(remap(t.x, t.y, t.z, t.w, probe_mode.y), 0, 0, 0): the shared helper (GPU Pro 7's remap) as compiled;
  *   2: the raw filtered noise at normalised coordinates t.xyz, from noise_lf (probe_mode.y = 0),
  *      noise_hf (1) or noise_curl (2, t.xy), so a test can see how this GPU filters 8-bit textures;
- *   3: vec4(vortex-moved xy, the second ring's xy) for the world xy t.xy (SPEC 1.9.5);
- *   4: vec4(storm glow rgb, 0) at the world point t.xyz for a fine density t.w (SPEC 2.10.3). */
+ *   3: vec4(vortex-moved xy, the second ring's xy) for the world xy t.xy (GDC22's vortex);
+ *   4: vec4(storm glow rgb, 0) at the world point t.xyz for a fine density t.w (GDC22's glow). */
 void main()
 {
   vec4 t = texelFetch(probe_points, ivec2(gl_FragCoord.xy), 0);
