@@ -532,8 +532,8 @@ def active_preset(context) -> PresetEntry | None:
     )
 
 
-class NUBIS_OT_preset_load(NeedsCloudscape, NubisOperator, bpy.types.Operator):
-    """Load a preset into this scene's cloudscape"""
+class NUBIS_OT_preset_load(NubisOperator, bpy.types.Operator):
+    """Load a preset into this scene's cloudscape (or make one from it)"""
 
     bl_idname = "nubis.preset_load"
     bl_label = "Load Preset"
@@ -557,6 +557,10 @@ class NUBIS_OT_preset_load(NeedsCloudscape, NubisOperator, bpy.types.Operator):
     def description(cls, _context, properties):
         entry = next((e for e in preset_entries() if str(e.path) == properties.filepath), None)
         return entry.description if entry else cls.__doc__
+
+    def invoke(self, context, event):
+        # Where the scene holds the artist's own camera, World or Sun, ask what to keep, as New Cloudscape does.
+        return NUBIS_OT_new_cloudscape.invoke(self, context, event)
 
     def run(self, context):
         if not self.filepath:
@@ -608,7 +612,11 @@ class NUBIS_OT_preset_remove(NeedsCloudscape, NubisOperator, bpy.types.Operator)
     def poll(cls, context):
         if not super().poll(context):
             return False
-        entry = active_preset(context)
+        try:
+            entry = active_preset(context)
+        except NubisError as err:
+            cls.poll_message_set(str(err))
+            return False
         if entry is None or not entry.user:
             cls.poll_message_set("Only presets you saved can be removed: load one of yours first")
             return False

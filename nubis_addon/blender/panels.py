@@ -49,7 +49,11 @@ class NUBIS_MT_presets(bpy.types.Menu):
 
 def draw_preset_row(layout, context) -> None:
     """Blender's preset row: the menu, showing the active preset, with Add (+) and Remove (-) beside it."""
-    entry = operators.active_preset(context)
+    try:
+        entry = operators.active_preset(context) if scene_io.has_cloudscape(context.scene) else None
+    except NubisError as err:  # the user's preset folder cannot be made
+        layout.label(text=str(err), icon="ERROR")
+        return
     row = layout.row(align=True)
     row.menu("NUBIS_MT_presets", text=entry.name if entry else "Presets", icon="PRESET")
     row.operator("nubis.preset_add", text="", icon="ADD")
@@ -65,10 +69,10 @@ class NUBIS_PT_main(bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         layout.operator_menu_enum("nubis.new_cloudscape", "preset", text="New Cloudscape", icon="OUTLINER_DATA_VOLUME")
+        draw_preset_row(layout, context)
         if not scene_io.has_cloudscape(context.scene):
             layout.label(text="No cloudscape in this scene yet")
             return
-        draw_preset_row(layout, context)
         row = layout.row(align=True)
         row.prop(context.scene.nubis, "enabled")
         shown = viewport.view_toggle(context)

@@ -250,6 +250,16 @@ def test_a_saved_user_preset_loads_back_to_every_setting(make_scene, blender, tm
     props = types.SimpleNamespace(filepath=str(path))
     assert operators.NUBIS_OT_preset_load.description(None, props) == "A storm at dusk, saved by the test"
     assert operators.active_preset(blender.context).path == path
+    # The main panel's preset row: the menu shows the active preset, with + and - beside it.
+    from nubis_addon.blender import panels
+
+    layout = LabelLayout()
+    panels.NUBIS_PT_main.draw(types.SimpleNamespace(layout=layout), types.SimpleNamespace(scene=scene))
+    row = layout.record[layout.record.index(("menu", "Dusk Storm")) :][:3]
+    assert row == [("menu", "Dusk Storm"), ("operator", "nubis.preset_add"), ("operator", "nubis.preset_remove")]
+    layout = LabelLayout()
+    panels.NUBIS_MT_presets.draw(types.SimpleNamespace(layout=layout), blender.context)
+    assert [k for k in layout.record if k[0] == "operator"] == [("operator", "nubis.preset_load")] * len(entries)
 
     # A different cloudscape in a fresh file, then the saved preset loaded from the menu.
     scene = make_scene("clear_sky")
