@@ -3,36 +3,36 @@
 from __future__ import annotations
 
 import contextlib
+from dataclasses import dataclass
+from pathlib import Path
 
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
-from ..core import presets, quality, storms
+from ..core import noise, presets, quality, storms, userpresets
 from ..core.errors import NubisError
 from ..core.limits import MAX_LAYERS
 from ..core.state import MAX_STORMS
 from . import cycles_setup, pipeline, preview, runtime, scene_io, status, viewport
 
-_PRESET_ITEMS: dict = {}  # (folder listing and times) -> items: Blender keeps pointers to these strings
+_PRESET_ITEMS: dict = {}  # id(entries) -> items: Blender keeps pointers to these strings
 
 
 def preset_items(_self=None, _context=None):
-    """The New Cloudscape menu: each preset's name, with its description as the tooltip. Parsed once per
-    change of the presets folder, and the same list returned, so Blender's pointers stay valid."""
-    folder = presets.preset_dir()
-    paths = sorted(folder.glob("*.toml"))
-    key = tuple((p.name, p.stat().st_mtime_ns) for p in paths if p.is_file())
+    """The New Cloudscape menu: the shipped presets, then the user's, each with its description as the
+    tooltip. Built once per change of the preset folders (preset_entries), and the same list returned, so
+    Blender's pointers to the strings stay valid."""
+    entries = preset_entries()
+    key = id(entries)
     if key not in _PRESET_ITEMS:
-        items = []
-        for path in paths:
-            try:
-                preset = presets.load_preset(str(path))
-                items.append((path.stem, preset.name, preset.description or preset.name))
-            except NubisError as err:
-                items.append((path.stem, f"{path.stem} (broken)", str(err)))
         _PRESET_ITEMS.clear()
-        _PRESET_ITEMS[key] = items or [("default", "Default", "The default cloudscape")]
-    return _PRESET_ITEMS[key]
+        items = [(e.stem, e.name + (" (yours)" if e.user else ""), e.description) for e in entries]
+        _PRESET_ITEMS[key] = (entries, items or [("default", "Default", "The default cloudscape")])
+    return _PRESET_ITEMS[key][1]
+
+
+def find_preset_entry(stem: str) -> PresetEntry | None:
+    return next((e for e in preset_entries() if e.stem == stem), None)
 
 
 def _absolute(path: str) -> str:
@@ -100,7 +100,8 @@ class NUBIS_OT_new_cloudscape(NubisOperator, bpy.types.Operator):
         return context.window_manager.invoke_props_dialog(self)
 
     def run(self, context):
-        preset = presets.load_preset(self.preset)
+        entry = find_preset_entry(self.preset)
+        preset = presets.load_preset(str(entry.path) if entry else self.preset)
         keep = scene_io.Keep(self.keep_camera, self.keep_world, self.keep_render, self.keep_sun)
         with _field_progress(context) as progress:
             scene_io.apply_preset(context.scene, preset, progress, keep)
@@ -475,6 +476,160 @@ class NUBIS_OT_benchmark(NeedsCloudscape, NubisOperator, bpy.types.Operator):
         )
 
 
+# ---- the noise cache and user presets (the add-on's preferences; the preset menu of the main panel) --
+
+
+class NUBIS_OT_clear_cache(NubisOperator, bpy.types.Operator):
+    """Delete the cached noise volumes; they are made again when a seed needs them"""
+
+    bl_idname = "nubis.clear_cache"
+    bl_label = "Clear Cache"
+
+    def run(self, context):
+        freed = noise.clear_cache(runtime.cache_dir())
+        return f"Cleared {freed.sets} cached noise sets ({freed.nbytes / 2**20:.1f} MB)"
+
+
+@dataclass(frozen=True)
+class PresetEntry:
+    path: Path
+    stem: str
+    name: str
+    description: str
+    user: bool
+
+
+_ENTRIES: dict = {}  # (folder listings and times) -> entries, parsed once per change of either folder
+
+
+def preset_entries() -> list[PresetEntry]:
+    """The shipped presets, then the user's own, each parsed once per change of its file."""
+    folders = ((presets.preset_dir(), False), (runtime.user_preset_dir(), True))
+    listing = [(user, sorted(f.glob("*.toml"))) for f, user in folders]
+    key = tuple((p.name, p.stat().st_mtime_ns, user) for user, paths in listing for p in paths if p.is_file())
+    if key not in _ENTRIES:
+        entries = []
+        for user, paths in listing:
+            for path in paths:
+                try:
+                    preset = presets.load_preset(str(path))
+                    entries.append(PresetEntry(path, path.stem, preset.name, preset.description or preset.name, user))
+                except NubisError as err:
+                    entries.append(PresetEntry(path, path.stem, f"{path.stem} (broken)", str(err), user))
+        _ENTRIES.clear()
+        _ENTRIES[key] = entries
+    return _ENTRIES[key]
+
+
+def active_preset(context) -> PresetEntry | None:
+    """The preset the scene's cloudscape was last loaded from or saved as."""
+    stem = context.scene.nubis.preset
+    entries = preset_entries()
+    # A user preset and a shipped one never share a stem (saving refuses shipped names).
+    return next((e for e in entries if e.stem == stem and e.user), None) or next(
+        (e for e in entries if e.stem == stem), None
+    )
+
+
+class NUBIS_OT_preset_load(NubisOperator, bpy.types.Operator):
+    """Load a preset into this scene's cloudscape (or make one from it)"""
+
+    bl_idname = "nubis.preset_load"
+    bl_label = "Load Preset"
+    bl_options = {"REGISTER", "UNDO"}
+
+    filepath: StringProperty(subtype="FILE_PATH", options={"HIDDEN", "SKIP_SAVE"})
+    keep_camera: BoolProperty(
+        name="Keep Scene Camera", default=False, description="Render from the scene's camera, unmoved and unchanged"
+    )
+    keep_world: BoolProperty(name="Keep World", default=False, description="Keep the scene's World as the sky")
+    keep_render: BoolProperty(
+        name="Keep Render Settings",
+        default=False,
+        description="Keep resolution, frame, view transform and Cycles samples and bounces",
+    )
+    keep_sun: BoolProperty(
+        name="Use Scene Sun", default=False, description="Light the clouds with the scene's own Sun lamp"
+    )
+
+    @classmethod
+    def description(cls, _context, properties):
+        entry = next((e for e in preset_entries() if str(e.path) == properties.filepath), None)
+        return entry.description if entry else cls.__doc__
+
+    def invoke(self, context, event):
+        # Where the scene holds the artist's own camera, World or Sun, ask what to keep, as New Cloudscape does.
+        return NUBIS_OT_new_cloudscape.invoke(self, context, event)
+
+    def run(self, context):
+        if not self.filepath:
+            raise NubisError("choose a preset from the menu")
+        preset = presets.load_preset(self.filepath)
+        keep = scene_io.Keep(self.keep_camera, self.keep_world, self.keep_render, self.keep_sun)
+        with _field_progress(context) as progress:
+            scene_io.apply_preset(context.scene, preset, progress, keep)
+        return f"Preset '{preset.name}' loaded"
+
+
+class NUBIS_OT_preset_add(NeedsCloudscape, NubisOperator, bpy.types.Operator):
+    """Save this scene's cloudscape as a preset of your own: every setting, the layers, the storms, and the
+    sun, World, camera and render settings"""
+
+    bl_idname = "nubis.preset_add"
+    bl_label = "Add Preset"
+
+    name: StringProperty(name="Name", description="The preset's name in the menu", maxlen=userpresets.MAX_NAME)
+    preset_description: StringProperty(name="Description", description="One sentence on the preset: its tooltip")
+
+    def invoke(self, context, _event):
+        entry = active_preset(context)
+        if not self.name and entry is not None and entry.user:
+            self.name = entry.name
+            self.preset_description = entry.description if entry.description != entry.name else ""
+        return context.window_manager.invoke_props_dialog(self)
+
+    def run(self, context):
+        scene = context.scene
+        preset = scene_io.preset_from_scene(scene, self.name.strip(), self.preset_description.strip())
+        path = userpresets.save_user_preset(runtime.user_preset_dir(), preset)
+        scene.nubis.preset = path.stem
+        transform = scene.view_settings.view_transform
+        if transform != preset.extra["render"]["view_transform"]:
+            self.report({"WARNING"}, f"the view transform '{transform}' is not one a preset holds: saved as AgX")
+        return f"Preset '{preset.name}' saved to {path}"
+
+
+class NUBIS_OT_preset_remove(NeedsCloudscape, NubisOperator, bpy.types.Operator):
+    """Delete the active preset, if it is one you saved (the presets shipped with Nubis stay)"""
+
+    bl_idname = "nubis.preset_remove"
+    bl_label = "Remove Preset"
+
+    name: StringProperty(name="Preset", description="File name of the preset to delete; empty: the active one")
+
+    @classmethod
+    def poll(cls, context):
+        if not super().poll(context):
+            return False
+        try:
+            entry = active_preset(context)
+        except NubisError as err:
+            cls.poll_message_set(str(err))
+            return False
+        if entry is None or not entry.user:
+            cls.poll_message_set("Only presets you saved can be removed: load one of yours first")
+            return False
+        return True
+
+    def invoke(self, context, event):
+        return context.window_manager.invoke_confirm(self, event)
+
+    def run(self, context):
+        stem = self.name or context.scene.nubis.preset
+        path = userpresets.remove_user_preset(runtime.user_preset_dir(), stem)
+        return f"Preset '{stem}' removed ({path})"
+
+
 CLASSES = (
     NUBIS_OT_new_cloudscape,
     NUBIS_OT_view_toggle,
@@ -495,5 +650,6 @@ CLASSES = (
 
 
 CLASSES += (NUBIS_OT_viewport_quality, NUBIS_OT_benchmark)
+CLASSES += (NUBIS_OT_clear_cache, NUBIS_OT_preset_load, NUBIS_OT_preset_add, NUBIS_OT_preset_remove)
 
 register, unregister = bpy.utils.register_classes_factory(CLASSES)

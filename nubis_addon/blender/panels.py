@@ -7,7 +7,8 @@ from __future__ import annotations
 import bpy
 
 from ..core import quality, schema
-from . import scene_io, status, viewport
+from ..core.errors import NubisError
+from . import operators, runtime, scene_io, status, viewport
 
 
 def draw_settings(layout, owner, settings) -> None:
@@ -23,6 +24,42 @@ def panel_settings(panel: str, group=schema.SCENE) -> tuple[schema.Setting, ...]
     return tuple(s for s in group if s.panel == panel)
 
 
+class NUBIS_MT_presets(bpy.types.Menu):
+    """The presets shipped with Nubis, then the user's own (saved with the + beside the menu)"""
+
+    bl_label = "Presets"
+
+    def draw(self, _context):
+        layout = self.layout
+        try:
+            entries = operators.preset_entries()
+        except NubisError as err:
+            layout.label(text=str(err), icon="ERROR")
+            return
+        shipped = [e for e in entries if not e.user]
+        mine = [e for e in entries if e.user]
+        for entry in shipped:
+            layout.operator("nubis.preset_load", text=entry.name).filepath = str(entry.path)
+        layout.separator()
+        if not mine:
+            layout.label(text="Save your own presets with +")
+        for entry in mine:
+            layout.operator("nubis.preset_load", text=entry.name, icon="USER").filepath = str(entry.path)
+
+
+def draw_preset_row(layout, context) -> None:
+    """Blender's preset row: the menu, showing the active preset, with Add (+) and Remove (-) beside it."""
+    try:
+        entry = operators.active_preset(context) if scene_io.has_cloudscape(context.scene) else None
+    except NubisError as err:  # the user's preset folder cannot be made
+        layout.label(text=str(err), icon="ERROR")
+        return
+    row = layout.row(align=True)
+    row.menu("NUBIS_MT_presets", text=entry.name if entry else "Presets", icon="PRESET")
+    row.operator("nubis.preset_add", text="", icon="ADD")
+    row.operator("nubis.preset_remove", text="", icon="REMOVE")
+
+
 class NUBIS_PT_main(bpy.types.Panel):
     bl_space_type = "VIEW_3D"
     bl_region_type = "UI"
@@ -32,6 +69,7 @@ class NUBIS_PT_main(bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         layout.operator_menu_enum("nubis.new_cloudscape", "preset", text="New Cloudscape", icon="OUTLINER_DATA_VOLUME")
+        draw_preset_row(layout, context)
         if not scene_io.has_cloudscape(context.scene):
             layout.label(text="No cloudscape in this scene yet")
             return
@@ -39,6 +77,9 @@ class NUBIS_PT_main(bpy.types.Panel):
         row.prop(context.scene.nubis, "enabled")
         shown = viewport.view_toggle(context)
         row.operator("nubis.view_toggle", text="", icon="HIDE_OFF" if shown else "HIDE_ON", depress=shown)
+        generating = runtime.noise_generating()
+        if generating is not None:
+            layout.label(text=f"Generating noise for seed {generating}...", icon="TIME")
         if status.last_error():
             layout.label(text=status.last_error(), icon="ERROR")
         layout.operator("nubis.render_image", icon="RENDER_STILL")
@@ -265,7 +306,7 @@ PANEL_CLASSES = {
     )
 }
 # Sub-panels in the schema's order (the order an artist works in).
-CLASSES = (NUBIS_UL_layers, NUBIS_PT_main, *(PANEL_CLASSES[p] for p in schema.PANEL_IDS))
+CLASSES = (NUBIS_UL_layers, NUBIS_MT_presets, NUBIS_PT_main, *(PANEL_CLASSES[p] for p in schema.PANEL_IDS))
 
 
 register, unregister = bpy.utils.register_classes_factory(CLASSES)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import events, operators, panels, properties, runtime, viewport
+from . import events, operators, panels, preferences, properties, runtime, viewport
 
 _registered = [False]
 
@@ -16,6 +16,7 @@ def register() -> None:
     events.register()
     operators.register()
     panels.register()
+    preferences.register()
     viewport.register()
     _registered[0] = True
 
@@ -24,6 +25,7 @@ def unregister() -> None:
     if not _registered[0]:
         return
     viewport.unregister()
+    preferences.unregister()
     panels.unregister()
     operators.unregister()
     events.unregister()

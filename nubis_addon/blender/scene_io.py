@@ -11,7 +11,7 @@ import bpy
 import numpy as np
 from mathutils import Euler, Matrix, Vector
 
-from ..core import camera, schema
+from ..core import camera, schema, userpresets
 from ..core import fields as fieldgen
 from ..core import storms as stormgen
 from ..core.errors import NubisError
@@ -456,6 +456,69 @@ def apply_preset(scene, preset: Preset, progress=None, keep: Keep = Keep()) -> N
     scene.frame_current = r["frame"]
     scene.cycles.samples = r["samples"]
     scene.cycles.volume_bounces = r["volume_bounces"]
+
+
+def preset_from_scene(scene, name: str, description: str = "") -> Preset:
+    """The scene's cloudscape as a preset (what Save Preset writes): every scene setting a preset
+    holds, the layer stack, the storms (centred on their Empties), and the sun, world, camera and
+    render sections read back from Blender's objects, the inverse of apply_preset. Floats are written
+    as the shortest decimals of their float32 values (core/userpresets.py)."""
+    settings = scene.nubis
+    tidy = userpresets.tidy_float32
+    params = {}
+    for s in schema.PRESET_SCENE:
+        value = _from_blender(s, getattr(settings, s.key))
+        params[s.key] = tidy(value) if s.kind in ("float", "vector", "color") else value
+    layers = [{k: tidy(v) for k, v in layer_to_dict(layer).items()} for layer in settings.layers]
+    storms = []
+    for storm in list(settings.storms)[:MAX_STORMS]:
+        data = {k: tidy(v) for k, v in table_to_dict(storm, schema.STORM).items()}
+        data["x"], data["y"] = (tidy(v) for v in storm_centre(storm))
+        storms.append(data)
+    extra = {sec: schema.table_defaults(t.values()) for sec, t in schema.EXTRA_SECTIONS.items() if sec != "preset"}
+    sun = find_sun(scene)
+    if sun is not None:
+        d = evaluated_matrix(sun).to_3x3() @ Vector((0.0, 0.0, 1.0))
+        d.normalize()
+        extra["sun"].update(
+            elevation=math.degrees(math.asin(max(-1.0, min(1.0, d.z)))),
+            azimuth=math.degrees(math.atan2(d.x, d.y)) % 360.0,
+            color=list(sun.data.color),
+            strength=sun.data.energy,
+            angle=math.degrees(sun.data.angle),
+        )
+    world = scene.world
+    if world is not None:
+        bg = next((n for n in world.node_tree.nodes if n.type == "BACKGROUND"), None) if world.node_tree else None
+        if bg is not None:
+            extra["world"].update(color=list(bg.inputs["Color"].default_value)[:3])
+            extra["world"].update(strength=bg.inputs["Strength"].default_value)
+        else:
+            extra["world"].update(color=list(world.color))
+    cam = scene.camera
+    if cam is not None:
+        if cam.parent is None and cam.rotation_mode == "XYZ" and not cam.constraints:
+            location, rotation = list(cam.location), list(cam.rotation_euler)
+        else:
+            m = evaluated_matrix(cam)
+            location, rotation = list(m.translation), list(m.to_euler("XYZ"))
+        extra["camera"].update(location=location, rotation=[math.degrees(a) for a in rotation])
+        if cam.type == "CAMERA":
+            extra["camera"].update(lens=cam.data.lens, clip_end=cam.data.clip_end)
+    r = scene.render
+    pct = r.resolution_percentage / 100.0
+    extra["render"].update(
+        width=max(4, round(r.resolution_x * pct)), height=max(4, round(r.resolution_y * pct)), frame=scene.frame_current
+    )
+    cycles = getattr(scene, "cycles", None)
+    if cycles is not None:
+        extra["render"].update(samples=cycles.samples, volume_bounces=cycles.volume_bounces)
+    if scene.view_settings.view_transform in schema.EXTRA_SECTIONS["render"]["view_transform"].choices:
+        extra["render"]["view_transform"] = scene.view_settings.view_transform
+    for table in extra.values():
+        for key, value in table.items():
+            table[key] = tidy(value)
+    return Preset(name, None, params, extra, layers, description, storms)
 
 
 def _load_layer_image(ref: str, preset_path: Path | None) -> str:

@@ -79,15 +79,27 @@ def draw_view(
     key=None,
     depth=None,
     depth_key=None,
-) -> temporal.TemporalViewport:
+    wait_for_noise: bool | None = None,
+) -> temporal.TemporalViewport | None:
     """One redraw of the temporal viewport (render/temporal.py) over the bound framebuffer: march one
     pixel in 16 and resolve the history, unless it has converged, then upscale it behind the scene's
-    objects. `depth` (a float texture of the view's depth) lets the march skip what geometry hides."""
+    objects. `depth` (a float texture of the view's depth) lets the march skip what geometry hides.
+
+    Noise for a new seed is made synchronously headless, and in the interface (`wait_for_noise` False)
+    on a worker thread: meanwhile the previous seed's clouds are drawn, or nothing (None is returned),
+    and the sidebar says "Generating noise"; the views redraw when it is ready (blender/runtime.py)."""
     settings = scene.nubis
+    if wait_for_noise is None:
+        wait_for_noise = bpy.app.background
+    if wait_for_noise:
+        clouds = runtime.cloud_gpu(settings.noise_seed)
+    else:
+        clouds = runtime.cloud_gpu_nowait(settings.noise_seed, scene_io.redraw_views)
+        if clouds is None:
+            return None
     # Binding the history's framebuffers rebinds; remember the target so the upscale lands there.
     target = gpu.state.active_framebuffer_get()
     state = _state(scene, view_origin)
-    clouds = runtime.cloud_gpu(settings.noise_seed)
     eye = (*view_origin[:3], 1.0) if perspective else (0.0, 0.0, 0.0, 0.0)
     view = temporal.View.of(np.array(inv_view_proj), eye, width, height)
     tv = temporal_view(key)
@@ -205,7 +217,7 @@ def draw_in_context(context) -> bool:
     return True
 
 
-def draw_region(scene, region, rv3d) -> temporal.TemporalViewport:
+def draw_region(scene, region, rv3d) -> temporal.TemporalViewport | None:
     """One redraw of a 3D view's region (`region`: width, height, as_pointer(); `rv3d`: view_matrix,
     window_matrix, is_perspective) over the bound framebuffer, its depth culling the march; asks for
     more redraws while the view converges."""
@@ -226,7 +238,7 @@ def draw_region(scene, region, rv3d) -> temporal.TemporalViewport:
         depth=depth,
         depth_key=_geometry[0],
     )
-    if not tv.converged:
+    if tv is not None and not tv.converged:
         _keep_converging()
     return tv
 

@@ -16,6 +16,11 @@ def toml_value(value: Any) -> str:
     return text if len(text) <= _LIMIT else text[: _LIMIT - 3] + "..."
 
 
+def toml_literal(value: Any) -> str:
+    """``value`` as a whole TOML literal, never shortened: what a written preset holds."""
+    return _format(value)
+
+
 def _format(value: Any) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
@@ -29,7 +34,7 @@ def _format(value: Any) -> str:
         return repr(value)
     if isinstance(value, str):
         escaped = value.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n").replace("\t", "\\t")
-        escaped = "".join(c if c.isprintable() else f"\\u{ord(c):04x}" for c in escaped)
+        escaped = "".join(c if c.isprintable() else _escape(c) for c in escaped)
         return f'"{escaped}"'
     if isinstance(value, datetime.datetime | datetime.date | datetime.time):
         return value.isoformat()
@@ -40,6 +45,10 @@ def _format(value: Any) -> str:
             return "{}"
         return "{ " + ", ".join(f"{_key(k)} = {_format(v)}" for k, v in value.items()) + " }"
     return str(value)
+
+
+def _escape(c: str) -> str:
+    return f"\\u{ord(c):04x}" if ord(c) <= 0xFFFF else f"\\U{ord(c):08x}"
 
 
 def _key(key: Any) -> str:

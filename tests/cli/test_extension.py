@@ -57,6 +57,13 @@ def test_built_zip_installs_enables_and_unregisters_cleanly(tmp_path):
         cache = sys.modules[mod + ".nubis_addon.blender.runtime"].cache_dir()
         assert str(cache).startswith(bpy.utils.extension_path_user(mod)), cache
         assert {str(ROOT)!r} not in str(cache)
+        prefs = bpy.context.preferences.addons[mod].preferences
+        assert prefs is not None and type(prefs).bl_idname == mod, "no add-on preferences"
+        user_presets = sys.modules[mod + ".nubis_addon.blender.runtime"].user_preset_dir()
+        assert str(user_presets).startswith(bpy.utils.extension_path_user(mod)), user_presets
+        assert bpy.ops.nubis.clear_cache() == {{"FINISHED"}}
+        assert bpy.ops.nubis.preset_add(name="Installed") == {{"FINISHED"}}
+        assert (user_presets / "installed.toml").is_file()
         bpy.ops.preferences.addon_disable(module=mod)
         assert not hasattr(bpy.types.Scene, "nubis"), "settings left behind"
         assert not [c for c in dir(bpy.types) if c.startswith("NUBIS_")], "classes left behind"

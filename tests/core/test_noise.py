@@ -291,10 +291,10 @@ def test_cache_writes_once_and_reloads(tmp_path: Path, counting_generator: list[
     path = tmp_path / noise.cache_file_name(0)
     assert path.name == f"noise_v{noise.NOISE_VERSION}_s0.npz"
     assert sorted(p.name for p in tmp_path.iterdir()) == [path.name]
-    mtime = path.stat().st_mtime_ns
+    data = path.read_bytes()
     second = noise.load_or_generate(str(tmp_path))
     assert counting_generator == [0]
-    assert path.stat().st_mtime_ns == mtime
+    assert path.read_bytes() == data  # read, not rewritten (its time is touched: it was used)
     assert_same(first, second)
     assert_same(second, full_set)
 
@@ -370,10 +370,99 @@ def test_failed_write_leaves_no_partial_file(tmp_path: Path, counting_generator:
         f.write(b"PK\x03\x04 half a zip")
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(noise.np, "savez", broken_savez)
+    monkeypatch.setattr(noise, "_savez_fast", broken_savez)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         ns = noise.load_or_generate(tmp_path)
     assert ns.seed == 0
     assert any("No space left" in str(w.message) for w in caught)
     assert list(tmp_path.iterdir()) == []
+
+
+# ---- the compressed, bounded cache -------------------------------------------------------------------------
+
+
+def test_texel_encoding_round_trips_exactly() -> None:
+    rng = np.random.default_rng(3)
+    for shape in ((5, 6, 7, 4), (9, 8, 3), (4, 4, 4, 1)):
+        a = rng.integers(0, 256, shape, dtype=np.uint8)
+        np.testing.assert_array_equal(noise.decode_texels(noise.encode_texels(a)), a)
+
+
+def test_cache_is_compressed_and_round_trips_bit_identically(tmp_path: Path, full_set) -> None:
+    """The real set for seed 0 through the cache: the file is much smaller than the textures, and what
+    comes back is the generated set bit for bit."""
+    noise._write_cache(tmp_path / noise.cache_file_name(0), full_set)
+    size = (tmp_path / noise.cache_file_name(0)).stat().st_size
+    assert size < 0.65 * full_set.nbytes, (size, full_set.nbytes)
+    back, old_format = noise._read_cache(tmp_path / noise.cache_file_name(0), 0)
+    assert back is not None and not old_format
+    assert_same(back, full_set)
+
+
+def test_uncompressed_cache_of_earlier_releases_is_read_and_rewritten_compressed(
+    tmp_path: Path, counting_generator: list[int], full_set
+) -> None:
+    path = tmp_path / noise.cache_file_name(0)
+    arrays = full_set.arrays()
+    digest = np.array(noise._digest(arrays, 0))
+    np.savez(path, version=np.int64(noise.NOISE_VERSION), seed=np.int64(0), digest=digest, **arrays)
+    old_size = path.stat().st_size
+    assert_same(noise.load_or_generate(tmp_path), full_set)
+    assert counting_generator == []  # read, not generated
+    assert path.stat().st_size < 0.65 * old_size
+    assert_same(noise.load_or_generate(tmp_path), full_set)
+
+
+def test_dragging_the_seed_through_ten_values_keeps_the_cache_bounded(
+    tmp_path: Path, counting_generator: list[int]
+) -> None:
+    """Ten seeds, as a drag of the Noise Seed slider makes them: at most CACHE_MAX_SEEDS sets and
+    CACHE_MAX_BYTES stay, the least recently used go first, and a set in use is kept."""
+    for seed in range(10):
+        noise.load_or_generate(tmp_path, seed)
+        usage = noise.cache_usage(tmp_path)
+        assert usage.sets <= noise.CACHE_MAX_SEEDS and usage.nbytes <= noise.CACHE_MAX_BYTES
+        if seed == 3:
+            os.utime(tmp_path / noise.cache_file_name(0), ns=(0, 0))  # seed 0 unused for ages
+            noise.load_or_generate(tmp_path, 1)  # seed 1 used again: recent
+    assert counting_generator == list(range(10))
+    left = sorted(int(p.stem.split("_s")[1]) for p in tmp_path.glob("noise_*.npz"))
+    assert left == [1, 3, 4, 5, 6, 7, 8, 9]  # seed 0 (unused longest), then seed 2 went
+    assert noise.cache_usage(tmp_path).sets == noise.CACHE_MAX_SEEDS
+    # The byte bound holds too: room for two sets keeps two, the two most recent.
+    one = (tmp_path / noise.cache_file_name(9)).stat().st_size
+    noise.load_or_generate(tmp_path, 10, max_bytes=int(2.5 * one))
+    assert sorted(p.name for p in tmp_path.glob("noise_*.npz")) == [noise.cache_file_name(s) for s in (10, 9)]
+    assert noise.cache_usage(tmp_path).nbytes <= 2.5 * one
+    assert not list(tmp_path.glob(".*.tmp"))
+
+
+def test_corrupt_compressed_file_is_refused_cleanly(tmp_path: Path, full_set) -> None:
+    """A damaged payload inside an intact zip (the digest catches it), and a cut file, read as "no set":
+    the caller regenerates; nothing raises."""
+    path = tmp_path / noise.cache_file_name(0)
+    noise._write_cache(path, full_set)
+    data = bytearray(path.read_bytes())
+    for i in range(len(data) // 2, len(data) // 2 + 32):
+        data[i] ^= 0x5A
+    path.write_bytes(bytes(data))
+    assert noise._read_cache(path, 0) == (None, False)
+    path.write_bytes(bytes(data[: len(data) // 3]))
+    assert noise._read_cache(path, 0) == (None, False)
+    assert noise._read_cache(tmp_path / "missing.npz", 0) == (None, False)
+
+
+def test_clear_cache_empties_it_and_touches_nothing_else(tmp_path: Path, counting_generator: list[int]) -> None:
+    for seed in (0, 1):
+        noise.load_or_generate(tmp_path, seed)
+    (tmp_path / ".noise_v1_s2-abc.tmp").write_bytes(b"left by an interrupted write")
+    (tmp_path / "benchmark").mkdir()
+    (tmp_path / "notes.txt").write_text("mine")
+    before = noise.cache_usage(tmp_path)
+    assert before.sets == 2 and before.nbytes > 0
+    freed = noise.clear_cache(tmp_path)
+    assert (freed.sets, freed.nbytes) == (2, before.nbytes)
+    assert noise.cache_usage(tmp_path) == noise.CacheUsage(tmp_path, 0, 0)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["benchmark", "notes.txt"]
+    assert noise.clear_cache(tmp_path / "never-made").sets == 0

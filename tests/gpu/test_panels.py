@@ -41,6 +41,12 @@ class RecordingLayout:
     def operator_menu_enum(self, *_args, **_kwargs):
         return None
 
+    def menu(self, *_args, **_kwargs):
+        return None
+
+    def separator(self, *_args, **_kwargs):
+        return None
+
     def label(self, **_kwargs):
         return None
 
