@@ -1,5 +1,23 @@
 /* Cloud lighting. Requires nubis_common_lib.glsl and nubis_density_lib.glsl. */
 
+/* The World's radiance towards `dir` (a distant environment): the equirectangular capture of the World
+ * (blender/sky.py), in the layout of Blender's Environment Texture (core/sky.py). */
+vec3 nubis_sky_radiance(vec3 dir)
+{
+  vec3 d = normalize(dir);
+  vec2 uv = vec2(0.5 - atan(d.y, d.x) / (2.0 * NUBIS_PI), 0.5 + asin(clamp(d.z, -1.0, 1.0)) / NUBIS_PI);
+  return texture(sky_env, uv).rgb;
+}
+
+/* The sky light of the real-time march at height fraction h in the layer: the World's irradiance from
+ * above at the top; at the base S15's fraction of it, from sky and ground alike (the mean of the two
+ * hemispheres). A World of one colour gives S15's gradient from the base fraction to 1 unchanged. */
+vec3 nubis_ambient_light(float h)
+{
+  vec3 base = P.ambient.w * 0.5 * (P.ambient.rgb + P.ambient_below.rgb);
+  return mix(base, P.ambient.rgb, h);
+}
+
 /* SPEC 2.3, GDC22: normalised Henyey-Greenstein (GPU Pro 7's listing multiplies by pi; not used). */
 float nubis_henyey_greenstein(float cos_angle, float g)
 {
@@ -185,13 +203,13 @@ float nubis_henyey_greenstein_sample(float g, float u)
   return clamp((1.0 + g * g - s * s) / (2.0 * g), -1.0, 1.0);
 }
 
-/* Reference sky light: the world is a uniform sphere of radiance (as in the Cycles scene), so single
- * scattering of it is the radiance times the transmittance weighted by the phase function over all
- * directions. The phase is far from isotropic (the silver-lining lobe peaks ~45x above it), so the
+/* Reference sky light: single scattering of the World's radiance (as Cycles lights the baked volume
+ * with the same World) is the radiance times the transmittance, weighted by the phase function over
+ * all directions. The phase is far from isotropic (the silver-lining lobe peaks ~45x above it), so the
  * directions are drawn from the two lobes in proportion to their weights (importance sampling,
  * stratified in the lobe's cosine), turned about the view ray by a per-pixel angle so neighbouring
  * pixels see different directions and supersampling averages them out. */
-float nubis_reference_sky_visibility(vec3 p, vec3 view_dir, vec2 pixel)
+vec3 nubis_reference_sky_light(vec3 p, vec3 view_dir, vec2 pixel)
 {
   /* Budget: Mesa's llvmpipe stops a shader's loops after 65535 iterations in total (its loop
    * limiter), which silently cut long reference marches short; 12 x 16 + 48 per cloud sample keeps
@@ -203,7 +221,7 @@ float nubis_reference_sky_visibility(vec3 p, vec3 view_dir, vec2 pixel)
                                                 cross(view_dir, vec3(1.0, 0.0, 0.0)));
   vec3 up = cross(view_dir, side);
   float spin = 6.2831853 * fract(nubis_pixel_hash(pixel + vec2(0.5, 17.5)) + 0.7548777 * P.options.z);
-  float main_lobe = 0.0, silver_lobe = 0.0;
+  vec3 main_lobe = vec3(0.0), silver_lobe = vec3(0.0);
   for (int i = 0; i < count; i++) {
     bool in_silver = i < silver;
     int k = in_silver ? i : i - silver;
@@ -215,14 +233,16 @@ float nubis_reference_sky_visibility(vec3 p, vec3 view_dir, vec2 pixel)
     vec3 dir = view_dir * cos_t + (side * cos(phi) + up * sin(phi)) * sin_t;
     float plain;
     float tau = nubis_reference_depth(p, dir, 16, plain) * P.density.x + nubis_cirrus_optical_depth(p, dir, 0.0);
+    /* The phase sampling makes the estimate the mean of the World's radiance times the transmittance. */
+    vec3 seen = nubis_sky_radiance(dir) * (exp(-tau) / float(n));
     if (in_silver) {
-      silver_lobe += exp(-tau) / float(n);
+      silver_lobe += seen;
     }
     else {
-      main_lobe += exp(-tau) / float(n);
+      main_lobe += seen;
     }
   }
-  return mix(main_lobe, silver_lobe, P.phase.z);
+  return P.ambient_below.w * mix(main_lobe, silver_lobe, P.phase.z);
 }
 
 /* What the light of one view ray shares along its length (for a sun light they are constant along
@@ -339,14 +359,15 @@ vec3 nubis_in_scattering(
   /* SPEC 2.7: GDC22's ambient probability from the coarse density, growing with height (S15); the
    * reference permutation measures the sky's visibility instead. */
 #if NUBIS_REFERENCE
-  float ambient_probability = nubis_reference_sky_visibility(p, view_dir, pixel);
+  vec3 sky_light = nubis_reference_sky_light(p, view_dir, pixel);
 #else
-  float ambient_probability = sqrt(1.0 - clamp01(d.coarse)) * mix(P.ambient.w, 1.0, d.h);
+  float ambient_probability = sqrt(1.0 - clamp01(d.coarse));
 #  if NUBIS_CIRRUS
   /* ... and the sky light by its transmittance overhead. */
   ambient_probability *= exp(-nubis_cirrus_optical_depth(p, normalize(p + vec3(0.0, 0.0, P.layer.x)), 0.0));
 #  endif
+  vec3 sky_light = nubis_ambient_light(d.h) * ambient_probability;
 #endif
-  ambient_probability *= nubis_storm_ambient(p, d.h);
-  return direct + P.ambient.rgb * ambient_probability + nubis_storm_steady_glow(p, d.fine);
+  sky_light *= nubis_storm_ambient(p, d.h);
+  return direct + sky_light + nubis_storm_steady_glow(p, d.fine);
 }

@@ -14,7 +14,9 @@ struct NubisParams {
   vec4 density;    /* extinction per metre, coverage multiplier, erosion strength, multiply by coverage (0/1) */
   vec4 sun_dir;    /* unit vector towards the sun, - */
   vec4 sun_rad;    /* sun colour * strength (irradiance), - */
-  vec4 ambient;    /* ambient sky colour * strength, ambient at the base relative to the top */
+  vec4 ambient;    /* sky light from above (the World's cosine-weighted radiance) * strength, ambient at the
+                    * base relative to the top */
+  vec4 ambient_below; /* sky light from below (the ground) * strength, the strength alone */
   vec4 phase;      /* g0, g1, weight of lobe 1, rain absorption multiplier */
   vec4 march;      /* view steps looking up, view steps to the horizon, light step length, light taps */
   vec4 scatter;    /* multiple-scattering octaves, attenuation a, contribution b, eccentricity scale c */

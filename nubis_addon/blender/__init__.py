@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import cli_command, operators, panels, properties, viewport
+from . import cli_command, operators, panels, properties, scene_render, sky, viewport
 
 _registered = False
 
@@ -17,6 +17,8 @@ def register() -> None:
     operators.register()
     panels.register()
     viewport.register()
+    sky.register()
+    scene_render.register()
     cli_command.register()
     _registered = True
 
@@ -26,6 +28,8 @@ def unregister() -> None:
     if not _registered:
         return
     cli_command.unregister()
+    scene_render.unregister()
+    sky.unregister()
     viewport.unregister()
     panels.unregister()
     operators.unregister()

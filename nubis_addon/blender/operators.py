@@ -69,11 +69,19 @@ class NUBIS_OT_new_cloudscape(NubisOperator, bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     preset: EnumProperty(name="Preset", items=_preset_items)
+    build_sky: BoolProperty(
+        name="Build Sky",
+        default=True,
+        description="Make a new World with Blender's physical Sky Texture, its sun tied to the Sun lamp (the "
+        "scene's own World is kept in the file); off keeps the scene's World as it is",
+    )
 
     def run(self, context):
         preset = presets.load_preset(self.preset)
         with _field_progress(context) as progress:
-            scene_io.apply_preset(context.scene, preset, progress)
+            scene_io.apply_preset(
+                context.scene, preset, progress, build_sky=self.build_sky, keep_world=not self.build_sky
+            )
         return f"Cloudscape '{preset.name}' created"
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 from pathlib import Path
 
@@ -46,3 +47,21 @@ def cloud_gpu(seed: int) -> CloudGPU:
 
 def free() -> None:
     _gpu.clear()
+
+
+_own_renders = [0]
+
+
+@contextlib.contextmanager
+def own_render():
+    """Around a render Nubis makes itself (the Cycles reference of the baked VDB, the benchmark's EEVEE
+    frame): the F12 clouds (blender/scene_render.py) stay out of it."""
+    _own_renders[0] += 1
+    try:
+        yield
+    finally:
+        _own_renders[0] -= 1
+
+
+def own_render_running() -> bool:
+    return _own_renders[0] > 0

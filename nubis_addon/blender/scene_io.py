@@ -10,11 +10,13 @@ import numpy as np
 from mathutils import Euler, Matrix, Vector
 
 from ..core import camera
+from ..core import sky as skymath
 from ..core import fields as fieldgen
 from ..core import storms as stormgen
 from ..core.errors import NubisError
 from ..core.presets import Preset
 from ..core.state import MAX_STORMS, CloudState, StormLight, sun_vector, wind_vector
+from . import sky
 from .properties import layer_from_dict, layer_to_dict, params_from_scene
 
 FIELD_IMAGES = {
@@ -272,9 +274,11 @@ def layer_images(settings) -> set[str]:
 # ---- presets ---------------------------------------------------------------------------------------
 
 
-def apply_preset(scene, preset: Preset, progress=None) -> None:
+def apply_preset(scene, preset: Preset, progress=None, build_sky: bool | None = None, keep_world: bool = False) -> None:
     """Make `scene` the preset's cloudscape: settings, layer stack, field images, sun, world, camera;
-    ``progress`` follows the field composite."""
+    ``progress`` follows the field composite. `build_sky` (default: the preset's `[world] sky`) makes
+    a new physically based World ('Nubis Sky', blender/sky.py); otherwise the flat colour of the
+    preset is set, unless `keep_world` leaves the scene's own World (an HDRI, a sky) as it is."""
     settings = scene.nubis
     for key, value in preset.params.items():
         setattr(settings, key, value)
@@ -289,7 +293,12 @@ def apply_preset(scene, preset: Preset, progress=None) -> None:
             data["image"] = _load_layer_image(data["image"], preset.path)
         layer_from_dict(settings.layers.add(), data)
     _setup_sun(scene, preset.extra["sun"])
-    _setup_world(scene, preset.extra["world"])
+    if build_sky is None:
+        build_sky = preset.extra["world"]["sky"]
+    if build_sky:
+        sky.build_world(scene, preset.extra["world"], scene.objects.get(SUN_NAME))
+    elif scene.world is None or sky.is_nubis_sky(scene.world) or not keep_world:
+        _setup_world(scene, preset.extra["world"])
     _setup_camera(scene, preset.extra["camera"])
     for storm in list(settings.storms):
         if storm.empty is not None:
@@ -360,6 +369,8 @@ def _setup_world(scene, world_cfg: dict) -> None:
     world.color = world_cfg["color"]
     if world.node_tree is None:  # worlds made before 5.0 may lack a node tree
         world.use_nodes = True
+    if sky.MARKER in world:
+        del world[sky.MARKER]
     bg = next((n for n in world.node_tree.nodes if n.type == "BACKGROUND"), None)
     if bg is None:
         bg = world.node_tree.nodes.new("ShaderNodeBackground")
@@ -387,11 +398,7 @@ def _setup_camera(scene, cam: dict) -> None:
 # ---- scene to state --------------------------------------------------------------------------------
 
 
-def find_sun(scene):
-    for obj in scene.objects:
-        if obj.type == "LIGHT" and obj.data.type == "SUN" and not obj.hide_render:
-            return obj
-    return None
+find_sun = sky.find_sun
 
 
 def world_ambient(scene) -> tuple[float, float, float]:
@@ -407,8 +414,10 @@ def world_ambient(scene) -> tuple[float, float, float]:
     return tuple(world.color)
 
 
-def state_from_scene(scene, camera_location=None, fields: tuple | None = None) -> CloudState:
-    """The frame's CloudState; `fields` passes already-read (field_a, field_b) arrays to skip reading pixels."""
+def state_from_scene(scene, camera_location=None, fields: tuple | None = None, wait: bool = True) -> CloudState:
+    """The frame's CloudState; `fields` passes already-read (field_a, field_b) arrays to skip reading pixels.
+    The sky light comes from the World's radiance (blender/sky.py); `wait` False (the viewport's draw)
+    takes the last capture of the World rather than rendering a new one there and then."""
     settings = scene.nubis
     params = params_from_scene(settings)
     sun = find_sun(scene)
@@ -423,6 +432,8 @@ def state_from_scene(scene, camera_location=None, fields: tuple | None = None) -
     time = (scene.frame_current + scene.frame_subframe) / fps * params["wind_time_scale"] + params["wind_time_offset"]
     if fields is None:
         fields = read_fields(settings)
+    env = sky.environment(scene, wait)
+    above, below = skymath.hemisphere_radiance_cached(env)
     return CloudState(
         params=params,
         field_a=fields[0],
@@ -430,7 +441,9 @@ def state_from_scene(scene, camera_location=None, fields: tuple | None = None) -
         field_c=fields[2],
         sun_direction=direction,
         sun_radiance=radiance,
-        ambient=world_ambient(scene) if settings.ambient_source == "WORLD" else tuple(settings.ambient_color),
+        ambient=above,
+        ambient_below=below,
+        sky_env=env,
         draw_center=(float(camera_location[0]), float(camera_location[1])),
         time=time,
         storms=storm_lights(settings, scene, time),

@@ -98,7 +98,7 @@ def _state(scene, view_origin):
         if len(_fields_cache) >= _MAX_VIEWS:
             _fields_cache.clear()
         cached = _fields_cache[scene.as_pointer()] = (key, scene_io.read_fields(s))
-    return scene_io.state_from_scene(scene, camera_location=view_origin, fields=cached[1])
+    return scene_io.state_from_scene(scene, camera_location=view_origin, fields=cached[1], wait=False)
 
 
 _MAX_VIEWS = 8  # 3D views with a history of their own; the least recently drawn is freed beyond this

@@ -224,6 +224,43 @@ PARAMS: tuple[Param, ...] = (
         256,
         "Samples per pixel the still viewport converges to (16 redraws each), then it stops redrawing",
     ),
+    # The sky and final renders (issue 15): a physically based World, the clouds in F12 renders through
+    # the World (camera background and lighting environment) and cloud shadows from a sun-facing caster.
+    P(
+        "sky",
+        "sun_color",
+        "bool",
+        True,
+        description="A Nubis sky sets the Sun lamp's colour to the atmosphere's transmittance at its elevation",
+    ),
+    P(
+        "sky",
+        "render_clouds",
+        "bool",
+        True,
+        description="EEVEE and Cycles renders (F12) show the clouds: behind the scene, as its lighting and in its shadows",
+    ),
+    P("sky", "shadows", "bool", True, description="The clouds cast their shadows on the scene's objects in renders"),
+    P("sky", "shadow_resolution", "int", 512, 16, 4096, "Pixels per side of the cloud-shadow map"),
+    P(
+        "sky",
+        "shadow_size",
+        "float",
+        0.0,
+        0.0,
+        1e6,
+        "Width of the ground the cloud shadows cover (0: the scene's objects, at most 20 km)",
+        "LENGTH",
+    ),
+    P(
+        "sky",
+        "environment_width",
+        "int",
+        512,
+        16,
+        8192,
+        "Width of the clouds' panorama that lights renders (the height is half)",
+    ),
     P("bake", "voxel_size", "float", 100.0, 1.0, 10000.0, "Edge of a voxel in the OpenVDB bake", "LENGTH"),
 )
 del P

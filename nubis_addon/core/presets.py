@@ -67,7 +67,17 @@ EXTRA_SCHEMA: dict[str, dict[str, tuple]] = {
         "strength": (float, 4.0, 0.0, 1e5),
         "angle": (float, 0.53, 0.0, 180.0),
     },
-    "world": {"color": (list, [0.35, 0.5, 0.8]), "strength": (float, 1.0, 0.0, 1e5)},
+    # `sky`: a physically based World (Blender's Sky Texture) whose sky light has the luminance of
+    # colour x strength at the preset's sun; false keeps the flat colour. Air, aerosol and ozone are
+    # multiples of the standard atmosphere (the Sky Texture's densities).
+    "world": {
+        "color": (list, [0.35, 0.5, 0.8]),
+        "strength": (float, 1.0, 0.0, 1e5),
+        "sky": (bool, True),
+        "air": (float, 1.0, 0.0, 10.0),
+        "aerosol": (float, 1.0, 0.0, 10.0),
+        "ozone": (float, 1.0, 0.0, 10.0),
+    },
     # SPEC 1.3.1: the weather rules, applied after the layer stack (S15, GPU Pro 7).
     "rules": {
         "rain": (bool, False),

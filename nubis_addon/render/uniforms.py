@@ -55,6 +55,10 @@ def param_vectors(state: CloudState) -> dict[str, tuple[float, float, float, flo
         "sun_dir": (*_normalized(state.sun_direction), 0.0),
         "sun_rad": (*state.sun_radiance, 0.0),
         "ambient": (*(c * p["lighting_ambient"] for c in state.ambient), p["lighting_ambient_bottom"]),
+        "ambient_below": (
+            *(c * p["lighting_ambient"] for c in (state.ambient_below or state.ambient)),
+            p["lighting_ambient"],
+        ),
         "phase": (
             p["lighting_phase_g0"],
             p["lighting_phase_g1"],
