@@ -15,6 +15,7 @@ import bpy
 import numpy as np
 
 from ..core import camera, imageio, interrupt, limits, march, metrics, vdbio
+from ..core import sky as skymath
 from ..core.bakeplan import BakePlan, comparison_voxel_size, plan_bake, view_footprint
 from ..core.errors import NubisError
 from ..core.fsutil import check_output_dir, check_output_path
@@ -22,7 +23,6 @@ from ..core.staging import output_set
 from ..core.state import MAX_STORMS, CloudState
 from ..render import bake as gpu_bake
 from ..render import engine
-from ..core import sky as skymath
 from . import cycles_setup, runtime, scene_io, sky
 
 Progress = Callable[[float], None]

@@ -10,8 +10,8 @@ import numpy as np
 from mathutils import Euler, Matrix, Vector
 
 from ..core import camera
-from ..core import sky as skymath
 from ..core import fields as fieldgen
+from ..core import sky as skymath
 from ..core import storms as stormgen
 from ..core.errors import NubisError
 from ..core.presets import Preset

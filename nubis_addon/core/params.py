@@ -238,7 +238,7 @@ PARAMS: tuple[Param, ...] = (
         "render_clouds",
         "bool",
         True,
-        description="EEVEE and Cycles renders (F12) show the clouds: behind the scene, as its lighting and in its shadows",
+        description="EEVEE and Cycles renders (F12) show the clouds: behind the scene, as its light and its shadows",
     ),
     P("sky", "shadows", "bool", True, description="The clouds cast their shadows on the scene's objects in renders"),
     P("sky", "shadow_resolution", "int", 512, 16, 4096, "Pixels per side of the cloud-shadow map"),
