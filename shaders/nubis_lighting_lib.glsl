@@ -176,6 +176,15 @@ float nubis_reference_depth(vec3 p, vec3 dir, int samples, out float plain)
     len = min(len, bottom.x); /* heading down out of the layer's floor */
   }
   len = min(len, 2.0 * P.layer.w);
+  /* A comparison keeps only the clouds inside the baked box: beyond its side there is nothing to
+   * shadow, so the samples stay inside it (a horizontal ray would otherwise spread its 16 samples
+   * over tens of kilometres, most of them outside, and miss the clouds that are there). */
+  if (P.clip_box.z >= P.clip_box.x) {
+    vec2 side = vec2(dir.x > 0.0 ? P.clip_box.z : P.clip_box.x, dir.y > 0.0 ? P.clip_box.w : P.clip_box.y);
+    vec2 exit_t = (side - p.xy) / max(abs(dir.xy), vec2(1e-9)) * sign(dir.xy);
+    exit_t = mix(vec2(1e30), max(exit_t, vec2(0.0)), greaterThan(abs(dir.xy), vec2(1e-9)));
+    len = min(len, min(exit_t.x, exit_t.y));
+  }
   /* Samples crowd near the point (t = len u^2): the nearby cloud decides most of the shadowing,
    * while a horizontal ray may cross tens of kilometres of layer. */
   float depth = 0.0;

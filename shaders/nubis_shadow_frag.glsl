@@ -1,7 +1,8 @@
-/* The clouds' transmittance towards the sun over a plane facing it: the map a shadow caster in the
+/* The clouds' transmittance towards the sun over a plane below them: the map a shadow caster in the
  * scene carries (blender/scene_render.py), so Cycles and EEVEE cast the clouds' shadows on the scene.
- * Each texel marches the full-detail density from where its sun ray enters the cloud shell to where
- * it leaves (rain's and storms' absorption included) and adds the cirrus layer's optical depth. */
+ * Each texel marches the full-detail density along its sun ray from where it enters the cloud shell
+ * to where it leaves (rain's and storms' absorption included) and adds the cirrus layer's optical
+ * depth. */
 void main()
 {
   vec3 p = shadow_origin.xyz + (uv.x - 0.5) * shadow_u.xyz + (uv.y - 0.5) * shadow_v.xyz;

@@ -208,9 +208,10 @@ def _shadow_at(blender, scene, points):
     m = np.array(caster.matrix_world)
     origin, u, v, n = m[:3, 3], m[:3, 0], m[:3, 1], m[:3, 2]
     n = n / np.linalg.norm(n)
+    sun = np.array(scene.objects["Nubis Sun"].matrix_world.to_3x3().col[2])
     # Along the sun from each point to the caster's plane, then into its UVs.
-    s = ((origin - points) @ n)[..., None]
-    q = points + s * n - origin
+    s = (((origin - points) @ n) / (sun @ n))[..., None]
+    q = points + s * sun - origin
     uu = (q @ u) / (u @ u) + 0.5
     vv = (q @ v) / (v @ v) + 0.5
     x = np.clip((uu * res).astype(int), 0, res - 1)

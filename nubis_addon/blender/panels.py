@@ -100,6 +100,7 @@ class NUBIS_PT_light(NubisPanel, bpy.types.Panel):
     def draw(self, context):
         s = context.scene.nubis
         self.layout.label(text="The sun is the scene's first Sun lamp: rotate it to change the time of day")
+        self.layout.label(text="Sky light: the World's radiance (an HDRI, a sky, a colour), or a colour")
         self.layout.prop(s, "ambient_source", expand=True)
         if s.ambient_source == "COLOR":
             self.layout.prop(s, "ambient_color")
@@ -196,6 +197,7 @@ CLASSES = (
     NUBIS_PT_storms,
     NUBIS_PT_light,
     _section_panel("lighting", "Lighting"),
+    _section_panel("sky", "Sky and Final Renders"),
     _section_panel("march", "Ray March"),
     NUBIS_PT_viewport,
     NUBIS_PT_bake,

@@ -232,7 +232,7 @@ def _settings_annotations() -> dict:
         ambient_source=EnumProperty(
             name="Ambient",
             items=(
-                ("WORLD", "World", "Sky light from the World's background colour and strength"),
+                ("WORLD", "World", "Sky light from the World's radiance in every direction (an HDRI, a sky, a colour)"),
                 ("COLOR", "Colour", "Sky light from an explicit colour"),
             ),
             default="WORLD",

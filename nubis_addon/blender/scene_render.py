@@ -8,8 +8,8 @@ GLSL the viewport draws, and the scene's World is swapped for a copy that shows 
   own sky (a screen-space image, so the scene's objects stand in front of them);
 - every other ray (diffuse, glossy, EEVEE's world probe) sees a panorama of the clouds from the camera
   over the World: the clouds light the scene and darken its sky light;
-- a sun-facing plane above the scene's objects, invisible to camera and indirect rays, carries the
-  clouds' transmittance towards the sun, so the Sun lamp's shadows hold the clouds' shadows and move
+- a horizontal plane just above the scene's objects, invisible to camera and indirect rays, carries
+  the clouds' transmittance towards the sun, so the Sun lamp's shadows hold the clouds' shadows and move
   with the wind.
 
 After the frame (`render_post`, `render_cancel`) the artist's World is put back. What this cannot do
@@ -119,12 +119,10 @@ def prepare_frame(scene) -> None:
 
 
 def shadow_frame(scene, sun_dir) -> tuple[Vector, Vector, Vector, float]:
-    """Where the shadow caster goes: a square facing the sun just above the scene's objects. Returns its
-    centre, its two unit edge directions and its width (metres)."""
+    """Where the shadow caster goes: a horizontal square just above the scene's tallest object, wide
+    enough that the sunlight reaching every object crosses it. Returns its centre, its two unit edge
+    directions and its width (metres)."""
     sun = Vector(sun_dir).normalized()
-    helper = Vector((0.0, 0.0, 1.0)) if abs(sun.z) < 0.99 else Vector((0.0, 1.0, 0.0))
-    u = helper.cross(sun).normalized()
-    v = sun.cross(u).normalized()
     corners = []
     for obj in scene.objects:
         if obj.type not in _SOLID_TYPES or obj.hide_render or obj.name == CASTER_NAME:
@@ -133,17 +131,23 @@ def shadow_frame(scene, sun_dir) -> tuple[Vector, Vector, Vector, float]:
         corners.extend(m @ Vector(c) for c in obj.bound_box)
     if not corners:
         corners = [Vector((x, y, 0.0)) for x in (-500.0, 500.0) for y in (-500.0, 500.0)]
-    centre = sum(corners, Vector()) / len(corners)
-    extent = max(max(abs((c - centre).dot(u)), abs((c - centre).dot(v))) for c in corners)
-    size = scene.nubis.sky_shadow_size or min(max(2.2 * extent, MIN_SHADOW_SIZE), MAX_SHADOW_SIZE)
-    lift = max((c - centre).dot(sun) for c in corners) + max(0.05 * size, 5.0)
-    return centre + sun * lift, u, v, size
+    lo = Vector([min(c[i] for c in corners) for i in range(3)])
+    hi = Vector([max(c[i] for c in corners) for i in range(3)])
+    height = hi.z + max(0.02 * max(hi.x - lo.x, hi.y - lo.y), 5.0)
+    # Sunlight reaching the lowest point crosses the caster this far towards the sun.
+    rise = (height - lo.z) / max(sun.z, 0.05)
+    shift = Vector((sun.x, sun.y, 0.0)) * rise
+    centre = (lo + hi) / 2 + shift / 2
+    centre.z = height
+    extent = max(hi.x - lo.x + abs(shift.x), hi.y - lo.y + abs(shift.y))
+    size = scene.nubis.sky_shadow_size or min(max(1.05 * extent, MIN_SHADOW_SIZE), MAX_SHADOW_SIZE)
+    return centre, Vector((1.0, 0.0, 0.0)), Vector((0.0, 1.0, 0.0)), size
 
 
 def update_shadow(scene, state, clouds) -> bpy.types.Object:
     """The shadow map of this frame and the caster that carries it."""
     origin, u, v, size = shadow_frame(scene, state.sun_direction)
-    n = u.cross(v)  # towards the sun
+    n = u.cross(v)
     res = scene.nubis.sky_shadow_resolution
     clouds.update(state)
     transmittance = engine.render_shadow(clouds, tuple(origin), tuple(u * size), tuple(v * size), res)
@@ -297,14 +301,12 @@ def attach(scene) -> None:
 
 
 def detach(scene) -> None:
-    """Give the scene its own World back and drop the render copy."""
+    """Give the scene its own World back."""
     name = _swapped.pop(scene.name, None)
     if name is None:
         return
     scene.world = bpy.data.worlds.get(name) if name else None
-    copy = bpy.data.worlds.get(RENDER_WORLD)
-    if copy is not None and copy.users == 0:
-        bpy.data.worlds.remove(copy)
+    # The render copy stays (unsaved, it has no users) for renders whose handlers run off the main thread.
 
 
 @bpy.app.handlers.persistent
@@ -314,10 +316,11 @@ def on_render_pre(scene, _depsgraph=None) -> None:
     if threading.current_thread() is not threading.main_thread():
         # An interface render runs its handlers on the render thread, where the GPU module has no
         # context: the frame's clouds must be prepared on the main thread (README, "Final renders").
-        if any(bpy.data.images.get(n) is None for n in (CAMERA_IMAGE, PANORAMA_IMAGE, PANORAMA_ALPHA)):
+        # Only the World pointer changes here; the render World and its images are the main thread's.
+        world = bpy.data.worlds.get(RENDER_WORLD)
+        if world is None or any(bpy.data.images.get(n) is None for n in (CAMERA_IMAGE, PANORAMA_IMAGE, PANORAMA_ALPHA)):
             return
         original = scene.world
-        world = render_world(scene)
         _swapped.setdefault(scene.name, original.name if original is not None else "")
         scene.world = world
         return
@@ -371,11 +374,10 @@ def panorama(scene, out: str | os.PathLike, width: int) -> Path:
     clouds.update(state)
     eye = scene_io.camera_eye(scene) if scene.camera is not None else (0.0, 0.0, 2.0, 1.0)
     rgba = engine.render_panorama(clouds, eye, width, height)  # bottom row first
+    # The sky behind the clouds is the World's (the ambient colour, when set, only lights the clouds).
     flat = sky.flat_colour(scene.world) if scene.world is not None else (0.0, 0.0, 0.0)
-    if scene.nubis.ambient_source == "COLOR" or flat is not None:
-        background = np.broadcast_to(np.asarray(state.ambient, np.float32), (height, width, 3))
-        if flat is not None and scene.nubis.ambient_source != "COLOR":
-            background = np.broadcast_to(np.asarray(flat, np.float32), (height, width, 3))
+    if flat is not None:
+        background = np.broadcast_to(np.asarray(flat, np.float32), (height, width, 3))
     else:
         env = sky.capture_world(scene, min(width, sky.BACKGROUND_WIDTH * 2), samples=4)
         background = skymath.sample(env, skymath.directions(width, height)).astype(np.float32)

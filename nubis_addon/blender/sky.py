@@ -23,6 +23,7 @@ WORLD_NAME = "Nubis Sky"
 SKY_NODE = "Nubis Sky Texture"
 MARKER = "nubis_sky"  # custom property on a World that Nubis built (and so may keep in step with the sun)
 ENV_WIDTH = 64  # the clouds' sky-light environment: 64 x 32 holds the sky's gradients
+ENV_SAMPLES = 4  # Cycles samples per pixel of a capture: a sky is smooth
 BACKGROUND_WIDTH = 512  # the sky behind the clouds in pictures (render's PNG, panorama)
 
 
@@ -81,10 +82,14 @@ def build_world(scene, cfg: dict, sun) -> bpy.types.World:
     # Calibrate the sky's strength once, at the preset's sun: its upper-hemisphere radiance then has
     # the luminance of the preset's flat sky colour. Turning the sun later changes it physically.
     bg.inputs["Strength"].default_value = 1.0
-    above, _below = skymath.hemisphere_radiance(capture_world(scene, ENV_WIDTH, samples=4))
+    env = capture_world(scene, ENV_WIDTH)
+    above, _below = skymath.hemisphere_radiance(env)
     target = float(metrics.luminance(np.array(cfg["color"], np.float32))) * cfg["strength"]
     have = float(metrics.luminance(np.array(above, np.float32)))
-    bg.inputs["Strength"].default_value = float(target / have) if have > 1e-9 else cfg["strength"]
+    strength = float(target / have) if have > 1e-9 else cfg["strength"]
+    bg.inputs["Strength"].default_value = strength
+    # The World's light is linear in its strength: the capture at the new strength needs no render.
+    _captures[(fingerprint(world), ENV_WIDTH, ENV_SAMPLES)] = (env * np.float32(strength)).astype(np.float32)
     return world
 
 
@@ -180,7 +185,7 @@ _UI_PROPS |= {"mute", "show_texture", "parent", "use_custom_color", "color", "wi
 _UI_PROPS |= {"bl_idname", "bl_label", "bl_description", "bl_icon", "warning_propagation", "color_tag"}
 
 
-def capture_world(scene, width: int = ENV_WIDTH, samples: int = 16, world=None) -> np.ndarray:
+def capture_world(scene, width: int = ENV_WIDTH, samples: int = ENV_SAMPLES, world=None) -> np.ndarray:
     """The World's radiance in every direction as an equirectangular image (H = W / 2, RGB, bottom row
     first): Cycles renders the World alone through a panoramic camera in a scratch scene. Cached by the
     World's settings, so a still sky costs nothing after the first call (about a second on 2 cores)."""
@@ -303,7 +308,7 @@ def environment(scene, wait: bool = True) -> np.ndarray:
     flat = flat_colour(world)
     if flat is not None:
         return _uniform(flat)
-    key = (fingerprint(world), ENV_WIDTH, 16)
+    key = (fingerprint(world), ENV_WIDTH, ENV_SAMPLES)
     hit = _captures.get(key)
     if hit is None and not wait:
         _pending.append(scene.name)
