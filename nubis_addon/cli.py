@@ -330,8 +330,10 @@ def _execute(args, in_blender: bool, log: Path) -> str:
 
         with _quiet(log):
             scene_render.panorama(scene, out, args.width)
+        return (
             f"panorama of {label} at {args.width}x{max(args.width // 2, 2)} "
             f"in {time.perf_counter() - start:.1f} s -> {out}"
+        )
     w, h = pipeline.resolution(scene, args.width, args.height)
     if cmd in ("preview", "benchmark"):
         return _realtime(cmd, args, scene, out, w, h, log, label, start)
