@@ -266,6 +266,21 @@ def test_final_render_shows_clouds_behind_the_cube_and_their_moving_shadows(blen
     assert not caster.visible_camera and caster.visible_shadow
 
 
+def test_renders_without_the_clouds_get_no_stale_shadow(blender, f12_scene):
+    from nubis_addon.blender import scene_render
+
+    scene = f12_scene
+    scene_render.prepare_frame(scene)
+    caster = scene.objects[scene_render.CASTER_NAME]
+    assert not caster.hide_render
+    scene.nubis.sky_render_clouds = False
+    try:
+        scene_render.on_render_pre(scene)
+        assert caster.hide_render and scene.world.name != scene_render.RENDER_WORLD
+    finally:
+        scene.nubis.sky_render_clouds = True
+
+
 def _has_engine(blender, name: str) -> bool:
     return name in {e.identifier for e in blender.types.RenderSettings.bl_rna.properties["engine"].enum_items}
 

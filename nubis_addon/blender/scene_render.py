@@ -311,7 +311,13 @@ def detach(scene) -> None:
 
 @bpy.app.handlers.persistent
 def on_render_pre(scene, _depsgraph=None) -> None:
-    if sky.capturing() or not wants_clouds(scene):
+    if sky.capturing():
+        return
+    if not wants_clouds(scene):
+        # An earlier frame's shadow must not fall on a render without the clouds (or on the VDB's).
+        caster = scene.objects.get(CASTER_NAME)
+        if caster is not None and not caster.hide_render:
+            caster.hide_render = True
         return
     if threading.current_thread() is not threading.main_thread():
         # An interface render runs its handlers on the render thread, where the GPU module has no

@@ -16,7 +16,7 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from ..core import imageio, metrics
+from ..core import imageio, interrupt, metrics
 from ..core import sky as skymath
 
 WORLD_NAME = "Nubis Sky"
@@ -234,12 +234,14 @@ def _render_world(world, width: int, height: int, samples: int) -> np.ndarray:
         fd, name = tempfile.mkstemp(prefix="nubis-world-", suffix=".exr")
         os.close(fd)
         path = Path(name)
+        interrupt.register(path)  # an interrupt ends the process at once: it removes the file then
         try:
             r.filepath = str(path)
             _without_nubis_handlers(lambda: bpy.ops.render.render(write_still=True, scene=tmp_scene.name))
             rgba = imageio.read_image(path)
         finally:
             path.unlink(missing_ok=True)
+            interrupt.unregister(path)
     finally:
         bpy.data.scenes.remove(tmp_scene)
         bpy.data.objects.remove(cam)
