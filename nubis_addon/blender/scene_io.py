@@ -293,12 +293,6 @@ def apply_preset(scene, preset: Preset, progress=None, build_sky: bool | None = 
             data["image"] = _load_layer_image(data["image"], preset.path)
         layer_from_dict(settings.layers.add(), data)
     _setup_sun(scene, preset.extra["sun"])
-    if build_sky is None:
-        build_sky = preset.extra["world"]["sky"]
-    if build_sky:
-        sky.build_world(scene, preset.extra["world"], scene.objects.get(SUN_NAME))
-    elif scene.world is None or sky.is_nubis_sky(scene.world) or not keep_world:
-        _setup_world(scene, preset.extra["world"])
     _setup_camera(scene, preset.extra["camera"])
     for storm in list(settings.storms):
         if storm.empty is not None:
@@ -307,6 +301,13 @@ def apply_preset(scene, preset: Preset, progress=None, build_sky: bool | None = 
     for data in preset.storms:
         add_storm(scene, data)
     generate_fields(scene, progress)  # after the camera and storms: the rules and stencils are placed by them
+    # The sky after the (possibly long) composite: its capture renders with Cycles for a second.
+    if build_sky is None:
+        build_sky = preset.extra["world"]["sky"]
+    if build_sky:
+        sky.build_world(scene, preset.extra["world"], scene.objects.get(SUN_NAME))
+    elif scene.world is None or sky.is_nubis_sky(scene.world) or not keep_world:
+        _setup_world(scene, preset.extra["world"])
     r = preset.extra["render"]
     scene.render.resolution_x, scene.render.resolution_y = r["width"], r["height"]
     scene.render.resolution_percentage = 100

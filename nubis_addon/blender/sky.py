@@ -9,7 +9,6 @@ SINGLE_SCATTERING and MULTIPLE_SCATTERING and calls them `aerosol_density`. Both
 from __future__ import annotations
 
 import math
-import os
 import tempfile
 from pathlib import Path
 
@@ -231,17 +230,17 @@ def _render_world(world, width: int, height: int, samples: int) -> np.ndarray:
         r.image_settings.file_format = "OPEN_EXR"
         r.image_settings.color_depth = "32"
         r.image_settings.color_mode = "RGB"
-        fd, name = tempfile.mkstemp(prefix="nubis-world-", suffix=".exr")
-        os.close(fd)
-        path = Path(name)
-        interrupt.register(path)  # an interrupt ends the process at once: it removes the file then
-        try:
-            r.filepath = str(path)
-            _without_nubis_handlers(lambda: bpy.ops.render.render(write_still=True, scene=tmp_scene.name))
-            rgba = imageio.read_image(path)
-        finally:
-            path.unlink(missing_ok=True)
-            interrupt.unregister(path)
+        # A private folder: an interrupt ends the process at once and removes it (renamed away first,
+        # so the render cannot write anything under its name afterwards: core/interrupt.py).
+        with tempfile.TemporaryDirectory(prefix="nubis-world-") as tmp:
+            interrupt.register(tmp)
+            try:
+                path = Path(tmp) / "world.exr"
+                r.filepath = str(path)
+                _without_nubis_handlers(lambda: bpy.ops.render.render(write_still=True, scene=tmp_scene.name))
+                rgba = imageio.read_image(path)
+            finally:
+                interrupt.unregister(tmp)
     finally:
         bpy.data.scenes.remove(tmp_scene)
         bpy.data.objects.remove(cam)
