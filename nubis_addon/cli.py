@@ -7,6 +7,7 @@
     python -m nubis_addon preview [--preset NAME | --blend FILE] --out DIR [--width W --height H --frames A-B
                                   --redraws N --orbit DEG --quality Q --naive]
     python -m nubis_addon benchmark [--preset NAME | --blend FILE] --out DIR [--width W --height H --quality Q]
+    python -m nubis_addon panorama [--preset NAME | --blend FILE] --out PATH.exr [--width W --frame F]
 
 and the same as ``blender -b [FILE.blend] --command nubis ...``. Each command prints a one-line summary and
 exits 0, or prints a one-line error that says what to do and exits non-zero: 1 for a user error, 2 for a
@@ -88,6 +89,11 @@ def build_parser() -> argparse.ArgumentParser:
                 help="split the samples over two seeds to measure Cycles' own noise",
             )
     _realtime_commands(sub, common, size)
+    p = sub.add_parser("panorama", help="write an equirectangular HDR of the clouds and the sky (a World environment)")
+    common(p)
+    p.add_argument(
+        "--width", type=int, default=1024, help="panorama width in pixels, the height is half (default 1024)"
+    )
     return parser
 
 
@@ -164,6 +170,8 @@ def _execute(args, in_blender: bool, log: Path) -> str:
         out = check_output_dir(args.out)
     elif args.command == "bake":
         out = check_output_path(args.out, (".vdb",))
+    elif args.command == "panorama":
+        out = check_output_path(args.out, (".exr",))
     else:
         out = check_output_path(args.out, IMAGE_SUFFIXES)
     if getattr(args, "motion", None):

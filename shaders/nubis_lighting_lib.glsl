@@ -50,6 +50,24 @@ const float NUBIS_LIGHT_COARSEST_LOD = 2.0;
 const float NUBIS_POWDER_GAIN = 2.0;
 const float NUBIS_POWDER_RATE = 2.0;
 
+/* The World's radiance towards `dir` (a distant environment): the equirectangular capture of the World
+ * (blender/sky.py), in the layout of Blender's Environment Texture (core/sky.py). */
+vec3 nubis_sky_radiance(vec3 dir)
+{
+  vec3 d = normalize(dir);
+  vec2 uv = vec2(0.5 - atan(d.y, d.x) / (2.0 * NUBIS_PI), 0.5 + asin(clamp(d.z, -1.0, 1.0)) / NUBIS_PI);
+  return texture(sky_env, uv).rgb;
+}
+
+/* The sky light of the real-time march at height fraction h in the layer: the World's irradiance from
+ * above at the top; at the base S15's fraction of it, from sky and ground alike (the mean of the two
+ * hemispheres). A World of one colour gives S15's gradient from the base fraction to 1 unchanged. */
+vec3 nubis_ambient_light(float h)
+{
+  vec3 base = P.lighting_ambient_bottom * 0.5 * (P.ambient.rgb + P.ambient_below.rgb);
+  return mix(base, P.ambient.rgb, h);
+}
+
 /* GDC22: normalised Henyey-Greenstein (GPU Pro 7's listing multiplies by pi; not used;
  * docs/sources.md#henyey-greenstein-normalisation). */
 float nubis_henyey_greenstein(float cos_angle, float g)
@@ -213,6 +231,15 @@ float nubis_reference_depth(vec3 p, vec3 dir, int samples, out float plain)
     len = min(len, bottom.x); /* heading down out of the layer's floor */
   }
   len = min(len, NUBIS_REFERENCE_REACH * P.layer_draw_radius);
+  /* A comparison keeps only the clouds inside the baked box: beyond its side there is nothing to
+   * shadow, so the samples stay inside it (a horizontal ray would otherwise spread its 16 samples
+   * over tens of kilometres, most of them outside, and miss the clouds that are there). */
+  if (P.clip_box.z >= P.clip_box.x) {
+    vec2 side = vec2(dir.x > 0.0 ? P.clip_box.z : P.clip_box.x, dir.y > 0.0 ? P.clip_box.w : P.clip_box.y);
+    vec2 exit_t = (side - p.xy) / max(abs(dir.xy), vec2(1e-9)) * sign(dir.xy);
+    exit_t = mix(vec2(1e30), max(exit_t, vec2(0.0)), greaterThan(abs(dir.xy), vec2(1e-9)));
+    len = min(len, min(exit_t.x, exit_t.y));
+  }
   /* Samples crowd near the point (t = len u^2): the nearby cloud decides most of the shadowing,
    * while a horizontal ray may cross tens of kilometres of layer. */
   float depth = 0.0;
@@ -240,13 +267,13 @@ float nubis_henyey_greenstein_sample(float g, float u)
   return clamp((1.0 + g * g - s * s) / (2.0 * g), -1.0, 1.0);
 }
 
-/* Reference sky light: the world is a uniform sphere of radiance (as in the Cycles scene), so single
- * scattering of it is the radiance times the transmittance weighted by the phase function over all
- * directions. The phase is far from isotropic (the silver-lining lobe peaks ~45x above it), so the
+/* Reference sky light: single scattering of the World's radiance (as Cycles lights the baked volume
+ * with the same World) is the radiance times the transmittance, weighted by the phase function over
+ * all directions. The phase is far from isotropic (the silver-lining lobe peaks ~45x above it), so the
  * directions are drawn from the two lobes in proportion to their weights (importance sampling,
  * stratified in the lobe's cosine), turned about the view ray by a per-pixel angle so neighbouring
  * pixels see different directions and supersampling averages them out. */
-float nubis_reference_sky_visibility(vec3 p, vec3 view_dir, vec2 pixel)
+vec3 nubis_reference_sky_light(vec3 p, vec3 view_dir, vec2 pixel)
 {
   /* Budget: Mesa's llvmpipe stops a shader's loops after 65535 iterations in total (its loop
    * limiter), which silently cut long reference marches short; 12 x 16 + 48 per cloud sample keeps
@@ -258,7 +285,7 @@ float nubis_reference_sky_visibility(vec3 p, vec3 view_dir, vec2 pixel)
                                                 cross(view_dir, vec3(1.0, 0.0, 0.0)));
   vec3 up = cross(view_dir, side);
   float spin = NUBIS_TWO_PI * fract(nubis_pixel_hash(pixel + NUBIS_SKY_HASH_OFFSET) + NUBIS_R2_STEP * P.jitter_pass);
-  float main_lobe = 0.0, silver_lobe = 0.0;
+  vec3 main_lobe = vec3(0.0), silver_lobe = vec3(0.0);
   for (int i = 0; i < count; i++) {
     bool in_silver = i < silver;
     int k = in_silver ? i : i - silver;
@@ -270,14 +297,16 @@ float nubis_reference_sky_visibility(vec3 p, vec3 view_dir, vec2 pixel)
     vec3 dir = view_dir * cos_t + (side * cos(phi) + up * sin(phi)) * sin_t;
     float plain;
     float tau = nubis_reference_depth(p, dir, NUBIS_REFERENCE_SKY_SAMPLES, plain) * P.density_sigma + nubis_cirrus_optical_depth(p, dir, 0.0);
+    /* The phase sampling makes the estimate the mean of the World's radiance times the transmittance. */
+    vec3 seen = nubis_sky_radiance(dir) * (exp(-tau) / float(n));
     if (in_silver) {
-      silver_lobe += exp(-tau) / float(n);
+      silver_lobe += seen;
     }
     else {
-      main_lobe += exp(-tau) / float(n);
+      main_lobe += seen;
     }
   }
-  return mix(main_lobe, silver_lobe, P.lighting_phase_mix);
+  return P.lighting_ambient * mix(main_lobe, silver_lobe, P.lighting_phase_mix);
 }
 
 /* What the light of one view ray shares along its length (for a sun light they are constant along
@@ -395,14 +424,15 @@ vec3 nubis_in_scattering(
   /* GDC22's ambient probability pow(1 - coarse, 0.5), growing with height (S15;
    * docs/sources.md#ambient); the reference permutation measures the sky's visibility instead. */
 #if NUBIS_REFERENCE
-  float ambient_probability = nubis_reference_sky_visibility(p, view_dir, pixel);
+  vec3 sky_light = nubis_reference_sky_light(p, view_dir, pixel);
 #else
-  float ambient_probability = sqrt(1.0 - clamp01(d.coarse)) * mix(P.lighting_ambient_bottom, 1.0, d.h);
+  float ambient_probability = sqrt(1.0 - clamp01(d.coarse));
 #  if NUBIS_CIRRUS
   /* ... and the sky light by its transmittance overhead. */
   ambient_probability *= exp(-nubis_cirrus_optical_depth(p, normalize(p + vec3(0.0, 0.0, P.layer_planet_radius)), 0.0));
 #  endif
+  vec3 sky_light = nubis_ambient_light(d.h) * ambient_probability;
 #endif
-  ambient_probability *= nubis_storm_ambient(p, d.h);
-  return direct + P.ambient.rgb * ambient_probability + nubis_storm_steady_glow(p, d.fine);
+  sky_light *= nubis_storm_ambient(p, d.h);
+  return direct + sky_light + nubis_storm_steady_glow(p, d.fine);
 }

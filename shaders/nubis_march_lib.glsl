@@ -235,11 +235,12 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out v
   }
   float alpha = 1.0 - transmittance;
   cloud_depth = alpha > 0.0 ? depth_sum / alpha : 0.0;
-  /* S15: clouds fade into the atmosphere with the depth of what the ray saw
+  /* S15: clouds fade into the atmosphere with the depth of what the ray saw, into the sky's own color
+   * along this ray (the World's radiance behind them), not a flat fog color
    * (docs/sources.md#aerial-perspective). */
   if (P.lighting_fade_distance > 0.0 && alpha > 0.0) {
     float fade = exp(-(depth_sum / alpha) / P.lighting_fade_distance);
-    radiance = mix(P.ambient.rgb * alpha, radiance, fade);
+    radiance = mix(nubis_sky_radiance(dir) * alpha, radiance, fade);
     flash_mask *= fade;
   }
   return vec4(radiance, alpha);

@@ -12,7 +12,7 @@ from ..core import console, fields, imageio, interrupt, staging
 from ..core.errors import NubisError
 from ..core.presets import load_preset
 from ..render.gpu_context import ensure_gpu_context
-from . import pipeline, preview, registration, scene_io
+from . import pipeline, preview, registration, scene_io, scene_render
 
 PROG = "nubis"
 # A field composite slower than this gets an estimate first, then a progress bar.
@@ -89,6 +89,13 @@ def execute(args, in_blender: bool, log: Path, out: Path) -> str:
         return (
             f"baked {label}: {nx}x{ny}x{nz} voxels of {result.plan.voxel_size:g} m, "
             f"{result.active_voxels} active, in {result.seconds:.1f} s -> {out}"
+        )
+    if cmd == "panorama":
+        with console.quiet(log):
+            scene_render.panorama(scene, out, args.width)
+        return (
+            f"panorama of {label} at {args.width}x{max(args.width // 2, 2)} "
+            f"in {time.perf_counter() - start:.1f} s -> {out}"
         )
     w, h = pipeline.resolution(scene, args.width, args.height)
     if cmd in ("preview", "benchmark"):

@@ -99,10 +99,17 @@ class NUBIS_OT_new_cloudscape(NubisOperator, bpy.types.Operator):
         self.keep_camera, self.keep_world, self.keep_render, self.keep_sun = own_camera, own_world, True, own_sun
         return context.window_manager.invoke_props_dialog(self)
 
+    build_sky: BoolProperty(
+        name="Build Sky",
+        default=True,
+        description="Make a new World with Blender's physical Sky Texture, its sun tied to the Sun lamp (the "
+        "scene's own World is kept in the file); off sets the preset's flat color",
+    )
+
     def run(self, context):
         entry = find_preset_entry(self.preset)
         preset = presets.load_preset(str(entry.path) if entry else self.preset)
-        keep = scene_io.Keep(self.keep_camera, self.keep_world, self.keep_render, self.keep_sun)
+        keep = scene_io.Keep(self.keep_camera, self.keep_world, self.keep_render, self.keep_sun, self.build_sky)
         with _field_progress(context) as progress:
             scene_io.apply_preset(context.scene, preset, progress, keep)
         return f"Cloudscape '{preset.name}' created"
@@ -565,7 +572,7 @@ class NUBIS_OT_preset_load(NubisOperator, bpy.types.Operator):
         if not self.filepath:
             raise NubisError("choose a preset from the menu")
         preset = presets.load_preset(self.filepath)
-        keep = scene_io.Keep(self.keep_camera, self.keep_world, self.keep_render, self.keep_sun)
+        keep = scene_io.Keep(self.keep_camera, self.keep_world, self.keep_render, self.keep_sun, self.build_sky)
         with _field_progress(context) as progress:
             scene_io.apply_preset(context.scene, preset, progress, keep)
         return f"Preset '{preset.name}' loaded"

@@ -220,6 +220,12 @@ class NUBIS_PT_lighting(NubisPanel, bpy.types.Panel):
         col.prop(context.scene.cycles, "volume_bounces", text="Cycles Volume Bounces")
 
 
+class NUBIS_PT_sky(NubisPanel, bpy.types.Panel):
+    bl_label = "Sky and Final Renders"
+    bl_options = {"DEFAULT_CLOSED"}
+    panel = "sky"
+
+
 class NUBIS_PT_cirrus(NubisPanel, bpy.types.Panel):
     bl_label = "Cirrus"
     bl_options = {"DEFAULT_CLOSED"}
@@ -298,6 +304,7 @@ PANEL_CLASSES = {
         NUBIS_PT_shape,
         NUBIS_PT_wind,
         NUBIS_PT_lighting,
+        NUBIS_PT_sky,
         NUBIS_PT_cirrus,
         NUBIS_PT_storms,
         NUBIS_PT_march,

@@ -15,6 +15,7 @@ import bpy
 import numpy as np
 
 from ..core import camera, imageio, interrupt, limits, march, metrics, vdbio
+from ..core import sky as skymath
 from ..core.bakeplan import BakePlan, comparison_voxel_size, plan_bake, view_footprint
 from ..core.errors import NubisError
 from ..core.fsutil import check_output_dir, check_output_path
@@ -22,7 +23,7 @@ from ..core.staging import output_set
 from ..core.state import MAX_STORMS, CloudState
 from ..render import bake as gpu_bake
 from ..render import engine
-from . import cycles_setup, runtime, scene_io
+from . import cycles_setup, runtime, scene_io, sky
 
 Progress = Callable[[float], None]
 
@@ -31,10 +32,25 @@ def ocio_config() -> str:
     return os.path.join(bpy.utils.resource_path("LOCAL"), "datafiles", "colormanagement", "config.ocio")
 
 
+def sky_background(scene, width: int, height: int) -> np.ndarray:
+    """The World as the scene camera sees it behind the clouds (H, W, 3), top row first: the World's
+    capture (blender/sky.py) looked up along each pixel's view ray."""
+    if scene.camera is None:
+        return np.broadcast_to(np.asarray(scene_io.world_ambient(scene), np.float32), (height, width, 3))
+    env = sky.environment(scene)
+    if env.shape[0] > 4 or env.shape[1] > 8:  # not one colour: a sharper capture for pictures
+        env = sky.capture_world(scene, sky.BACKGROUND_WIDTH, samples=4)
+    inv = scene_io.camera_inv_view_proj(scene, width, height)
+    dirs = skymath.camera_directions(inv, scene_io.camera_eye(scene), width, height)
+    return skymath.sample(env, dirs).astype(np.float32)
+
+
 def display_image(scene, rgba: np.ndarray) -> np.ndarray:
-    """What the artist sees: the clouds over the world's sky colour, through the scene's view transform."""
-    sky = scene_io.world_ambient(scene)
-    return imageio.to_display(imageio.composite_over(rgba, sky), scene.view_settings.view_transform, ocio_config())
+    """What the artist sees: the clouds over the World's sky, through the scene's view transform."""
+    background = sky_background(scene, rgba.shape[1], rgba.shape[0])
+    return imageio.to_display(
+        imageio.composite_over(rgba, background), scene.view_settings.view_transform, ocio_config()
+    )
 
 
 def save_render(scene, path: str | os.PathLike, rgba: np.ndarray) -> Path:
@@ -229,7 +245,8 @@ def render_cycles(
         exr = Path(tmp) / "cycles.exr"
         cycles_setup.configure_render(scene, width, height, samples, bounces, exact_samples)
         scene.render.filepath = str(exr)
-        bpy.ops.render.render(write_still=True, scene=scene.name)
+        with runtime.own_render():
+            bpy.ops.render.render(write_still=True, scene=scene.name)
         if not exr.is_file():
             raise NubisError("Cycles wrote no image: check the console for Cycles errors")
         rgba = imageio.read_image(exr)

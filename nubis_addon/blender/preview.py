@@ -246,7 +246,8 @@ def render_eevee(scene, width: int, height: int, vdb_path: str, samples: int = 1
             exr = Path(tmp) / "eevee.exr"
             scene.render.filepath = str(exr)
             t = time.perf_counter()
-            bpy.ops.render.render(write_still=True, scene=scene.name)
+            with runtime.own_render():
+                bpy.ops.render.render(write_still=True, scene=scene.name)
             seconds = time.perf_counter() - t
             if not exr.is_file():
                 raise NubisError("EEVEE wrote no image: check the console for errors")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import events, operators, panels, preferences, properties, runtime, viewport
+from . import events, operators, panels, preferences, properties, runtime, scene_render, sky, viewport
 
 _registered = [False]
 
@@ -18,12 +18,16 @@ def register() -> None:
     panels.register()
     preferences.register()
     viewport.register()
+    sky.register()
+    scene_render.register()
     _registered[0] = True
 
 
 def unregister() -> None:
     if not _registered[0]:
         return
+    scene_render.unregister()
+    sky.unregister()
     viewport.unregister()
     preferences.unregister()
     panels.unregister()

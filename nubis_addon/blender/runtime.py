@@ -9,6 +9,7 @@ worker runs numpy only; GPU textures are made on Blender's main thread, in the d
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 from collections.abc import Callable
@@ -158,3 +159,21 @@ def free() -> None:
     _jobs.clear()
     if _executor:
         _executor.pop().shutdown(wait=False, cancel_futures=True)  # a running generation ends by itself
+
+
+_own_renders = [0]
+
+
+@contextlib.contextmanager
+def own_render():
+    """Around a render Nubis makes itself (the Cycles reference of the baked VDB, the benchmark's EEVEE
+    frame): the F12 clouds (blender/scene_render.py) stay out of it."""
+    _own_renders[0] += 1
+    try:
+        yield
+    finally:
+        _own_renders[0] -= 1
+
+
+def own_render_running() -> bool:
+    return _own_renders[0] > 0

@@ -13,10 +13,12 @@ from mathutils import Euler, Matrix, Vector
 
 from ..core import camera, schema, userpresets
 from ..core import fields as fieldgen
+from ..core import sky as skymath
 from ..core import storms as stormgen
 from ..core.errors import NubisError
 from ..core.presets import Preset
 from ..core.state import MAX_STORMS, CloudState, StormLight, sun_vector, wind_vector
+from . import sky
 
 FIELD_IMAGES = {
     "a": ("field_a", "Nubis Field A"),
@@ -416,12 +418,15 @@ class Keep:
     world: bool = False  # the scene's World: not replaced or recolored
     render: bool = False  # resolution, frame, view transform, Cycles samples and bounces
     sun: bool = False  # light the clouds with the scene's own Sun lamp rather than the preset's
+    sky: bool | None = None  # build a physical sky World (blender/sky.py); None: the preset's [world] sky
 
 
 def apply_preset(scene, preset: Preset, progress=None, keep: Keep = Keep()) -> None:
     """Make `scene` the preset's cloudscape: settings, layer stack, field images, and (unless `keep`
     says otherwise) its sun, world, camera and render settings; ``progress`` follows the field
-    composite. Storm Empties an artist made stay in the scene; those Nubis made for the old storms go."""
+    composite. The World is a physically based sky ('Nubis Sky', blender/sky.py) when the preset's
+    `[world] sky` (or `keep.sky`) asks for one, else the preset's flat color; an artist's World stays in
+    the file. Storm Empties an artist made stay in the scene; those Nubis made for the old storms go."""
     settings = scene.nubis
     own_sun = settings.sun if keep.sun and settings.sun is not None else (find_sun(scene) if keep.sun else None)
     with batch_edit():
@@ -436,8 +441,6 @@ def apply_preset(scene, preset: Preset, progress=None, keep: Keep = Keep()) -> N
                 data["image"] = _load_layer_image(data["image"], preset.path)
             layer_from_dict(settings.layers.add(), data)
         settings.sun = own_sun or _setup_sun(scene, preset.extra["sun"])
-        if not keep.world or scene.world is None:
-            _setup_world(scene, preset.extra["world"])
         if not keep.camera or scene.camera is None:
             _setup_camera(scene, preset.extra["camera"])
         for storm in list(settings.storms):
@@ -447,6 +450,13 @@ def apply_preset(scene, preset: Preset, progress=None, keep: Keep = Keep()) -> N
         for data in preset.storms:
             add_storm(scene, data)
     generate_fields(scene, progress)  # after the camera and storms: the rules and stencils are placed by them
+    # The sky after the (possibly long) composite: its capture renders with Cycles for a second.
+    if not keep.world or scene.world is None:
+        build_sky = preset.extra["world"]["sky"] if keep.sky is None else keep.sky
+        if build_sky:
+            sky.build_world(scene, preset.extra["world"], settings.sun)
+        else:
+            _setup_world(scene, preset.extra["world"])
     if keep.render:
         return
     r = preset.extra["render"]
@@ -578,6 +588,8 @@ def _setup_world(scene, world_cfg: dict) -> None:
     world.color = world_cfg["color"]
     if world.node_tree is None:  # worlds made before 5.0 may lack a node tree
         world.use_nodes = True
+    if sky.MARKER in world:
+        del world[sky.MARKER]
     bg = next((n for n in world.node_tree.nodes if n.type == "BACKGROUND"), None)
     if bg is None:
         bg = world.node_tree.nodes.new("ShaderNodeBackground")
@@ -605,15 +617,7 @@ def _setup_camera(scene, cam: dict) -> None:
 # ---- scene to state --------------------------------------------------------------------------------
 
 
-def find_sun(scene):
-    """The Sun lamp lighting the clouds: the cloudscape's own (Lighting > Sun), else the first visible one."""
-    chosen = getattr(scene.nubis, "sun", None) if getattr(scene, "nubis", None) is not None else None
-    if chosen is not None and chosen.type == "LIGHT" and chosen.data.type == "SUN" and chosen.name in scene.objects:
-        return chosen
-    for obj in scene.objects:
-        if obj.type == "LIGHT" and obj.data.type == "SUN" and not obj.hide_render:
-            return obj
-    return None
+find_sun = sky.find_sun
 
 
 def world_ambient(scene) -> tuple[float, float, float]:
@@ -629,8 +633,10 @@ def world_ambient(scene) -> tuple[float, float, float]:
     return tuple(world.color)
 
 
-def state_from_scene(scene, camera_location=None, fields: tuple | None = None) -> CloudState:
-    """The frame's CloudState; `fields` passes already-read (field_a, field_b) arrays to skip reading pixels."""
+def state_from_scene(scene, camera_location=None, fields: tuple | None = None, wait: bool = True) -> CloudState:
+    """The frame's CloudState; `fields` passes already-read (field_a, field_b) arrays to skip reading pixels.
+    The sky light comes from the World's radiance (blender/sky.py); `wait` False (the viewport's draw)
+    takes the last capture of the World rather than rendering a new one there and then."""
     settings = scene.nubis
     params = params_from_scene(settings)
     sun = find_sun(scene)
@@ -645,6 +651,8 @@ def state_from_scene(scene, camera_location=None, fields: tuple | None = None) -
     time = (scene.frame_current + scene.frame_subframe) / fps * params["wind_time_scale"] + params["wind_time_offset"]
     if fields is None:
         fields = read_fields(settings)
+    env = sky.environment(scene, wait)
+    above, below = skymath.hemisphere_radiance_cached(env)
     return CloudState(
         params=params,
         field_a=fields[0],
@@ -652,7 +660,9 @@ def state_from_scene(scene, camera_location=None, fields: tuple | None = None) -
         field_c=fields[2],
         sun_direction=direction,
         sun_radiance=radiance,
-        ambient=world_ambient(scene) if settings.ambient_source == "WORLD" else tuple(settings.ambient_color),
+        ambient=above,
+        ambient_below=below,
+        sky_env=env,
         draw_center=(float(camera_location[0]), float(camera_location[1])),
         time=time,
         storms=storm_lights(settings, scene, time),

@@ -45,7 +45,7 @@ def _state(scene, view_origin):
         # Headless there is no debounce timer: a composite owed is made here. In the interface the
         # timer makes it (blender/events.py) and the draw shows the last field until then.
         cached = _fields_cache[scene.as_pointer()] = (key, scene_io.read_fields(s, flush=bpy.app.background))
-    return scene_io.state_from_scene(scene, camera_location=view_origin, fields=cached[1])
+    return scene_io.state_from_scene(scene, camera_location=view_origin, fields=cached[1], wait=False)
 
 
 _MAX_VIEWS = 8  # 3D views with a history of their own; the least recently drawn is freed beyond this

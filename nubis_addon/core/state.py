@@ -50,7 +50,11 @@ class CloudState:
     field_c: np.ndarray | None = None  # cirrus coverage and type
     sun_direction: tuple[float, float, float] = (0.0, 0.0, 1.0)  # unit vector towards the sun
     sun_radiance: tuple[float, float, float] = (4.0, 4.0, 4.0)  # colour x strength
-    ambient: tuple[float, float, float] = (0.35, 0.5, 0.8)  # world colour x strength
+    ambient: tuple[float, float, float] = (0.35, 0.5, 0.8)  # the sky's radiance from above (E / pi)
+    ambient_below: tuple[float, float, float] | None = None  # ... from below (None: the same as above)
+    # The World's radiance in every direction, equirectangular (H, W, 3) bottom row first (core/sky.py),
+    # for the reference sky light and the aerial perspective; None: `ambient` everywhere.
+    sky_env: np.ndarray | None = None
     draw_center: tuple[float, float] = (0.0, 0.0)
     time: float = 0.0  # seconds of simulated wind
     light_mode: int = 0  # 0 real-time cone march, 1 reference march

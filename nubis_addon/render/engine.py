@@ -10,11 +10,11 @@ import numpy as np
 from gpu.types import GPUShaderCreateInfo, GPUStageInterfaceInfo
 from gpu_extras.batch import batch_for_shader
 
-from ..core import noise
+from ..core import noise, sky
 from ..core.state import CloudState
 from . import uniforms
 from .sources import CLOUD_LIBS, assemble, read_shader
-from .textures import NoiseTextures, field_texture
+from .textures import NoiseTextures, field_texture, sky_texture
 
 CLOUD_SAMPLERS = (
     ("FLOAT_2D", "field_a"),
@@ -27,6 +27,7 @@ CLOUD_SAMPLERS = (
     ("FLOAT_3D", "noise_hf_mip1"),
     ("FLOAT_2D", "noise_curl"),
     ("FLOAT_2D", "noise_cirrus"),
+    ("FLOAT_2D", "sky_env"),
 )
 # The permutation switches every stage is compiled with (0 or 1); see shaders/nubis_common_lib.glsl.
 SWITCHES = ("NUBIS_STORMS", "NUBIS_REFERENCE", "NUBIS_NAIVE", "NUBIS_CIRRUS", "NUBIS_FETCH_STATS")
@@ -60,6 +61,10 @@ _RESOLVE = {
 # The bake reads the lighting library too, for the glow grid.
 STAGES: dict[str, Stage] = {
     "raymarch": Stage(_VIEW),
+    # The clouds in every direction from one point (equirectangular), and their transmittance towards
+    # the sun over a plane facing it (the scene's cloud shadows).
+    "panorama": Stage((("VEC4", "eye"),)),
+    "shadow": Stage((("VEC4", "shadow_origin"), ("VEC4", "shadow_u"), ("VEC4", "shadow_v"))),
     "bake": Stage((("VEC4", "bake_origin"), ("VEC4", "bake_voxel"))),
     "motion": Stage(_VIEW, blocks=(("NubisMotionCameras", "C"),)),
     # The temporal viewport (render/temporal.py): one pixel of every 4x4 block into the working buffer,
@@ -137,6 +142,9 @@ class CloudGPU:
         self.noise = NoiseTextures(noise_set)
         self._field_arrays: tuple = ()
         self.field_a = self.field_b = self.field_c = None
+        self._sky_key = None
+        self._sky_array = None
+        self.sky_env = None
         self.switches = dict.fromkeys(SWITCHES, 0)
         self.ubo = None
         self.ubo_bytes = b""
@@ -152,6 +160,11 @@ class CloudGPU:
         if len(self._field_arrays) != 3 or any(a is not b for a, b in zip(arrays, self._field_arrays, strict=True)):
             self.field_a, self.field_b, self.field_c = (field_texture(a) for a in arrays)
             self._field_arrays = arrays
+        env = state.sky_env
+        sky_key = id(env) if env is not None else tuple(state.ambient)
+        if self.sky_env is None or sky_key != self._sky_key or (env is not None and env is not self._sky_array):
+            self.sky_env = sky_texture(env if env is not None else sky.uniform(state.ambient))
+            self._sky_key, self._sky_array = sky_key, env
         self.ubo_bytes = uniforms.pack(state).tobytes()
         self.ubo = gpu.types.GPUUniformBuf(self.ubo_bytes)
         self.switches.update(
@@ -169,7 +182,7 @@ class CloudGPU:
         sh.uniform_block("P", self.ubo)
         if not cloud_inputs:
             return
-        textures = {"field_a": self.field_a, "field_b": self.field_b, "field_c": self.field_c}
+        textures = {"field_a": self.field_a, "field_b": self.field_b, "field_c": self.field_c, "sky_env": self.sky_env}
         for _kind, name in CLOUD_SAMPLERS:
             tex = textures.get(name) or self.noise.textures[name.removeprefix("noise_")]
             sh.uniform_sampler(name, tex)
@@ -251,6 +264,33 @@ def render_offscreen(
         gpu.state.scissor_test_set(False)
 
     return draw_offscreen(width, height, tiles)[::-1].copy()
+
+
+def _tiled(stage: str, gpu_inputs: CloudGPU, values: dict, width: int, height: int, tile: int = 256) -> np.ndarray:
+    """A full-screen stage drawn in tiles into a float offscreen; its pixels, bottom row first."""
+
+    def tiles() -> None:
+        for y in range(0, height, tile):
+            for x in range(0, width, tile):
+                gpu.state.scissor_test_set(True)
+                gpu.state.scissor_set(x, y, min(tile, width - x), min(tile, height - y))
+                draw_stage(stage, gpu_inputs, values)
+        gpu.state.scissor_test_set(False)
+
+    return draw_offscreen(width, height, tiles)
+
+
+def render_panorama(gpu_inputs: CloudGPU, eye, width: int, height: int) -> np.ndarray:
+    """The clouds around the point `eye` as an equirectangular image (premultiplied RGBA, bottom row first,
+    in the layout of Blender's Environment Texture: core/sky.py)."""
+    return _tiled("panorama", gpu_inputs, {"eye": (*eye[:3], 1.0)}, width, height)
+
+
+def render_shadow(gpu_inputs: CloudGPU, origin, u, v, size: int) -> np.ndarray:
+    """The clouds' transmittance towards the sun over the square `origin` +- u/2 +- v/2 (metres), size x size
+    texels, bottom row first (v up): RGB the transmittance, A 1."""
+    values = {"shadow_origin": (*origin[:3], 0.0), "shadow_u": (*u[:3], 0.0), "shadow_v": (*v[:3], 0.0)}
+    return _tiled("shadow", gpu_inputs, values, size, size)
 
 
 def read_pixels(fb, width: int, height: int) -> np.ndarray:

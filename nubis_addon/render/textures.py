@@ -103,3 +103,8 @@ class NoiseTextures:
 def field_texture(field: np.ndarray) -> gpu.types.GPUTexture:
     """A data-field image (H, W, 4) float, bottom row first, as a float texture."""
     return texture_from_array(np.nan_to_num(field.astype(np.float32), nan=0.0, posinf=0.0, neginf=0.0), "RGBA32F")
+
+
+def sky_texture(env: np.ndarray) -> gpu.types.GPUTexture:
+    """An equirectangular environment (H, W, 3) float, bottom row first (core/sky.py), as a float texture."""
+    return texture_from_array(np.nan_to_num(np.asarray(env, np.float32)[..., :3], nan=0.0, posinf=0.0), "RGBA32F")

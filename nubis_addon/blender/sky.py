@@ -1,0 +1,373 @@
+"""The physically based sky: a World made of Blender's own Sky Texture (the model Cycles and EEVEE
+render) whose sun follows the Sun lamp, and the World's radiance captured as a small equirectangular
+environment for the clouds' sky light and aerial perspective.
+
+Blender 4.5's Sky Texture calls its physical model NISHITA and its aerosols `dust_density`; 5.0 has
+SINGLE_SCATTERING and MULTIPLE_SCATTERING and calls them `aerosol_density`. Both are handled here.
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+from pathlib import Path
+
+import bpy
+import numpy as np
+
+from ..core import imageio, interrupt, metrics
+from ..core import sky as skymath
+
+WORLD_NAME = "Nubis Sky"
+SKY_NODE = "Nubis Sky Texture"
+MARKER = "nubis_sky"  # custom property on a World that Nubis built (and so may keep in step with the sun)
+ENV_WIDTH = 64  # the clouds' sky-light environment: 64 x 32 holds the sky's gradients
+ENV_SAMPLES = 4  # Cycles samples per pixel of a capture: a sky is smooth
+BACKGROUND_WIDTH = 512  # the sky behind the clouds in pictures (render's PNG, panorama)
+
+
+def sky_type() -> str:
+    return "MULTIPLE_SCATTERING" if bpy.app.version >= (5, 0, 0) else "NISHITA"
+
+
+def _aerosol_attr() -> str:
+    return "aerosol_density" if bpy.app.version >= (5, 0, 0) else "dust_density"
+
+
+def is_nubis_sky(world) -> bool:
+    return world is not None and bool(world.get(MARKER)) and sky_node(world) is not None
+
+
+def sky_node(world):
+    if world is None or world.node_tree is None:
+        return None
+    node = world.node_tree.nodes.get(SKY_NODE)
+    return node if node is not None and node.bl_idname == "ShaderNodeTexSky" else None
+
+
+def build_world(scene, cfg: dict, sun) -> bpy.types.World:
+    """A new World 'Nubis Sky' holding a Sky Texture, made the scene's World. The World it replaces is
+    kept (with a fake user, so saving does not drop it): an artist's sky is never edited or lost.
+    `cfg` is the preset's [world] table; its colour x strength sets how bright the sky light is at the
+    preset's sun, so presets tuned on a flat sky keep their balance."""
+    old = scene.world
+    if old is not None and not is_nubis_sky(old):
+        old.use_fake_user = True
+    world = old if is_nubis_sky(old) else bpy.data.worlds.new(WORLD_NAME)
+    world[MARKER] = True
+    if world.node_tree is None:
+        world.use_nodes = True
+    nt = world.node_tree
+    nt.nodes.clear()
+    tex = nt.nodes.new("ShaderNodeTexSky")
+    tex.name = tex.label = SKY_NODE
+    tex.sky_type = sky_type()
+    # The Sun lamp is the sun: a disc in the sky as well would light Cycles' scene twice.
+    tex.sun_disc = False
+    tex.air_density = cfg.get("air", 1.0)
+    setattr(tex, _aerosol_attr(), cfg.get("aerosol", 1.0))
+    tex.ozone_density = cfg.get("ozone", 1.0)
+    tex.altitude = 0.0
+    bg = nt.nodes.new("ShaderNodeBackground")
+    out = nt.nodes.new("ShaderNodeOutputWorld")
+    nt.links.new(tex.outputs["Color"], bg.inputs["Color"])
+    nt.links.new(bg.outputs["Background"], out.inputs["Surface"])
+    tex.location, bg.location, out.location = (-300, 0), (0, 0), (250, 0)
+    world.color = cfg["color"]
+    scene.world = world
+    if bpy.context.view_layer is not None:
+        bpy.context.view_layer.update()  # the lamp's matrix_world after a script turned it
+    sync_sun(scene, sun, force=True)
+    # Calibrate the sky's strength once, at the preset's sun: its upper-hemisphere radiance then has
+    # the luminance of the preset's flat sky colour. Turning the sun later changes it physically.
+    bg.inputs["Strength"].default_value = 1.0
+    env = capture_world(scene, ENV_WIDTH)
+    above, _below = skymath.hemisphere_radiance(env)
+    target = float(metrics.luminance(np.array(cfg["color"], np.float32))) * cfg["strength"]
+    have = float(metrics.luminance(np.array(above, np.float32)))
+    strength = float(target / have) if have > 1e-9 else cfg["strength"]
+    bg.inputs["Strength"].default_value = strength
+    # The World's light is linear in its strength: the capture at the new strength needs no render.
+    _captures[(fingerprint(world), ENV_WIDTH, ENV_SAMPLES)] = (env * np.float32(strength)).astype(np.float32)
+    return world
+
+
+def find_sun(scene):
+    """The Sun lamp of the clouds and of the sky: the cloudscape's own (Lighting > Sun), else the scene's
+    first Sun lamp that renders."""
+    settings = getattr(scene, "nubis", None)
+    chosen = getattr(settings, "sun", None) if settings is not None else None
+    if chosen is not None and chosen.type == "LIGHT" and chosen.data.type == "SUN" and chosen.name in scene.objects:
+        return chosen
+    for obj in scene.objects:
+        if obj.type == "LIGHT" and obj.data.type == "SUN" and not obj.hide_render:
+            return obj
+    return None
+
+
+def sync_sun(scene, sun=None, force: bool = False) -> bool:
+    """Keep a Nubis sky's sun where the Sun lamp points and the lamp's colour at the atmosphere's
+    transmittance for that elevation. Returns whether anything changed. Only Worlds that Nubis built
+    are touched; an artist's World is left alone."""
+    world = scene.world
+    if not is_nubis_sky(world):
+        return False
+    sun = sun if sun is not None else find_sun(scene)
+    if sun is None:
+        return False
+    tex = sky_node(world)
+    direction = sun.matrix_world.to_3x3().col[2]
+    elevation, azimuth = skymath.elevation_azimuth(direction)
+    rotation = sky_rotation(azimuth)
+    changed = force or abs(tex.sun_elevation - elevation) > 1e-6 or abs(_wrap(tex.sun_rotation - rotation)) > 1e-6
+    if changed:
+        tex.sun_elevation = elevation
+        tex.sun_rotation = rotation % (2.0 * math.pi)
+    if scene.nubis.sky_sun_color:
+        colour = skymath.transmittance(
+            elevation,
+            tex.altitude,
+            tex.air_density,
+            getattr(tex, _aerosol_attr()),
+            tex.ozone_density,
+        )
+        if force or max(abs(a - b) for a, b in zip(sun.data.color, colour, strict=True)) > 1e-5:
+            sun.data.color = colour
+            changed = True
+    return changed
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def sky_rotation(azimuth: float) -> float:
+    """The Sky Texture's `sun_rotation` for a sun at `azimuth` (atan2(y, x)): the texture measures its
+    rotation from +Y clockwise seen from above (measured: tests/test_sky.py renders the sky with a sun
+    disc and finds it where the lamp points)."""
+    return math.pi / 2.0 - azimuth
+
+
+# ---- capturing a World --------------------------------------------------------------------------------
+
+_captures: dict = {}
+
+
+def fingerprint(world) -> tuple:
+    """What a World's radiance depends on, for the capture cache: every node's settings and inputs."""
+    if world is None:
+        return ()
+    items: list = [world.name, tuple(world.color)]
+    if world.node_tree is not None:
+        for node in world.node_tree.nodes:
+            items.append(node.bl_idname)
+            items.append(node.name)
+            for prop in node.bl_rna.properties:
+                ident = prop.identifier
+                if prop.is_readonly or ident in _UI_PROPS:
+                    continue
+                value = getattr(node, ident, None)
+                if isinstance(value, bpy.types.ID):
+                    value = (value.name, getattr(value, "filepath", ""))
+                elif hasattr(value, "__len__") and not isinstance(value, str):
+                    value = tuple(value)
+                items.append((ident, value))
+            for sock in node.inputs:
+                value = getattr(sock, "default_value", None)
+                if hasattr(value, "__len__") and not isinstance(value, str):
+                    value = tuple(value)
+                items.append((sock.identifier, value, sock.is_linked))
+        for link in world.node_tree.links:
+            items.append(
+                (link.from_node.name, link.from_socket.identifier, link.to_node.name, link.to_socket.identifier)
+            )
+    return tuple(str(i) for i in items)
+
+
+_UI_PROPS = {"name", "label", "location", "width", "height", "select", "show_options", "show_preview", "hide"}
+_UI_PROPS |= {"mute", "show_texture", "parent", "use_custom_color", "color", "width_hidden", "location_absolute"}
+_UI_PROPS |= {"bl_idname", "bl_label", "bl_description", "bl_icon", "warning_propagation", "color_tag"}
+
+
+def capture_world(scene, width: int = ENV_WIDTH, samples: int = ENV_SAMPLES, world=None) -> np.ndarray:
+    """The World's radiance in every direction as an equirectangular image (H = W / 2, RGB, bottom row
+    first): Cycles renders the World alone through a panoramic camera in a scratch scene. Cached by the
+    World's settings, so a still sky costs nothing after the first call (about a second on 2 cores)."""
+    world = world if world is not None else scene.world
+    if world is None:
+        return skymath.uniform((0.0, 0.0, 0.0))
+    key = (fingerprint(world), width, samples)
+    hit = _captures.get(key)
+    if hit is not None:
+        return hit
+    env = _render_world(world, width, max(width // 2, 1), samples)
+    if len(_captures) > 16:
+        _captures.clear()
+    _captures[key] = env
+    return env
+
+
+def _render_world(world, width: int, height: int, samples: int) -> np.ndarray:
+    tmp_scene = bpy.data.scenes.new("Nubis World Capture")
+    cam_data = bpy.data.cameras.new("Nubis World Capture")
+    cam = bpy.data.objects.new("Nubis World Capture", cam_data)
+    try:
+        tmp_scene.collection.objects.link(cam)
+        tmp_scene.camera = cam
+        tmp_scene.world = world
+        cam_data.type = "PANO"
+        if hasattr(cam_data, "panorama_type"):
+            cam_data.panorama_type = "EQUIRECTANGULAR"
+        else:
+            cam_data.cycles.panorama_type = "EQUIRECTANGULAR"
+        # Looking along +X with +Z up: the panorama then has the Environment Texture's layout.
+        cam.rotation_euler = (math.pi / 2, 0.0, -math.pi / 2)
+        r = tmp_scene.render
+        r.engine = "CYCLES"
+        tmp_scene.cycles.device = "CPU"
+        tmp_scene.cycles.samples = samples
+        tmp_scene.cycles.use_adaptive_sampling = False
+        tmp_scene.cycles.use_denoising = False
+        r.resolution_x, r.resolution_y, r.resolution_percentage = width, height, 100
+        r.film_transparent = False
+        r.use_compositing = False
+        r.use_sequencer = False
+        r.image_settings.file_format = "OPEN_EXR"
+        r.image_settings.color_depth = "32"
+        r.image_settings.color_mode = "RGB"
+        # A private folder: an interrupt ends the process at once and removes it (renamed away first,
+        # so the render cannot write anything under its name afterwards: core/interrupt.py).
+        with tempfile.TemporaryDirectory(prefix="nubis-world-") as tmp:
+            interrupt.register(tmp)
+            try:
+                path = Path(tmp) / "world.exr"
+                r.filepath = str(path)
+                _without_nubis_handlers(lambda: bpy.ops.render.render(write_still=True, scene=tmp_scene.name))
+                rgba = imageio.read_image(path)
+            finally:
+                interrupt.unregister(tmp)
+    finally:
+        bpy.data.scenes.remove(tmp_scene)
+        bpy.data.objects.remove(cam)
+        bpy.data.cameras.remove(cam_data)
+    # read_image gives the top row first; environments are stored bottom row first.
+    return np.ascontiguousarray(rgba[::-1, :, :3], dtype=np.float32)
+
+
+_busy = [False]
+
+
+def capturing() -> bool:
+    """True while a capture renders (the render handlers must leave that render alone)."""
+    return _busy[0]
+
+
+def _without_nubis_handlers(fn):
+    _busy[0] = True
+    try:
+        return fn()
+    finally:
+        _busy[0] = False
+
+
+_uniforms: dict[tuple, np.ndarray] = {}
+_latest: dict[str, np.ndarray] = {}  # the last capture of each World, for the viewport's draw
+
+
+def _uniform(colour) -> np.ndarray:
+    key = tuple(round(float(c), 7) for c in colour)
+    env = _uniforms.get(key)
+    if env is None:
+        if len(_uniforms) > 64:
+            _uniforms.clear()
+        env = _uniforms[key] = skymath.uniform(key)
+    return env
+
+
+def flat_colour(world) -> tuple[float, float, float] | None:
+    """The radiance of a World that is one colour everywhere (a Background node with an unlinked colour
+    feeding the output, or no nodes at all), else None."""
+    if world.node_tree is None:
+        return tuple(world.color)
+    out = next((n for n in world.node_tree.nodes if n.type == "OUTPUT_WORLD" and n.is_active_output), None)
+    out = out or next((n for n in world.node_tree.nodes if n.type == "OUTPUT_WORLD"), None)
+    if out is None or not out.inputs["Surface"].is_linked:
+        return (0.0, 0.0, 0.0) if out is not None else tuple(world.color)
+    bg = out.inputs["Surface"].links[0].from_node
+    if bg.type != "BACKGROUND" or bg.inputs["Color"].is_linked or bg.inputs["Strength"].is_linked:
+        return None
+    c, s = bg.inputs["Color"].default_value, bg.inputs["Strength"].default_value
+    return (c[0] * s, c[1] * s, c[2] * s)
+
+
+def environment(scene, wait: bool = True) -> np.ndarray:
+    """The environment the clouds are lit by: the World's radiance, or the scene's ambient colour when
+    the artist chose one (ambient source: Colour). A World of one colour needs no capture. With `wait`
+    False a World whose capture is out of date gives its last capture now and a new one soon after
+    (a timer, outside the viewport's draw)."""
+    s = scene.nubis
+    if s.ambient_source == "COLOR":
+        return _uniform(tuple(s.ambient_color))
+    world = scene.world
+    if world is None:
+        return _uniform((0.0, 0.0, 0.0))
+    flat = flat_colour(world)
+    if flat is not None:
+        return _uniform(flat)
+    key = (fingerprint(world), ENV_WIDTH, ENV_SAMPLES)
+    hit = _captures.get(key)
+    if hit is None and not wait:
+        _pending.append(scene.name)
+        if not bpy.app.timers.is_registered(_capture_pending):
+            bpy.app.timers.register(_capture_pending, first_interval=0.1)
+        last = _latest.get(world.name)
+        return last if last is not None else _uniform(tuple(world.color))
+    env = hit if hit is not None else capture_world(scene, ENV_WIDTH)
+    _latest[world.name] = env
+    return env
+
+
+_pending: list[str] = []
+
+
+def _capture_pending():
+    names = set(_pending)
+    _pending.clear()
+    for name in names:
+        scene = bpy.data.scenes.get(name)
+        if scene is not None and scene.world is not None:
+            _latest[scene.world.name] = capture_world(scene, ENV_WIDTH)
+    for window in bpy.context.window_manager.windows if bpy.context.window_manager else ():
+        for area in window.screen.areas:
+            if area.type == "VIEW_3D":
+                area.tag_redraw()
+    return None
+
+
+# ---- keeping the sky in step with the lamp ---------------------------------------------------------------
+
+
+@bpy.app.handlers.persistent
+def on_update(scene, _depsgraph=None) -> None:
+    """Turning the Sun lamp (by hand, by animation) moves the Nubis sky's sun and recolours the lamp."""
+    if capturing() or getattr(scene, "nubis", None) is None:
+        return
+    sync_sun(scene)
+
+
+HANDLERS = (
+    (bpy.app.handlers.depsgraph_update_post, on_update),
+    (bpy.app.handlers.frame_change_post, on_update),
+)
+
+
+def register() -> None:
+    for handlers, fn in HANDLERS:
+        if fn not in handlers:
+            handlers.append(fn)
+
+
+def unregister() -> None:
+    for handlers, fn in HANDLERS:
+        if fn in handlers:
+            handlers.remove(fn)

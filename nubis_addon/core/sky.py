@@ -1,0 +1,154 @@
+"""The sky as the clouds see it: the atmosphere's transmittance towards the sun, and equirectangular
+environments (what a World radiates, captured as an image) with their irradiance from above and below.
+
+Equirectangular images follow Blender's Environment Texture mapping: the column u = 0.5 - azimuth / 2 pi
+with azimuth = atan2(y, x) (so the image centre looks along +X and u = 0.25 along +Y), the row
+v = 0.5 + elevation / pi counted from the bottom. Arrays are (H, W, C), bottom row first like
+Blender images.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+# Earth and atmosphere (Bruneton and Neyret 2008, Bruneton 2017; the same constants Blender's own sky
+# model uses): radii in metres, scale heights, and sea-level coefficients per metre at 680, 550 and
+# 440 nm, the wavelengths standing for red, green and blue.
+EARTH_RADIUS = 6360e3
+ATMOSPHERE_TOP = 6420e3
+RAYLEIGH_HEIGHT = 8000.0
+MIE_HEIGHT = 1200.0
+RAYLEIGH = np.array([5.802e-6, 13.558e-6, 33.1e-6])
+MIE_EXTINCTION = 2.0e-5 / 0.9  # scattering over the single-scattering albedo of 0.9
+OZONE = np.array([0.650e-6, 1.881e-6, 0.085e-6])  # absorption at the layer's peak
+OZONE_PEAK, OZONE_WIDTH = 25e3, 15e3  # a tent from 10 to 40 km (Bruneton 2017)
+
+
+def transmittance(
+    elevation: float, altitude: float = 0.0, air: float = 1.0, aerosol: float = 1.0, ozone: float = 1.0
+) -> tuple[float, float, float]:
+    """RGB transmittance of the atmosphere along a ray leaving `altitude` (metres) at `elevation`
+    (radians above the horizon) towards space: what is left of the sun's light when it arrives. The
+    densities are multiples of the standard atmosphere, as the Sky Texture's air, dust (aerosol) and
+    ozone settings are. A ray that meets the ground gives zero."""
+    r0 = EARTH_RADIUS + max(altitude, 0.0)
+    mu = math.sin(elevation)
+    # Distance to the ground and to the top of the atmosphere (ray-sphere, stable forms).
+    disc_ground = r0 * r0 * (mu * mu - 1.0) + EARTH_RADIUS**2
+    if mu < 0.0 and disc_ground >= 0.0:
+        return (0.0, 0.0, 0.0)
+    top = ATMOSPHERE_TOP if r0 < ATMOSPHERE_TOP else r0
+    length = -r0 * mu + math.sqrt(max(r0 * r0 * (mu * mu - 1.0) + top * top, 0.0))
+    # Samples crowd near the start, where the air is densest: t = length u^2.
+    n = 256
+    u = (np.arange(n) + 0.5) / n
+    t = length * u * u
+    dt = 2.0 * length * u / n
+    r = np.sqrt(r0 * r0 + t * t + 2.0 * r0 * t * mu)
+    h = r - EARTH_RADIUS
+    rayleigh = air * np.sum(np.exp(-h / RAYLEIGH_HEIGHT) * dt)
+    mie = aerosol * np.sum(np.exp(-h / MIE_HEIGHT) * dt)
+    oz = ozone * np.sum(np.clip(1.0 - np.abs(h - OZONE_PEAK) / OZONE_WIDTH, 0.0, None) * dt)
+    tau = RAYLEIGH * rayleigh + MIE_EXTINCTION * mie + OZONE * oz
+    return tuple(float(x) for x in np.exp(-tau))
+
+
+def elevation_azimuth(direction) -> tuple[float, float]:
+    """Elevation above the horizon and azimuth (radians, atan2(y, x)) of a direction."""
+    x, y, z = (float(c) for c in direction)
+    n = math.sqrt(x * x + y * y + z * z) or 1.0
+    return math.asin(max(-1.0, min(1.0, z / n))), math.atan2(y, x)
+
+
+def directions(width: int, height: int) -> np.ndarray:
+    """Unit direction of every pixel centre of an equirectangular image, (H, W, 3), bottom row first."""
+    u = (np.arange(width) + 0.5) / width
+    v = (np.arange(height) + 0.5) / height
+    azimuth = (0.5 - u) * 2.0 * math.pi
+    elevation = (v - 0.5) * math.pi
+    az, el = np.meshgrid(azimuth, elevation)
+    return np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], axis=-1)
+
+
+def sample(env: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+    """Bilinear look-up of an equirectangular image in directions (..., 3); wraps around in azimuth."""
+    h, w = env.shape[:2]
+    d = dirs / np.maximum(np.linalg.norm(dirs, axis=-1, keepdims=True), 1e-12)
+    u = 0.5 - np.arctan2(d[..., 1], d[..., 0]) / (2.0 * math.pi)
+    v = 0.5 + np.arcsin(np.clip(d[..., 2], -1.0, 1.0)) / math.pi
+    x = u * w - 0.5
+    y = np.clip(v * h - 0.5, 0.0, h - 1.0)
+    x0 = np.floor(x).astype(np.int64)
+    y0 = np.minimum(np.floor(y).astype(np.int64), h - 2) if h > 1 else np.zeros_like(x0)
+    fx = (x - x0)[..., None]
+    fy = (y - y0)[..., None] if h > 1 else np.zeros_like(fx)
+    x0 %= w
+    x1 = (x0 + 1) % w
+    y1 = np.minimum(y0 + 1, h - 1)
+    top = env[y1, x0] * (1 - fx) + env[y1, x1] * fx
+    bottom = env[y0, x0] * (1 - fx) + env[y0, x1] * fx
+    return bottom * (1 - fy) + top * fy
+
+
+def camera_directions(inv_view_proj, eye, width: int, height: int) -> np.ndarray:
+    """The view ray of every pixel centre (H, W, 3), top row first, as the shaders build them
+    (nubis_view_ray): through the far plane from the eye, or from the near plane for w = 0."""
+    inv = np.array(inv_view_proj, dtype=np.float64).reshape(4, 4)
+    x = (np.arange(width) + 0.5) / width * 2.0 - 1.0
+    y = 1.0 - (np.arange(height) + 0.5) / height * 2.0
+    nx, ny = np.meshgrid(x, y)
+
+    def unproject(depth: float) -> np.ndarray:
+        h = np.stack([nx, ny, np.full_like(nx, depth), np.ones_like(nx)], axis=-1) @ inv.T
+        return h[..., :3] / h[..., 3:4]
+
+    far = unproject(1.0)
+    origin = np.asarray(eye[:3], np.float64) if eye[3] > 0.5 else unproject(-1.0)
+    d = far - origin
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def solid_angles(width: int, height: int) -> np.ndarray:
+    """Solid angle of each pixel of an equirectangular image, (H, 1); they sum to 4 pi per row sweep."""
+    v0 = np.arange(height) / height
+    v1 = (np.arange(height) + 1) / height
+    band = (np.sin((v1 - 0.5) * math.pi) - np.sin((v0 - 0.5) * math.pi)) * 2.0 * math.pi / width
+    return band[:, None]
+
+
+def hemisphere_radiance(env: np.ndarray) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """The cosine-weighted mean radiance over the upper and the lower hemisphere, E / pi from above and
+    from below: what a horizontal surface facing up (down) receives from the environment, expressed as
+    the uniform radiance that would give it. A uniform environment returns its own radiance twice."""
+    h, w = env.shape[:2]
+    dirs = directions(w, h)
+    weight = solid_angles(w, h) * dirs[..., 2]
+    rgb = env[..., :3].astype(np.float64)
+    up = np.clip(weight, 0.0, None)[..., None]
+    down = np.clip(-weight, 0.0, None)[..., None]
+    above = (rgb * up).sum(axis=(0, 1)) / max(float(up.sum()), 1e-12)
+    below = (rgb * down).sum(axis=(0, 1)) / max(float(down.sum()), 1e-12)
+    return tuple(float(c) for c in above), tuple(float(c) for c in below)
+
+
+_hemispheres: dict[int, tuple] = {}
+
+
+def hemisphere_radiance_cached(env: np.ndarray) -> tuple:
+    """hemisphere_radiance of an environment array, remembered per array (callers replace arrays, they
+    never edit one in place), so a redraw costs nothing."""
+    hit = _hemispheres.get(id(env))
+    if hit is not None and hit[0] is env:
+        return hit[1]
+    if len(_hemispheres) > 32:
+        _hemispheres.clear()
+    result = hemisphere_radiance(env)
+    _hemispheres[id(env)] = (env, result)
+    return result
+
+
+def uniform(colour, width: int = 8, height: int = 4) -> np.ndarray:
+    """An environment of one radiance everywhere (a World that is a flat colour)."""
+    return np.broadcast_to(np.asarray(colour, np.float32)[:3], (height, width, 3)).copy()

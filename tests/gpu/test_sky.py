@@ -1,0 +1,335 @@
+"""The physically based sky, the clouds lit by the World, final renders in EEVEE and Cycles with the
+clouds and their shadows (blender/sky.py, blender/scene_render.py), and the `panorama` command."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from conftest import run_cli
+
+from nubis_addon.core import sky as skymath
+
+# ---- core (no Blender) --------------------------------------------------------------------------------
+
+
+def test_transmittance_reddens_towards_the_horizon_and_ends_below_it():
+    noon = np.array(skymath.transmittance(math.radians(80)))
+    evening = np.array(skymath.transmittance(math.radians(4)))
+    assert np.all(noon > evening) and np.all(noon < 1.0)
+    # Rayleigh scattering takes blue first: the low sun is redder.
+    assert evening[0] / evening[2] > 3.0 * noon[0] / noon[2]
+    assert noon[2] > 0.6 and evening[2] < 0.3
+    assert skymath.transmittance(math.radians(-5)) == (0.0, 0.0, 0.0)
+    # Thinner air (half the density) lets more through.
+    assert skymath.transmittance(math.radians(10), air=0.5)[2] > skymath.transmittance(math.radians(10))[2]
+
+
+def test_equirectangular_layout_and_hemispheres():
+    d = skymath.directions(8, 4)
+    # Blender's Environment Texture layout: the centre column looks along +X, a quarter along +Y.
+    assert np.allclose(skymath.directions(5, 2)[1, 2], [math.cos(math.pi / 4), 0.0, math.sin(math.pi / 4)], atol=1e-6)
+    assert d[0, 2, 1] > 0.3 and d[3, 0, 2] > 0.9 and d[0, 6, 1] < -0.3
+    env = np.zeros((32, 64, 3), np.float32)
+    env[16:] = (1.0, 2.0, 3.0)  # a bright sky above, black ground
+    above, below = skymath.hemisphere_radiance(env)
+    assert np.allclose(above, (1.0, 2.0, 3.0)) and np.allclose(below, 0.0)
+    assert np.allclose(skymath.hemisphere_radiance(skymath.uniform((0.5, 0.5, 0.5)))[1], 0.5)
+    assert np.allclose(skymath.sample(env, np.array([[0.0, 0.3, 1.0], [0.0, 0.0, -1.0]])), [[1, 2, 3], [0, 0, 0]])
+
+
+# ---- the sky World ------------------------------------------------------------------------------------
+
+
+def test_new_cloudscape_builds_a_sky_tied_to_the_sun(make_scene, blender):
+    from nubis_addon.blender import scene_io, sky
+
+    scene = make_scene("default")
+    world = scene.world
+    assert sky.is_nubis_sky(world)
+    tex = sky.sky_node(world)
+    assert tex.sky_type == ("MULTIPLE_SCATTERING" if blender.app.version >= (5, 0, 0) else "NISHITA")
+    assert not tex.sun_disc  # the Sun lamp is the sun
+    sun = scene.objects[scene_io.SUN_NAME]
+    assert math.degrees(tex.sun_elevation) == pytest.approx(28.0, abs=1e-3)
+    # Turning the lamp alone moves the sky's sun and recolours the lamp (the depsgraph handler).
+    noon = tuple(sun.data.color)
+    sun.rotation_euler = (math.radians(10.0), 0.0, 0.3)  # about 80 degrees up
+    blender.context.view_layer.update()
+    assert math.degrees(tex.sun_elevation) == pytest.approx(80.0, abs=0.01)
+    high = tuple(sun.data.color)
+    sun.rotation_euler = (math.radians(86.0), 0.0, 0.3)  # 4 degrees up
+    blender.context.view_layer.update()
+    low = tuple(sun.data.color)
+    assert math.degrees(tex.sun_elevation) == pytest.approx(4.0, abs=0.01)
+    assert high[2] > low[2] * 2 and high[0] / high[2] < low[0] / low[2] and noon != high
+    # The sky light follows: the clouds' ambient from above is dimmer and redder at a low sun.
+    env_low = sky.environment(scene)
+    sun.rotation_euler = (math.radians(10.0), 0.0, 0.3)
+    blender.context.view_layer.update()
+    env_high = sky.environment(scene)
+    a_low, a_high = skymath.hemisphere_radiance(env_low)[0], skymath.hemisphere_radiance(env_high)[0]
+    assert sum(a_high) > 2 * sum(a_low)
+
+
+def test_the_sky_behind_the_clouds_is_not_one_colour(tmp_path):
+    from nubis_addon.core import imageio
+
+    out = tmp_path / "default.png"
+    r = run_cli("render", "--preset", "default", "--out", str(out), "--width", "96", "--height", "54")
+    assert r.returncode == 0, r.stderr
+    exr = tmp_path / "default.exr"
+    assert run_cli("render", "--out", str(exr), "--width", "96", "--height", "54").returncode == 0
+    png, clouds = imageio.read_image(out), imageio.read_image(exr)
+    clear = clouds[..., 3] < 0.02
+    sky_px = png[..., :3][clear & (np.arange(54)[:, None] < 30)]  # above the horizon
+    assert len(sky_px) > 200
+    # Blue overhead, paler near the horizon: the sky's pixels spread well beyond 8-bit noise.
+    assert float(sky_px.std(axis=0).max()) > 0.03, sky_px.std(axis=0)
+    top, low = png[:6][clear[:6]], png[24:30][clear[24:30]]
+    assert top[:, 2].mean() - top[:, 0].mean() > low[:, 2].mean() - low[:, 0].mean()
+
+
+def test_an_artists_world_is_kept_and_lights_the_clouds(blender):
+    from nubis_addon.blender import ensure_registered, scene_io, sky
+
+    blender.ops.wm.read_factory_settings(use_empty=True)
+    ensure_registered()
+    scene = blender.context.scene
+    mine = blender.data.worlds.new("Artist HDRI")
+    nt = mine.node_tree if mine.node_tree is not None else None
+    if nt is None:
+        mine.use_nodes = True
+        nt = mine.node_tree
+    bg = next(n for n in nt.nodes if n.type == "BACKGROUND")
+    grad = nt.nodes.new("ShaderNodeTexGradient")  # warm below, cool above: not one colour
+    ramp = nt.nodes.new("ShaderNodeValToRGB")
+    ramp.color_ramp.elements[0].color = (1.0, 0.4, 0.1, 1.0)
+    ramp.color_ramp.elements[1].color = (0.1, 0.3, 1.0, 1.0)
+    coords = nt.nodes.new("ShaderNodeTexCoord")
+    mapping = nt.nodes.new("ShaderNodeMapping")
+    mapping.inputs["Rotation"].default_value = (0.0, -math.pi / 2, 0.0)  # the gradient along Z
+    nt.links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
+    nt.links.new(mapping.outputs["Vector"], grad.inputs["Vector"])
+    nt.links.new(grad.outputs["Fac"], ramp.inputs["Fac"])
+    nt.links.new(ramp.outputs["Color"], bg.inputs["Color"])
+    scene.world = mine
+    before = sky.fingerprint(mine)
+    assert blender.ops.nubis.new_cloudscape(preset="default", keep_world=True) == {"FINISHED"}
+    assert scene.world == mine and sky.fingerprint(mine) == before and not sky.is_nubis_sky(mine)
+    state = scene_io.state_from_scene(scene)
+    above, below = state.ambient, state.ambient_below
+    assert state.sky_env.shape == (sky.ENV_WIDTH // 2, sky.ENV_WIDTH, 3) and float(state.sky_env.std()) > 0.05
+    assert above != below  # lit by the artist's World, from above and below differently
+    # Asked to build the sky, New Cloudscape makes a new World and keeps the artist's in the file.
+    assert blender.ops.nubis.new_cloudscape(preset="default", build_sky=True) == {"FINISHED"}
+    assert sky.is_nubis_sky(scene.world) and scene.world != mine
+    assert mine.name in blender.data.worlds and mine.use_fake_user and sky.fingerprint(mine) == before
+
+
+# ---- final renders (F12 path) -------------------------------------------------------------------------
+
+W, H = 96, 54
+
+
+@pytest.fixture(scope="module")
+def f12_scene(blender):
+    """New Cloudscape plus a large ground plane and a cube standing in front of the sky."""
+    from nubis_addon.blender import ensure_registered
+
+    blender.ops.wm.read_factory_settings(use_empty=True)
+    ensure_registered()
+    assert blender.ops.nubis.new_cloudscape(preset="default") == {"FINISHED"}
+    scene = blender.context.scene
+    blender.ops.mesh.primitive_plane_add(size=8000.0, location=(0.0, 0.0, 0.0))
+    blender.ops.mesh.primitive_cube_add(size=300.0, location=(0.0, -1500.0, 150.0))
+    cam = scene.camera
+    cam.location = (0.0, -3000.0, 150.0)
+    cam.rotation_euler = (math.radians(84.0), 0.0, 0.0)
+    cam.data.lens = 18.0
+    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = W, H, 100
+    scene.render.image_settings.file_format = "OPEN_EXR"
+    scene.render.image_settings.color_depth = "32"
+    scene.cycles.device = "CPU"
+    scene.cycles.samples = 8
+    scene.cycles.use_denoising = False
+    scene.eevee.taa_render_samples = 4
+    scene.nubis.sky_environment_width = 128
+    scene.nubis.sky_shadow_resolution = 256
+    return scene
+
+
+def _render(blender, scene, engine: str, frame: int, path) -> np.ndarray:
+    from nubis_addon.core import imageio
+
+    scene.render.engine = engine
+    scene.frame_set(frame)
+    scene.render.filepath = str(path)
+    world = scene.world
+    blender.ops.render.render(write_still=True)
+    assert scene.world == world  # the artist's World is back after the render
+    return imageio.read_image(path)[..., :3]
+
+
+CUBE_MIN, CUBE_MAX = np.array([-150.0, -1650.0, 0.0]), np.array([150.0, -1350.0, 300.0])
+
+
+def _masks(scene):
+    """Per pixel: where the camera sees the ground (and the point it sees), the cube, and open sky."""
+    from nubis_addon.blender import scene_io
+
+    inv = scene_io.camera_inv_view_proj(scene, W, H)
+    dirs = skymath.camera_directions(inv, scene_io.camera_eye(scene), W, H)
+    eye = np.array(scene.camera.location)
+    t = np.where(dirs[..., 2] < -1e-3, -eye[2] / np.minimum(dirs[..., 2], -1e-3), np.inf)
+    hit = eye + dirs * t[..., None]
+    # The cube, with a pixel's margin (slab test against a box grown by 20 m).
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t0 = (CUBE_MIN - 20.0 - eye) / dirs
+        t1 = (CUBE_MAX + 20.0 - eye) / dirs
+    near = np.minimum(t0, t1).max(axis=-1)
+    far = np.maximum(t0, t1).min(axis=-1)
+    cube = (near <= far) & (far > 0)
+    on_plane = np.isfinite(t) & (np.abs(hit[..., 0]) < 3900) & (np.abs(hit[..., 1]) < 3900) & ~cube
+    on_plane &= dirs[..., 2] < -0.03  # not within a pixel or two of the horizon
+    sky = (dirs[..., 2] > 0.03) & ~cube
+    return on_plane, hit, cube, sky
+
+
+def _shadow_at(blender, scene, points):
+    """The shadow map's transmittance where sunlight reaching `points` crosses the caster."""
+    from nubis_addon.blender import scene_render
+
+    caster = scene.objects[scene_render.CASTER_NAME]
+    img = blender.data.images[scene_render.SHADOW_IMAGE]
+    res = img.size[0]
+    tmap = np.array(img.pixels[:], np.float32).reshape(res, res, 4)[..., 0]
+    m = np.array(caster.matrix_world)
+    origin, u, v, n = m[:3, 3], m[:3, 0], m[:3, 1], m[:3, 2]
+    n = n / np.linalg.norm(n)
+    sun = np.array(scene.objects["Nubis Sun"].matrix_world.to_3x3().col[2])
+    # Along the sun from each point to the caster's plane, then into its UVs.
+    s = (((origin - points) @ n) / (sun @ n))[..., None]
+    q = points + s * sun - origin
+    uu = (q @ u) / (u @ u) + 0.5
+    vv = (q @ v) / (v @ v) + 0.5
+    x = np.clip((uu * res).astype(int), 0, res - 1)
+    y = np.clip((vv * res).astype(int), 0, res - 1)
+    return tmap[y, x]
+
+
+@pytest.mark.parametrize("engine", ["CYCLES", "EEVEE"])
+def test_final_render_shows_clouds_behind_the_cube_and_their_moving_shadows(blender, f12_scene, engine, tmp_path):
+    from nubis_addon.blender import pipeline, scene_render
+
+    scene = f12_scene
+    name = (
+        "CYCLES"
+        if engine == "CYCLES"
+        else next(
+            e for e in ("BLENDER_EEVEE_NEXT", "BLENDER_EEVEE") if e in scene_render.ENGINES and _has_engine(blender, e)
+        )
+    )
+    frames = {}
+    for frame in (1, 240):
+        px = _render(blender, scene, name, frame, tmp_path / f"{frame}.exr")
+        clouds = np.array(blender.data.images[scene_render.CAMERA_IMAGE].pixels[:], np.float32).reshape(H, W, 4)[::-1]
+        on_plane, hit, cube, sky_px = _masks(scene)
+        frames[frame] = (px, clouds, on_plane, _shadow_at(blender, scene, hit[on_plane]), cube, sky_px)
+    for frame, (px, clouds, on_plane, t, cube, sky_px) in frames.items():
+        lum = px @ np.array([0.2126, 0.7152, 0.0722])
+        # The clouds in the sky: above the horizon the render is the clouds over the World's sky.
+        expected = clouds[..., :3] + (1 - clouds[..., 3:]) * pipeline.sky_background(scene, W, H)
+        assert sky_px.sum() > 500 and cube.sum() > 20, (sky_px.sum(), cube.sum())
+        sky_err = np.abs(px[sky_px] - expected[sky_px]).mean() / expected[sky_px].mean()
+        assert sky_err < 0.1, (engine, frame, sky_err)
+        assert clouds[sky_px][:, 3].max() > 0.3 and clouds[sky_px][:, 3].std() > 0.05  # there are clouds
+        # ... and the cube in front of them: where it stands the render is not what the sky shows.
+        behind = clouds[cube][:, 3]
+        cube_err = np.abs(px[cube] - expected[cube]).mean() / expected[cube].mean()
+        assert cube_err > 0.3 and behind.max() > 0.05, (engine, frame, cube_err, behind.max())
+        # Cloud shadows on the plane: the ground is bright where the map lets the sun through.
+        ground = lum[on_plane]
+        assert on_plane.sum() > 300 and t.std() > 0.05, (on_plane.sum(), t.std())
+        low, high = np.quantile(t, [0.2, 0.8])
+        lit, shaded = ground[t >= high].mean(), ground[t <= low].mean()
+        assert lit > shaded * (1.0 + 0.5 * (high - low)), (engine, frame, lit, shaded, low, high)
+        assert np.corrcoef(ground, t)[0, 1] > 0.2, (engine, frame, np.corrcoef(ground, t)[0, 1])
+    # The wind moves the shadows: frames 1 and 240 differ on the ground.
+    (a, _, mask, ta, _, _), (b, _, _, tb, _, _) = frames[1], frames[240]
+    assert np.abs(ta - tb).mean() > 0.03
+    la, lb = (x[mask] @ np.array([0.2126, 0.7152, 0.0722]) for x in (a, b))
+    # ... and the ground brightens where the map cleared and darkens where it closed.
+    assert np.corrcoef(lb - la, tb - ta)[0, 1] > 0.3, (engine, np.corrcoef(lb - la, tb - ta)[0, 1])
+    caster = scene.objects[scene_render.CASTER_NAME]
+    assert not caster.visible_camera and caster.visible_shadow
+
+
+def test_renders_without_the_clouds_get_no_stale_shadow(blender, f12_scene):
+    from nubis_addon.blender import scene_render
+
+    scene = f12_scene
+    scene_render.prepare_frame(scene)
+    caster = scene.objects[scene_render.CASTER_NAME]
+    assert not caster.hide_render
+    scene.nubis.sky_render_clouds = False
+    try:
+        scene_render.on_render_pre(scene)
+        assert caster.hide_render and scene.world.name != scene_render.RENDER_WORLD
+    finally:
+        scene.nubis.sky_render_clouds = True
+
+
+def _has_engine(blender, name: str) -> bool:
+    return name in {e.identifier for e in blender.types.RenderSettings.bl_rna.properties["engine"].enum_items}
+
+
+def test_panorama_lights_a_sphere_in_a_fresh_scene(blender, tmp_path):
+    from nubis_addon.core import imageio
+
+    pano = tmp_path / "sky.exr"
+    r = run_cli("panorama", "--preset", "default", "--out", str(pano), "--width", "64", "--frame", "12")
+    assert r.returncode == 0, r.stderr
+    assert "panorama of default at 64x32" in r.stdout
+    env = imageio.read_image(pano)
+    assert env.shape == (32, 64, 3) and np.all(np.isfinite(env)) and float(env.max()) > 0.1
+    assert float(env[16:].std()) > 0.02  # clouds and sky, not one colour
+
+    def sphere_luminance(world_image) -> float:
+        blender.ops.wm.read_factory_settings(use_empty=True)
+        scene = blender.context.scene
+        world = blender.data.worlds.new("Panorama")
+        if world.node_tree is None:
+            world.use_nodes = True
+        nt = world.node_tree
+        bg = next(n for n in nt.nodes if n.type == "BACKGROUND")
+        if world_image is not None:
+            tex = nt.nodes.new("ShaderNodeTexEnvironment")
+            tex.image = blender.data.images.load(str(world_image))
+            nt.links.new(tex.outputs["Color"], bg.inputs["Color"])
+        else:
+            bg.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+        scene.world = world
+        blender.ops.mesh.primitive_uv_sphere_add(radius=1.0)
+        cam = blender.data.objects.new("cam", blender.data.cameras.new("cam"))
+        scene.collection.objects.link(cam)
+        scene.camera = cam
+        cam.location = (0.0, -4.0, 0.0)
+        cam.rotation_euler = (math.pi / 2, 0.0, 0.0)
+        scene.render.engine = "CYCLES"
+        scene.cycles.device = "CPU"
+        scene.cycles.samples = 8
+        scene.render.resolution_x = scene.render.resolution_y = 32
+        scene.render.film_transparent = True
+        scene.render.image_settings.file_format = "OPEN_EXR"
+        out = tmp_path / f"sphere_{world_image is not None}.exr"
+        scene.render.filepath = str(out)
+        blender.ops.render.render(write_still=True)
+        px = imageio.read_image(out)
+        centre = px[12:20, 12:20]
+        assert centre[..., 3].min() > 0.99  # the sphere
+        return float((centre[..., :3] @ np.array([0.2126, 0.7152, 0.0722])).mean())
+
+    lit, dark = sphere_luminance(pano), sphere_luminance(None)
+    assert dark < 1e-4 and lit > 0.05, (lit, dark)
