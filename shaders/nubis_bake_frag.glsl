@@ -1,8 +1,16 @@
-/* One Z slice of the VDB bake: the same density the march uses, at voxel centres, full detail. */
+/* The VDB bake: the same density the march uses, at voxel centres, full detail.
+ * One draw evaluates a block of `bake_tile.w` rows per Z slice, the slices stacked up the target:
+ * fragment row r is voxel row r mod rows of slice r / rows. Voxel (i, j, k) of the bake's box sits at
+ * bake_origin.xyz + (i, j, k) * voxel size, with (i, j, k) = fragment + the block's integer offset
+ * `bake_tile.xyz` (slice k counted from bake_origin.w), so a tiled bake computes exactly the positions
+ * a whole-box bake does. NUBIS_BAKE_VELOCITY writes the clouds' motion instead of their density. */
 void main()
 {
-  vec2 ij = floor(gl_FragCoord.xy);
-  vec3 p = bake_origin.xyz + vec3(ij, bake_origin.w) * bake_voxel.x;
+  vec2 frag = floor(gl_FragCoord.xy);
+  float rows = max(bake_tile.w, 1.0);
+  float slice = floor(frag.y / rows);
+  vec3 index = vec3(frag.x, frag.y - slice * rows, slice) + bake_tile.xyz + vec3(0.0, 0.0, bake_origin.w);
+  vec3 p = bake_origin.xyz + index * bake_voxel.x;
   NubisDensity d = nubis_density(p, false, 0.0);
   float density = d.fine;
   /* The 2D cirrus layer becomes a thin slab holding the same optical depth the march gives it. */
@@ -10,11 +18,16 @@ void main()
   if (from_cirrus < 0.5 * P.cirrus2.z && P.density.x > 0.0) {
     density += nubis_cirrus_density(p.xy, 0.0) * P.cirrus.w / (P.cirrus2.z * P.density.x);
   }
+#if NUBIS_BAKE_VELOCITY
+  /* Where the cloud at p was one frame ago (the motion vectors' own model, GDC22): the displacement
+   * per frame, which Python scales to metres per second. */
+  color = vec4(p - nubis_previous_position(p, P.motion.x), density);
+#else
   /* The storm glow as an emission grid: what the march adds per unit length is sigma x density x
    * glow, so the grid holds density x glow (its strongest channel) and Cycles multiplies by sigma. */
   vec3 glow = nubis_storm_glow(p, d.fine) * d.fine;
-  /* Rain's and storms' absorption (SPEC 2.5, 2.10.1) in density units: Cycles adds it as a Volume
-   * Absorption. */
+  /* Rain's and storms' extra absorption in density units: Cycles adds it as a Volume Absorption. */
   float absorption = d.fine * (nubis_extinction_factor(p, d.precipitation) - 1.0);
   color = vec4(density, max(glow.r, max(glow.g, glow.b)), absorption, 1.0);
+#endif
 }

@@ -8,13 +8,35 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import NubisError
-from .state import CloudState
+from .state import CloudState, wind_vector
 
-# Float32 density, glow and absorption volumes, the transposed copy handed to OpenVDB and the sparse
-# tree itself.
-BYTES_PER_VOXEL = 20
+# The bake is sparse and tiled (docs/bake.md): the box is cut into columns of TILE x TILE voxels, each
+# evaluated only over the slices where the data field says cloud can be, and the active voxels go
+# straight into OpenVDB trees. Memory follows the clouds: about 4.5 bytes per active float voxel in a
+# tree of full 8^3 leaves (values plus masks), 13.5 for a Vec3 velocity, plus one tile's read-back.
+BYTES_PER_ACTIVE_VOXEL = 4.5
+BYTES_PER_VELOCITY_VOXEL = 13.5
 DEFAULT_MEMORY_LIMIT = 4 * 1024**3
-MAX_SLICE = 8192  # texels per side of one GPU slice
+TILE = 128  # voxels per side of one tile
+MAX_TILES = 200_000  # beyond this the box alone is absurd: refuse before planning every tile
+# What the process holds besides the trees: Blender, the noise textures, one block's read-back.
+BASE_BYTES = 600 * 1024**2
+
+
+@dataclass(frozen=True)
+class Tile:
+    """A column of the bake box: voxels i0.. i0 + nx - 1 and j0.. j0 + ny - 1, and the slice ranges
+    [k0, k1) where the data field allows cloud (empty: nothing to evaluate)."""
+
+    i0: int
+    j0: int
+    nx: int
+    ny: int
+    spans: tuple[tuple[int, int], ...] = ()
+
+    @property
+    def voxels(self) -> int:
+        return self.nx * self.ny * sum(k1 - k0 for k0, k1 in self.spans)
 
 
 @dataclass(frozen=True)
@@ -23,14 +45,23 @@ class BakePlan:
     voxel_size: float
     dims: tuple[int, int, int]  # voxels along x, y, z
     cirrus_slab: float | None = None  # thickness of the baked cirrus slab, when the sky has cirrus
+    tiles: tuple[Tile, ...] = ()
+    velocity: bool = False  # a velocity grid is baked too
+    extra_grids: int = 0  # float grids beside density the field can produce (absorption, glow)
 
     @property
     def voxels(self) -> int:
         return self.dims[0] * self.dims[1] * self.dims[2]
 
     @property
+    def evaluated_voxels(self) -> int:
+        """Voxels the GPU evaluates: those of the tiles' spans (an upper bound on the active ones)."""
+        return sum(t.voxels for t in self.tiles)
+
+    @property
     def bytes_estimate(self) -> int:
-        return self.voxels * BYTES_PER_VOXEL
+        per = BYTES_PER_ACTIVE_VOXEL * (1 + self.extra_grids) + (BYTES_PER_VELOCITY_VOXEL if self.velocity else 0)
+        return int(BASE_BYTES + self.evaluated_voxels * per)
 
 
 def view_footprint(state: CloudState, inv_view_proj: np.ndarray, samples: int = 33) -> tuple[float, ...]:
@@ -80,10 +111,13 @@ def plan_bake(
     voxel_size: float,
     memory_limit: int = DEFAULT_MEMORY_LIMIT,
     region: tuple[float, float, float, float] | None = None,
+    velocity: bool = False,
+    tile: int = TILE,
 ) -> BakePlan:
     """The box holding every cloud the viewport can draw: the field, clipped to the draw radius (and to
     `region`, x0 x1 y0 y1, when given), and the shell's altitudes, lowered by the planet's curvature at
-    the box's far corners."""
+    the box's far corners; cut into tiles (plan_tiles). Refuses, naming a voxel size that fits, when
+    the estimated memory exceeds `memory_limit`."""
     if not (math.isfinite(voxel_size) and voxel_size > 0):
         raise NubisError(f"the voxel size must be a positive number of metres, not {voxel_size!r}")
     p = state.params
@@ -114,14 +148,138 @@ def plan_bake(
     z0, z1 = lo - sag, hi
     v = voxel_size
     dims = tuple(max(1, math.ceil((b - a) / v)) for a, b in ((x0, x1), (y0, y1), (z0, z1)))
-    plan = BakePlan((x0 + v / 2, y0 + v / 2, z0 + v / 2), v, dims, slab)
-    if plan.bytes_estimate > memory_limit or max(dims[:2]) > MAX_SLICE:
-        suggested = v * max((plan.bytes_estimate / memory_limit) ** (1 / 3), max(dims[:2]) / MAX_SLICE) * 1.05
-        raise NubisError(
-            f"a bake at {v:g} m voxels needs {dims[0]}x{dims[1]}x{dims[2]} voxels "
-            f"(about {plan.bytes_estimate / 1024**3:.1f} GB): use a voxel size of at least {math.ceil(suggested)} m"
-        )
+    plan = BakePlan((x0 + v / 2, y0 + v / 2, z0 + v / 2), v, dims, slab, velocity=velocity)
+    extra = _extra_grids(state)
+    n_tiles = math.ceil(dims[0] / tile) * math.ceil(dims[1] / tile)
+    if n_tiles > MAX_TILES:
+        # The box alone: a coarse bound (a tenth of it in cloud) is enough to name a size that fits.
+        need = plan.voxels * 0.1 * BYTES_PER_ACTIVE_VOXEL
+        _refuse(plan, need, memory_limit, n_tiles / MAX_TILES)
+    plan = BakePlan(
+        plan.origin, v, dims, slab, tuple(plan_tiles(state, plan, tile)), velocity=velocity, extra_grids=extra
+    )
+    if plan.bytes_estimate > memory_limit:
+        _refuse(plan, plan.bytes_estimate - BASE_BYTES, memory_limit - BASE_BYTES)
     return plan
+
+
+def _refuse(plan: BakePlan, need: float, limit: float, tiles_over: float = 1.0):
+    v = plan.voxel_size
+    suggested = v * max((need / max(limit, 1.0)) ** (1 / 3), tiles_over**0.5) * 1.05
+    raise NubisError(
+        f"a bake at {v:g} m voxels needs {plan.dims[0]}x{plan.dims[1]}x{plan.dims[2]} voxels "
+        f"(about {(need + BASE_BYTES) / 1024**3:.1f} GB): use a voxel size of at least {math.ceil(suggested)} m"
+    )
+
+
+def _extra_grids(state: CloudState) -> int:
+    """How many float grids beside density the sky can fill: absorption where it rains, glow in storms."""
+    rain = state.field_a is not None and float(np.max(state.field_a[..., 1])) > 0
+    return int(rain or bool(state.storms)) + int(bool(state.storms))
+
+
+def _texel_window(lo: float, hi: float, origin: float, size: float, n: int) -> np.ndarray:
+    """Indices of the field texels a bilinear lookup between world coordinates lo and hi can read, with
+    a texel of margin and both the clamped and the wrapped edge (the lookup clamps its uv)."""
+    s0 = ((lo - origin) / size + 0.5) * n - 0.5
+    s1 = ((hi - origin) / size + 0.5) * n - 0.5
+    a = max(math.floor(s0) - 1, -1)
+    b = min(math.floor(s1) + 2, n)
+    if a >= n or b < 0:
+        return np.array([0 if b < 0 else n - 1])
+    return np.unique(np.clip(np.arange(a, b + 1), 0, n - 1))
+
+
+def _z_at(altitude: float, r: float, planet: float) -> float:
+    """Height above the tangent plane of a point at `altitude` over the sphere, r metres from the axis."""
+    return math.sqrt(max((planet + altitude) ** 2 - r * r, 0.0)) - planet
+
+
+def plan_tiles(state: CloudState, plan: BakePlan, tile: int = TILE) -> list[Tile]:
+    """Cut the box into tiles and find, for each, the slices that can hold cloud: conservative bounds
+    read straight from the data field, so no cloud is ever skipped. The density is zero wherever the
+    bilinear coverage (field A red) or the density multiplier (field B alpha) is zero, and below or
+    above the column's own min and max heights (field B green, blue; the vertical profile is zero
+    outside them, GPU Pro 7); a superstorm's anvil spreads its storm coverage (field B red) downwind
+    under the shell's top (GDC22); the cirrus slab lies around its altitude where field C red is
+    non-zero. Tiles beyond the draw radius, outside the field or outside a clip box are empty."""
+    p = state.params
+    v = plan.voxel_size
+    ox, oy, oz = plan.origin
+    nx, ny, nz = plan.dims
+    planet = p["layer_planet_radius"]
+    bottom, top = p["layer_bottom"], p["layer_top"]
+    thick = top - bottom
+    shell_lo, shell_hi = state.shell()
+    fx, fy, fs = p["field_origin_x"], p["field_origin_y"], p["field_size"]
+    fa, fb, fc = state.field_a, state.field_b, state.field_c
+    res_y, res_x = fa.shape[:2]
+    coverage = (fa[..., 0] * p["density_coverage"] > 0) & (fb[..., 3] > 0)
+    storm = (fb[..., 0] > 0) & (fb[..., 3] > 0) if state.storms else None
+    cirrus = None
+    if plan.cirrus_slab and p["density_sigma"] > 0 and p["cirrus_opacity"] > 0:
+        cirrus = fc[..., 0] * p["cirrus_coverage"] > 0
+    col_lo = bottom + fb[..., 1] * thick
+    col_hi = bottom + fb[..., 2] * thick
+    # The anvil reads its storm coverage upwind, up to the anvil shift along the wind.
+    from_wind = float(np.hypot(*wind_vector(p["wind_direction"]))) * p["storm_anvil_shift"]
+    band = 0.22 * (shell_hi - bottom)
+    radius = p["layer_draw_radius"]
+    dcx, dcy = state.draw_center
+    clip = state.clip_box
+    margin_z = v + 4.0  # a voxel, and the shader's float32 altitude near a 6371 km sphere
+    tiles = []
+    for j0 in range(0, ny, tile):
+        for i0 in range(0, nx, tile):
+            tx, ty = min(tile, nx - i0), min(tile, ny - j0)
+            xa, xb = ox + i0 * v, ox + (i0 + tx - 1) * v
+            ya, yb = oy + j0 * v, oy + (j0 + ty - 1) * v
+            tiles.append(Tile(i0, j0, tx, ty, ()))
+            # Nearest point of the tile to the draw centre: clouds exist only inside the radius.
+            near = math.hypot(max(xa - dcx, 0.0, dcx - xb), max(ya - dcy, 0.0, dcy - yb))
+            if near >= radius or xb < fx - fs / 2 or xa > fx + fs / 2 or yb < fy - fs / 2 or ya > fy + fs / 2:
+                continue
+            if clip is not None and (xb < clip[0] or xa > clip[2] or yb < clip[1] or ya > clip[3]):
+                continue
+            rmin = math.hypot(max(xa, 0.0, -xb), max(ya, 0.0, -yb))
+            rmax = max(math.hypot(x, y) for x in (xa, xb) for y in (ya, yb))
+            wi = _texel_window(xa, xb, fx, fs, res_x)
+            wj = _texel_window(ya, yb, fy, fs, res_y)
+            window = np.ix_(wj, wi)
+            altitudes = []
+            if coverage[window].any():
+                lo = max(float(col_lo[window].min()), shell_lo)
+                hi = min(float(col_hi[window].max()), shell_hi)
+                if hi > lo:
+                    altitudes.append((lo, hi))
+            if storm is not None:
+                sw = np.ix_(
+                    _texel_window(ya - from_wind, yb + from_wind, fy, fs, res_y),
+                    _texel_window(xa - from_wind, xb + from_wind, fx, fs, res_x),
+                )
+                if storm[sw].any() and fb[window][..., 3].max() > 0:
+                    altitudes.append((shell_hi - band, shell_hi))
+            if cirrus is not None and cirrus[window].any():
+                c = p["cirrus_altitude"]
+                altitudes.append((c - plan.cirrus_slab / 2, c + plan.cirrus_slab / 2))
+            spans = []
+            for lo, hi in altitudes:
+                k0 = max(math.floor((_z_at(lo, rmax, planet) - margin_z - oz) / v), 0)
+                k1 = min(math.ceil((_z_at(hi, rmin, planet) + margin_z - oz) / v) + 1, nz)
+                if k1 > k0:
+                    spans.append((k0, k1))
+            tiles[-1] = Tile(i0, j0, tx, ty, _merge(spans))
+    return tiles
+
+
+def _merge(spans: list[tuple[int, int]]) -> tuple[tuple[int, int], ...]:
+    out: list[list[int]] = []
+    for k0, k1 in sorted(spans):
+        if out and k0 <= out[-1][1]:
+            out[-1][1] = max(out[-1][1], k1)
+        else:
+            out.append([k0, k1])
+    return tuple((a, b) for a, b in out)
 
 
 # A comparison bakes only the camera's view, so it can afford finer voxels than a whole-sky bake:

@@ -59,7 +59,7 @@ _RESOLVE = {
 # The bake reads the lighting library too, for the glow grid.
 STAGES: dict[str, Stage] = {
     "raymarch": Stage(_VIEW),
-    "bake": Stage((("VEC4", "bake_origin"), ("VEC4", "bake_voxel"))),
+    "bake": Stage((("VEC4", "bake_origin"), ("VEC4", "bake_voxel"), ("VEC4", "bake_tile"))),
     "motion": Stage(_VIEW, blocks=(("NubisMotionCameras", "C"),)),
     # The temporal viewport (render/temporal.py): one pixel of every 4x4 block into the working buffer,
     # the resolve into the full-resolution history, and the upscale onto the view.
