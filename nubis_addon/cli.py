@@ -1,7 +1,8 @@
 """The headless command line, a stable contract:
 
     python -m nubis_addon render  [--preset NAME | --blend FILE] --out PATH [--width W --height H --frame F]
-    python -m nubis_addon bake    [--preset NAME | --blend FILE] --out PATH.vdb [--voxel-size METRES]
+    python -m nubis_addon bake    [--preset NAME | --blend FILE] --out PATH.vdb [--voxel-size METRES --camera-only
+                                  --half --velocity --frames A-B --distributed local:N|tcp://HOST:PORT]
     python -m nubis_addon cycles  [--preset NAME | --blend FILE] --out PATH [--samples N --width W --height H]
     python -m nubis_addon compare [--preset NAME | --blend FILE] --out DIR [--samples N --width W --height H]
     python -m nubis_addon preview [--preset NAME | --blend FILE] --out DIR [--width W --height H --frames A-B
@@ -65,6 +66,14 @@ def build_parser() -> argparse.ArgumentParser:
     common(p)
     p.add_argument("--voxel-size", type=float, help="voxel edge in metres (default: the scene's bake setting)")
     p.add_argument("--camera-only", action="store_true", help="bake only what the scene camera sees")
+    p.add_argument("--half", action="store_true", help="store the grids as half floats (half the file size)")
+    p.add_argument("--velocity", action="store_true", help="add a 'velocity' Vec3 grid for motion blur (m/s)")
+    p.add_argument("--frames", help="bake frames A-B, one file each: write the frame as #### in --out")
+    p.add_argument(
+        "--distributed",
+        metavar="local:N|tcp://HOST:PORT",
+        help="spread the frames (or one frame's tiles) over Dask workers: N local ones or a running scheduler",
+    )
     for name, what in (
         ("cycles", "render the baked clouds with Cycles"),
         ("compare", "render viewport and Cycles side by side, with metrics"),
@@ -308,10 +317,14 @@ def _execute(args, in_blender: bool, log: Path) -> str:
                 write_image(outputs.stage(args.motion), pipeline.render_motion(scene, w, h))
         cover = float((rgba[..., 3] > 0.05).mean()) * 100
         return f"rendered {label} at {w}x{h} ({cover:.0f}% cloud cover) in {time.perf_counter() - start:.1f} s -> {out}"
+    if cmd == "bake" and (args.frames or args.distributed or "#" in out.name):
+        return _bake_sequence(args, scene, out, voxel, log, label)
     if cmd == "bake":
         progress = _progress("baking")
         with _quiet(log):
-            result = pipeline.bake(scene, out, voxel, progress, camera_only=args.camera_only)
+            result = pipeline.bake(
+                scene, out, voxel, progress, camera_only=args.camera_only, half=args.half, velocity=args.velocity
+            )
         nx, ny, nz = result.plan.dims
         return (
             f"baked {label}: {nx}x{ny}x{nz} voxels of {result.plan.voxel_size:g} m, "
@@ -339,6 +352,34 @@ def _execute(args, in_blender: bool, log: Path) -> str:
         f"compared {label} ({args.mode}) at {w}x{h}: alpha RMSE {m['alpha_rmse']:.4f}, luminance error "
         f"{m['luminance_rel_error'] * 100:.1f}%, silhouette IoU {m['silhouette_iou']:.3f}{capped} "
         f"in {time.perf_counter() - start:.1f} s -> {out}"
+    )
+
+
+def _bake_sequence(args, scene, out: Path, voxel, log: Path, label: str) -> str:
+    """`bake --frames A-B` (files named with # padding) and `bake --distributed` (core/distributed.py)."""
+    from .blender import farm
+    from .core import distributed, sequence
+
+    if args.frames and args.frame is not None:
+        raise NubisError("--frame and --frames exclude each other: give one frame or a range")
+    frames = sequence.parse_frames(args.frames) if args.frames else [scene.frame_current]
+    sequence.sequence_paths(out, frames)  # the name must hold the frame number before any work
+    engine = distributed.parse_engine(args.distributed) if args.distributed else None
+    if engine is not None:
+        distributed.require()
+    options = farm.BakeOptions(voxel, args.camera_only, None, args.half, args.velocity)
+    progress = _progress("baking")
+    with _quiet(log):
+        source = farm.source_of(scene, args.preset, args.blend) if engine else None
+        r = farm.bake_sequence(scene, out, frames, options, engine, source, progress)
+    first = r.results[0]
+    nx, ny, nz = first.plan.dims
+    on = f" on {r.engine}" if r.engine else ""
+    where = first.path if len(frames) == 1 else f"{first.path.parent / out.name} ({len(frames)} files)"
+    return (
+        f"baked {label}, frame{'s' if len(frames) > 1 else ''} {args.frames or frames[0]}: {nx}x{ny}x{nz} voxels "
+        f"of {first.plan.voxel_size:g} m, {sum(x.active_voxels for x in r.results)} active{on}, "
+        f"in {r.seconds:.1f} s -> {where}"
     )
 
 

@@ -93,8 +93,21 @@ class SparseGrids:
         if not np.any(np.abs(block) > self.tolerance):
             return
         arr = np.ascontiguousarray(block.transpose(2, 1, 0, 3) if vector else block.transpose(2, 1, 0), np.float32)
+        self._copy(grid, arr, ijk, vector)
+
+    def _copy(self, grid, arr_xyz: np.ndarray, ijk, vector: bool) -> None:
         tol = (self.tolerance,) * 3 if vector else self.tolerance
-        grid.copyFromArray(arr, ijk=tuple(int(c) for c in ijk), tolerance=tol)
+        grid.copyFromArray(arr_xyz, ijk=tuple(int(c) for c in ijk), tolerance=tol)
+
+    def add_region(self, other, lo: tuple[int, int, int], shape: tuple[int, int, int]) -> None:
+        """Copy the voxels of grid `other` (another process's part of the same bake) inside the box of
+        `shape` voxels from index `lo` into the grid of the same name; the box must hold nothing yet."""
+        vector = other.valueTypeName.startswith("vec3")
+        grid = self.grid(other.name, vector)
+        arr = np.zeros((*shape, 3) if vector else shape, np.float32)
+        other.copyToArray(arr, ijk=tuple(int(c) for c in lo))
+        if np.any(np.abs(arr) > self.tolerance):
+            self._copy(grid, arr, lo, vector)
 
     def active_voxels(self, name: str) -> int:
         return int(self.grids[name].activeVoxelCount()) if name in self.grids else 0
