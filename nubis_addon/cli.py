@@ -293,6 +293,8 @@ def _execute(args, in_blender: bool, log: Path) -> str:
     if getattr(args, "motion", None):
         args.motion = check_output_path(args.motion, (".exr",))
     voxel = getattr(args, "voxel_size", None)
+    if cmd == "bake":
+        _check_bake_arguments(args, out)
 
     with _quiet(log):
         from .blender import pipeline
@@ -355,18 +357,26 @@ def _execute(args, in_blender: bool, log: Path) -> str:
     )
 
 
+def _check_bake_arguments(args, out: Path) -> None:
+    """--frames, the # padding and --distributed (Dask installed, a valid engine) before any work."""
+    from .core import distributed, sequence
+
+    if args.frames and args.frame is not None:
+        raise NubisError("--frame and --frames exclude each other: give one frame or a range")
+    if args.frames:
+        sequence.sequence_paths(out, sequence.parse_frames(args.frames))
+    if args.distributed:
+        distributed.parse_engine(args.distributed)
+        distributed.require()
+
+
 def _bake_sequence(args, scene, out: Path, voxel, log: Path, label: str) -> str:
     """`bake --frames A-B` (files named with # padding) and `bake --distributed` (core/distributed.py)."""
     from .blender import farm
     from .core import distributed, sequence
 
-    if args.frames and args.frame is not None:
-        raise NubisError("--frame and --frames exclude each other: give one frame or a range")
     frames = sequence.parse_frames(args.frames) if args.frames else [scene.frame_current]
-    sequence.sequence_paths(out, frames)  # the name must hold the frame number before any work
     engine = distributed.parse_engine(args.distributed) if args.distributed else None
-    if engine is not None:
-        distributed.require()
     options = farm.BakeOptions(voxel, args.camera_only, None, args.half, args.velocity)
     progress = _progress("baking")
     with _quiet(log):

@@ -21,6 +21,7 @@ import bpy
 from ..core import bundled, distributed, sequence, vdbio
 from ..core.distributed import BakeOptions, SceneSource
 from ..core.errors import NubisError
+from ..core.fsutil import check_output_path
 from ..core.presets import load_preset
 from ..core.staging import output_set
 from ..render.gpu_context import ensure_gpu_context
@@ -64,7 +65,7 @@ def bake_sequence(
     """Bake `frames` to the files `out` names (with `#` padding), serially or on `engine`; the files
     replace earlier ones together or not at all."""
     start = time.perf_counter()
-    paths = sequence.sequence_paths(out, frames)
+    paths = [check_output_path(p, (".vdb",)) for p in sequence.sequence_paths(out, frames)]
     result = SequenceResult(engine=str(engine or ""))
     with output_set() as outputs:
         staged = [outputs.stage(p) for p in paths]
