@@ -207,15 +207,20 @@ def bake_grids(scene, state: CloudState, plan: BakePlan, tiles=None, progress: P
     clouds.update(state)
     grids = vdbio.SparseGrids(plan.voxel_size, plan.origin)
     grids.grid("density")
-    sink = _grid_sink(grids, plan.velocity, fps)
-    gpu_bake.bake_tiles(clouds, plan, plan.tiles if tiles is None else tiles, sink, progress, plan.velocity)
+    # Skies whose field can hold no glow or absorption read back the density alone.
+    packed = plan.extra_grids == 0 and not plan.velocity
+    sink = _grid_sink(grids, plan.velocity, fps, packed)
+    gpu_bake.bake_tiles(clouds, plan, plan.tiles if tiles is None else tiles, sink, progress, plan.velocity, packed)
     return grids
 
 
-def _grid_sink(grids, velocity: bool, fps: float):
+def _grid_sink(grids, velocity: bool, fps: float, packed: bool = False):
     tol = vdbio.DEFAULT_TOLERANCE
 
     def sink(ijk, block):
+        if packed:
+            grids.add("density", block, ijk)
+            return
         grids.add("density", block[..., 0], ijk)
         for name, channel in (("glow", 1), ("absorption", 2)):
             if float(block[..., channel].max()) > tol:

@@ -214,7 +214,9 @@ def plan_tiles(state: CloudState, plan: BakePlan, tile: int = TILE) -> list[Tile
     fx, fy, fs = p["field_origin_x"], p["field_origin_y"], p["field_size"]
     fa, fb, fc = state.field_a, state.field_b, state.field_c
     res_y, res_x = fa.shape[:2]
-    coverage = (fa[..., 0] * p["density_coverage"] > 0) & (fb[..., 3] > 0)
+    cover = np.clip(fa[..., 0] * p["density_coverage"], 0.0, 1.0)
+    coverage = (cover > 0) & (fb[..., 3] > 0)
+    top_type, bottom_type = np.clip(fa[..., 2], 0.0, 1.0), np.clip(fa[..., 3], 0.0, 1.0)
     storm = (fb[..., 0] > 0) & (fb[..., 3] > 0) if state.storms else None
     cirrus = None
     if plan.cirrus_slab and p["density_sigma"] > 0 and p["cirrus_opacity"] > 0:
@@ -248,8 +250,14 @@ def plan_tiles(state: CloudState, plan: BakePlan, tile: int = TILE) -> list[Tile
             window = np.ix_(wj, wi)
             altitudes = []
             if coverage[window].any():
-                lo = max(float(col_lo[window].min()), shell_lo)
-                hi = min(float(col_hi[window].max()), shell_hi)
+                lo, hi = _column_bounds(
+                    float(cover[window].max()),
+                    float(top_type[window].max()),
+                    float(bottom_type[window].min()),
+                    (float(col_lo[window].min()), float(col_lo[window].max())),
+                    (float(col_hi[window].min()), float(col_hi[window].max())),
+                )
+                lo, hi = max(lo, shell_lo), min(hi, shell_hi)
                 if hi > lo:
                     altitudes.append((lo, hi))
             if storm is not None:
@@ -270,6 +278,28 @@ def plan_tiles(state: CloudState, plan: BakePlan, tile: int = TILE) -> list[Tile
                     spans.append((k0, k1))
             tiles[-1] = Tile(i0, j0, tx, ty, _merge(spans))
     return tiles
+
+
+def _column_bounds(
+    c: float, top_type: float, bottom_type: float, lo: tuple[float, float], hi: tuple[float, float]
+) -> tuple[float, float]:
+    """Altitudes outside which a column's density is zero, for coverage up to `c`, top types up to
+    `top_type`, bottom types from `bottom_type` and column bottoms and tops within `lo` and `hi`.
+
+    The base shape (at most 1) times the vertical profile must exceed 1 - coverage before the coverage
+    remap leaves anything (GPU Pro 7's remap of the base shape by coverage), so the profile must: its
+    top ramp (from ramp x to ramp y, both rising with the top type; shaders/nubis_density_lib.glsl)
+    passes 1 - c below ramp x + c (ramp y - ramp x), its bottom ramp passes it above (1 - c) x the
+    bottom ramp's end. Both bounds grow with the types and the coverage, so the extremes bound them."""
+    if top_type < 0.5:
+        rx, ry = 0.10 + (0.40 - 0.10) * top_type * 2, 0.20 + (0.60 - 0.20) * top_type * 2
+    else:
+        rx, ry = 0.40 + (0.70 - 0.40) * (top_type * 2 - 1), 0.60 + (1.00 - 0.60) * (top_type * 2 - 1)
+    h_top = min(rx + c * (ry - rx), 1.0)
+    h_bottom = max((1.0 - c) * (0.05 + 0.30 * bottom_type), 0.0)
+    # altitude = (1 - h) bottom + h top, rising in h, the bottom and the top (the shader divides by at
+    # least a metre of thickness: bounded the same way).
+    return (1 - h_bottom) * lo[0] + h_bottom * hi[0], (1 - h_top) * lo[1] + h_top * hi[1]
 
 
 def _merge(spans: list[tuple[int, int]]) -> tuple[tuple[int, int], ...]:

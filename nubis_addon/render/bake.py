@@ -19,16 +19,21 @@ from .engine import CloudGPU, fullscreen_batch, read_pixels, shader
 MAX_TARGET_ROWS = 8192
 
 
+PACK = 4  # voxels per fragment in the density-only permutation
+
+
 class BlockBaker:
     """Evaluates blocks of the bake box: `block(i0, j0, nx, ny, k0, k1)` returns float RGBA shaped
-    (k1 - k0, ny, nx, 4): density, glow, absorption, 1; or with `velocity` the displacement of the
-    clouds over `frame_dt` seconds of wind time (x, y, z metres) and the density."""
+    (k1 - k0, ny, nx, 4): density, glow, absorption, 1; with `velocity` the displacement of the clouds
+    over one frame (P.motion.x seconds of wind time; x, y, z metres) and the density; with `packed`
+    the density alone, shaped (k1 - k0, ny, nx) (nx a multiple of 4)."""
 
-    def __init__(self, gpu_inputs: CloudGPU, plan: BakePlan, width: int, velocity: bool = False):
+    def __init__(self, gpu_inputs: CloudGPU, plan: BakePlan, width: int, velocity: bool = False, packed=False):
         self.gpu_inputs = gpu_inputs
         self.plan = plan
         self.width = width
-        defines = gpu_inputs.defines(NUBIS_BAKE_VELOCITY=int(velocity))
+        self.packed = packed and not velocity
+        defines = gpu_inputs.defines(NUBIS_BAKE_VELOCITY=int(velocity), NUBIS_BAKE_PACKED=int(self.packed))
         self.sh = shader("bake", defines)
         self.batch = fullscreen_batch("bake", defines)
         self.offscreen = gpu.types.GPUOffScreen(width, MAX_TARGET_ROWS, format="RGBA32F")
@@ -53,18 +58,21 @@ class BlockBaker:
             raise ValueError(f"block {nx}x{ny}x{k1 - k0} does not fit the {self.width}x{MAX_TARGET_ROWS} target")
         rows = ny * (k1 - k0)
         plan = self.plan
+        cols = -(-nx // PACK) if self.packed else nx
         with self.offscreen.bind():
             fb = gpu.state.active_framebuffer_get()
             gpu.state.blend_set("NONE")
             gpu.state.scissor_test_set(True)
-            gpu.state.scissor_set(0, 0, nx, rows)
+            gpu.state.scissor_set(0, 0, cols, rows)
             self.gpu_inputs.bind(self.sh)
             self.sh.uniform_float("bake_origin", (*plan.origin, 0.0))
             self.sh.uniform_float("bake_voxel", (plan.voxel_size, 0.0, 0.0, 0.0))
             self.sh.uniform_float("bake_tile", (float(i0), float(j0), float(k0), float(ny)))
             self.batch.draw(self.sh)
             gpu.state.scissor_test_set(False)
-            px = read_pixels(fb, nx, rows)
+            px = read_pixels(fb, cols, rows)
+        if self.packed:
+            return px.reshape(k1 - k0, ny, cols * PACK)[..., :nx]
         return px.reshape(k1 - k0, ny, nx, 4)
 
 
@@ -75,14 +83,16 @@ def bake_tiles(
     sink: Callable[[tuple[int, int, int], np.ndarray], None],
     progress: Callable[[float], None] | None = None,
     velocity: bool = False,
+    packed: bool = False,
 ) -> None:
     """Evaluate every span of every tile and hand each block to `sink(ijk of its first voxel, block)`
     (see BlockBaker.block); with `velocity`, each block carries 8 channels: the density pass's four,
-    then the velocity pass's displacement and density. Empty tiles cost nothing."""
+    then the velocity pass's displacement and density; with `packed` (and no velocity) the block is
+    the density alone. Empty tiles cost nothing."""
     total = sum(t.voxels for t in tiles) or 1
     done = 0
     width = max((t.nx for t in tiles), default=1)
-    with BlockBaker(gpu_inputs, plan, width) as density:
+    with BlockBaker(gpu_inputs, plan, width, packed=packed and not velocity) as density:
         motion = BlockBaker(gpu_inputs, plan, width, velocity=True) if velocity else None
         try:
             for t in tiles:
