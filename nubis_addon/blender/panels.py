@@ -182,6 +182,9 @@ class NUBIS_PT_bake(NubisPanel, bpy.types.Panel):
 
     def draw(self, context):
         self.layout.prop(context.scene.nubis, "bake_voxel_size")
+        col = self.layout.column(heading="Options")
+        for key in ("bake_camera_only", "bake_half", "bake_velocity"):
+            col.prop(context.scene.nubis, key)
         self.layout.operator("nubis.bake_vdb", icon="FILE_VOLUME")
         self.layout.operator("nubis.bake_frames", icon="SEQUENCE")
 

@@ -15,7 +15,7 @@ import bpy
 import numpy as np
 
 from ..core import camera, imageio, interrupt, limits, march, metrics, vdbio
-from ..core.bakeplan import BakePlan, comparison_voxel_size, plan_bake, view_footprint
+from ..core.bakeplan import BakePlan, camera_voxel_size, plan_bake, view_footprint
 from ..core.errors import NubisError
 from ..core.fsutil import check_output_dir, check_output_path
 from ..core.staging import output_set
@@ -350,9 +350,10 @@ def _compare(scene, out: Path, stage, width, height, samples, mode, voxel_size, 
     timings = {}
     t = time.perf_counter()
     if voxel_size is None:
+        # The sparse bake's memory follows the clouds, so the voxels can be as fine as the camera needs.
         state = scene_io.state_from_scene(scene)
-        region = view_footprint(state, np.array(scene_io.camera_inv_view_proj(scene, width, height)))
-        voxel_size = comparison_voxel_size(state, scene.nubis.bake_voxel_size, region)
+        inv = np.array(scene_io.camera_inv_view_proj(scene, width, height))
+        voxel_size = camera_voxel_size(state, inv, width, height, scene.nubis.bake_voxel_size)
     baked = bake(scene, stage(out / "clouds.vdb"), voxel_size, camera_only=True, size=(width, height))
     timings["bake_s"] = time.perf_counter() - t
     # The viewport keeps only the baked clouds: sky light from beyond the box would otherwise be

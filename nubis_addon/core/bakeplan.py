@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .camera import pixel_footprint
 from .errors import NubisError
 from .state import CloudState, wind_vector
 
@@ -213,6 +214,12 @@ def plan_tiles(state: CloudState, plan: BakePlan, tile: int = TILE) -> list[Tile
     shell_lo, shell_hi = state.shell()
     fx, fy, fs = p["field_origin_x"], p["field_origin_y"], p["field_size"]
     fa, fb, fc = state.field_a, state.field_b, state.field_c
+    if fa is None or fb is None:  # no field to bound the clouds by: every slice of every tile
+        return [
+            Tile(i0, j0, min(tile, nx - i0), min(tile, ny - j0), ((0, nz),))
+            for j0 in range(0, ny, tile)
+            for i0 in range(0, nx, tile)
+        ]
     res_y, res_x = fa.shape[:2]
     cover = np.clip(fa[..., 0] * p["density_coverage"], 0.0, 1.0)
     coverage = (cover > 0) & (fb[..., 3] > 0)
@@ -315,8 +322,72 @@ def _merge(spans: list[tuple[int, int]]) -> tuple[tuple[int, int], ...]:
 # A comparison bakes only the camera's view, so it can afford finer voxels than a whole-sky bake:
 # trilinear interpolation of coarse voxels thickens thin cloud edges (measured: 40 m voxels showed
 # Cycles thin cloud 15 % more opaque than the viewport, 20 m halved the alpha error).
-COMPARE_VOXEL_BUDGET = 64_000_000
+COMPARE_VOXEL_BUDGET = 64_000_000  # the fixed budget of comparison_voxel_size (the benchmark's EEVEE bake)
 COMPARE_FINEST_VOXEL = 20.0
+
+
+def nearest_cloud_distance(state: CloudState, inv_view_proj: np.ndarray, samples: int = 33) -> float:
+    """Metres from the camera to the nearest point of the cloud shell (or the cirrus) that a ray through
+    the image reaches within the draw radius: 0 from inside the shell."""
+    p = state.params
+    planet = p["layer_planet_radius"]
+    lo, hi = state.shell()
+    t = np.linspace(-1.0, 1.0, samples)
+    nx, ny = np.meshgrid(t, t)
+    ndc = np.stack([nx.ravel(), ny.ravel()], axis=1)
+    m = np.asarray(inv_view_proj, dtype=np.float64)
+
+    def unproject(z: float) -> np.ndarray:
+        h = np.c_[ndc, np.full(len(ndc), z), np.ones(len(ndc))] @ m.T
+        return h[:, :3] / h[:, 3:4]
+
+    origin = unproject(-1.0)
+    direction = unproject(1.0) - origin
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    centre = np.array([0.0, 0.0, -planet])
+    altitude = float(np.linalg.norm(origin[0] - centre)) - planet
+    if lo <= altitude <= hi:
+        return 0.0
+    oc = origin - centre
+    b = np.sum(oc * direction, axis=1)
+    best = math.inf
+    for alt in [lo, hi] + ([p["cirrus_altitude"]] if state.has_cirrus() else []):
+        c = np.sum(oc * oc, axis=1) - (planet + alt) ** 2
+        disc = b * b - c
+        ok = disc >= 0
+        for sign in (-1.0, 1.0):
+            dist = -b + sign * np.sqrt(np.where(ok, disc, 0.0))
+            hit = ok & (dist > 0)
+            points = (origin + direction * dist[:, None])[hit][:, :2]
+            inside = np.linalg.norm(points - np.asarray(state.draw_center), axis=1) < p["layer_draw_radius"]
+            if inside.any():
+                best = min(best, float(dist[hit][inside].min()))
+    return best
+
+
+def camera_voxel_size(
+    state: CloudState,
+    inv_view_proj: np.ndarray,
+    width: int,
+    height: int,
+    start: float,
+    finest: float = COMPARE_FINEST_VOXEL,
+) -> float:
+    """The voxel size a camera needs: one pixel's footprint at the nearest cloud it sees (no finer than
+    `finest`, no coarser than `start`), then doubled while the camera-only bake would not fit in memory."""
+    angle, size = pixel_footprint(inv_view_proj, width, height)
+    near = nearest_cloud_distance(state, inv_view_proj)
+    footprint = near * angle + size if math.isfinite(near) else start
+    voxel = min(max(finest, footprint), max(start, finest))
+    region = view_footprint(state, inv_view_proj)
+    while True:
+        try:
+            plan_bake(state, voxel, region=region)
+            return voxel
+        except NubisError as err:
+            if "voxel size of at least" not in str(err) or voxel >= 10_000:
+                raise
+            voxel *= 2
 
 
 def comparison_voxel_size(

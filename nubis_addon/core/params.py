@@ -225,6 +225,10 @@ PARAMS: tuple[Param, ...] = (
         "Samples per pixel the still viewport converges to (16 redraws each), then it stops redrawing",
     ),
     P("bake", "voxel_size", "float", 100.0, 1.0, 10000.0, "Edge of a voxel in the OpenVDB bake", "LENGTH"),
+    # ---- Production VDB export (docs/bake.md): the Bake panel's options, as the command line's flags ----
+    P("bake", "camera_only", "bool", False, description="Bake only what the scene camera sees (finer voxels fit)"),
+    P("bake", "half", "bool", False, description="Store the grids as half floats (OpenVDB saveFloatAsHalf)"),
+    P("bake", "velocity", "bool", False, description="Add a velocity grid from the wind and storms, for motion blur"),
 )
 del P
 
