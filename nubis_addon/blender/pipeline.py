@@ -178,6 +178,7 @@ def bake_plan(
     camera_only: bool = False,
     size: tuple[int, int] | None = None,
     velocity: bool = False,
+    thin_cirrus: bool = False,
 ) -> tuple[CloudState, BakePlan]:
     """The scene's cloud state at its current frame and the bake's plan (tiles, memory estimate:
     refused politely before any GPU work when it does not fit)."""
@@ -187,7 +188,9 @@ def bake_plan(
         w, h = size or resolution(scene, None, None)
         inv = np.array(scene_io.camera_inv_view_proj(scene, w, h))
         region = view_footprint(state, inv)
-    plan = plan_bake(state, voxel_size or scene.nubis.bake_voxel_size, region=region, velocity=velocity)
+    plan = plan_bake(
+        state, voxel_size or scene.nubis.bake_voxel_size, region=region, velocity=velocity, thin_cirrus=thin_cirrus
+    )
     state.cirrus_slab = plan.cirrus_slab
     return state, plan
 
@@ -261,6 +264,7 @@ def bake(
     size: tuple[int, int] | None = None,
     half: bool = False,
     velocity: bool = False,
+    thin_cirrus: bool = False,
 ) -> BakeResult:
     """Bake the viewport's density to an OpenVDB `density` grid in world space (atomic write): sparse
     and tiled, so memory follows the clouds rather than the box (docs/bake.md).
@@ -269,7 +273,7 @@ def bake(
     `half` stores the float grids as half floats; `velocity` adds the `velocity` grid."""
     path = check_output_path(path, (".vdb",))
     start = time.perf_counter()
-    state, plan = bake_plan(scene, voxel_size, camera_only, size, velocity)
+    state, plan = bake_plan(scene, voxel_size, camera_only, size, velocity, thin_cirrus)
     grids = bake_grids(scene, state, plan, progress=progress)
     names = tuple(
         n
@@ -336,14 +340,21 @@ def compare(
 ) -> dict:
     """Viewport and Cycles renders of the same shot, their side-by-side, a difference image and
     metrics.json (computed on the scene-linear EXR values); the bake Cycles rendered is kept as
-    clouds.vdb. Only the part of the sky the camera sees is baked, at the finest voxel size (down to 20 m) that
-    fits 64 M voxels unless `voxel_size` is given. The eight files replace an earlier comparison together
+    clouds.vdb. Only the part of the sky the camera sees is baked, with voxels of one pixel's footprint at the
+    nearest cloud (down to 20 m) unless `voxel_size` is given, and the cirrus as a slab two voxels thin. The eight files replace an earlier comparison together
     or not at all."""
     if mode not in COMPARE_MODES:
         raise NubisError(f"unknown comparison mode '{mode}': use single or full")
     out = check_output_dir(out_dir)
     with output_set() as outputs:
         return _compare(scene, out, outputs.stage, width, height, samples, mode, voxel_size, noise_estimate)
+
+
+# The comparison bakes the cirrus as a slab two voxels thin: the viewport samples the 2D layer at one
+# point, and a ray crossing the default 400 m slab at a grazing angle averages kilometres of it
+# (measured at the default camera, 160x90, single mode: alpha RMSE 0.023 with the 400 m slab, 0.016
+# with a 48 m one).
+THIN_CIRRUS = True
 
 
 def _compare(scene, out: Path, stage, width, height, samples, mode, voxel_size, noise_estimate) -> dict:
@@ -354,7 +365,9 @@ def _compare(scene, out: Path, stage, width, height, samples, mode, voxel_size, 
         state = scene_io.state_from_scene(scene)
         inv = np.array(scene_io.camera_inv_view_proj(scene, width, height))
         voxel_size = camera_voxel_size(state, inv, width, height, scene.nubis.bake_voxel_size)
-    baked = bake(scene, stage(out / "clouds.vdb"), voxel_size, camera_only=True, size=(width, height))
+    baked = bake(
+        scene, stage(out / "clouds.vdb"), voxel_size, camera_only=True, size=(width, height), thin_cirrus=THIN_CIRRUS
+    )
     timings["bake_s"] = time.perf_counter() - t
     # The viewport keeps only the baked clouds: sky light from beyond the box would otherwise be
     # shadowed by clouds Cycles never sees.

@@ -114,6 +114,7 @@ def plan_bake(
     region: tuple[float, float, float, float] | None = None,
     velocity: bool = False,
     tile: int = TILE,
+    thin_cirrus: bool = False,
 ) -> BakePlan:
     """The box holding every cloud the viewport can draw: the field, clipped to the draw radius (and to
     `region`, x0 x1 y0 y1, when given), and the shell's altitudes, lowered by the planet's curvature at
@@ -141,7 +142,9 @@ def plan_bake(
     slab = None
     if state.has_cirrus():
         # The 2D cirrus layer bakes as a slab at least two voxels thick, so voxel centres cannot miss it.
-        slab = max(p["cirrus_thickness"], 2.0 * voxel_size)
+        # `thin_cirrus` makes it just that: a ray at a grazing angle then crosses it over a short
+        # stretch of the cirrus, as the 2D layer the viewport samples at one point (a comparison).
+        slab = 2.0 * voxel_size if thin_cirrus else max(p["cirrus_thickness"], 2.0 * voxel_size)
         hi = max(hi, p["cirrus_altitude"] + slab / 2)
     planet = p["layer_planet_radius"]
     far = max(math.hypot(x, y) for x in (x0, x1) for y in (y0, y1))
