@@ -340,9 +340,9 @@ def compare(
 ) -> dict:
     """Viewport and Cycles renders of the same shot, their side-by-side, a difference image and
     metrics.json (computed on the scene-linear EXR values); the bake Cycles rendered is kept as
-    clouds.vdb. Only the part of the sky the camera sees is baked, with voxels of one pixel's footprint at the
-    nearest cloud (down to 20 m) unless `voxel_size` is given, and the cirrus as a slab two voxels thin. The eight files replace an earlier comparison together
-    or not at all."""
+    clouds.vdb. Only the part of the sky the camera sees is baked, with voxels of one pixel's footprint
+    at the nearest cloud (down to 20 m) unless `voxel_size` is given, and the cirrus as a slab two
+    voxels thin. The eight files replace an earlier comparison together or not at all."""
     if mode not in COMPARE_MODES:
         raise NubisError(f"unknown comparison mode '{mode}': use single or full")
     out = check_output_dir(out_dir)
