@@ -83,7 +83,6 @@ def test_cli_sequence_with_velocity_matches_the_motion_vectors(make_scene, tmp_p
     predicted[:, 1] *= -1  # image rows run down
     measured = motion[rows, cols, :2][ok][found]
     err = np.linalg.norm(predicted - measured, axis=1) / np.maximum(np.linalg.norm(measured, axis=1), 1e-3)
-    print("velocity check", found.sum(), np.median(np.linalg.norm(measured, axis=1)), np.percentile(err, [50, 90, 99]))
     assert np.median(np.linalg.norm(measured, axis=1)) > 0.05  # the clouds do move on screen
     assert np.median(err) < 0.05, np.median(err)
     assert np.percentile(err, 90) < 0.25, np.percentile(err, 90)
