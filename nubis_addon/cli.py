@@ -1,7 +1,8 @@
 """The headless command line, a stable contract:
 
     python -m nubis_addon render  [--preset NAME | --blend FILE] --out PATH [--width W --height H --frame F]
-    python -m nubis_addon bake    [--preset NAME | --blend FILE] --out PATH.vdb [--voxel-size METRES]
+    python -m nubis_addon bake    [--preset NAME | --blend FILE] --out PATH.vdb [--voxel-size METRES --camera-only
+                                  --half --velocity --frames A-B --distributed local:N|tcp://HOST:PORT]
     python -m nubis_addon cycles  [--preset NAME | --blend FILE] --out PATH [--samples N --width W --height H]
     python -m nubis_addon compare [--preset NAME | --blend FILE] --out DIR [--samples N --width W --height H]
     python -m nubis_addon preview [--preset NAME | --blend FILE] --out DIR [--width W --height H --frames A-B
@@ -26,7 +27,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from .core import console as terminal
-from .core import interrupt, limits
+from .core import distributed, interrupt, limits, sequence
 from .core.console import Console
 from .core.errors import NubisError
 from .core.fsutil import check_output_dir, check_output_path
@@ -66,6 +67,14 @@ def build_parser() -> argparse.ArgumentParser:
     common(p)
     p.add_argument("--voxel-size", type=float, help="voxel edge in metres (default: the scene's bake setting)")
     p.add_argument("--camera-only", action="store_true", help="bake only what the scene camera sees")
+    p.add_argument("--half", action="store_true", help="store the grids as half floats (half the file size)")
+    p.add_argument("--velocity", action="store_true", help="add a 'velocity' Vec3 grid for motion blur (m/s)")
+    p.add_argument("--frames", help="bake frames A-B, one file each: write the frame as #### in --out")
+    p.add_argument(
+        "--distributed",
+        metavar="local:N|tcp://HOST:PORT",
+        help="spread the frames (or one frame's tiles) over Dask workers: N local ones or a running scheduler",
+    )
     for name, what in (
         ("cycles", "render the baked clouds with Cycles"),
         ("compare", "render viewport and Cycles side by side, with metrics"),
@@ -176,9 +185,22 @@ def _execute(args, in_blender: bool, log: Path) -> str:
         out = check_output_path(args.out, IMAGE_SUFFIXES)
     if getattr(args, "motion", None):
         args.motion = check_output_path(args.motion, (".exr",))
+    if args.command == "bake":
+        _check_bake_arguments(args, out)
     from .blender import commands  # bpy loads only now: `--help` and argument errors stay fast
 
     return commands.execute(args, in_blender, log, out)
+
+
+def _check_bake_arguments(args, out: Path) -> None:
+    """--frames, the # padding and --distributed (Dask installed, a valid engine) before any work."""
+    if args.frames and args.frame is not None:
+        raise NubisError("--frame and --frames exclude each other: give one frame or a range")
+    if args.frames:
+        sequence.sequence_paths(out, sequence.parse_frames(args.frames))
+    if args.distributed:
+        distributed.parse_engine(args.distributed)
+        distributed.require()
 
 
 def check_arguments(args) -> None:

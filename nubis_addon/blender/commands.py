@@ -8,11 +8,11 @@ from pathlib import Path
 
 import bpy
 
-from ..core import console, fields, imageio, interrupt, staging
+from ..core import console, distributed, fields, imageio, interrupt, sequence, staging
 from ..core.errors import NubisError
 from ..core.presets import load_preset
 from ..render.gpu_context import ensure_gpu_context
-from . import pipeline, preview, registration, scene_io, scene_render
+from . import farm, pipeline, preview, registration, scene_io, scene_render
 
 PROG = "nubis"
 # A field composite slower than this gets an estimate first, then a progress bar.
@@ -81,10 +81,14 @@ def execute(args, in_blender: bool, log: Path, out: Path) -> str:
                 imageio.write_image(outputs.stage(args.motion), pipeline.render_motion(scene, w, h))
         cover = float((rgba[..., 3] > 0.05).mean()) * 100
         return f"rendered {label} at {w}x{h} ({cover:.0f}% cloud cover) in {time.perf_counter() - start:.1f} s -> {out}"
+    if cmd == "bake" and (args.frames or args.distributed or "#" in out.name):
+        return _bake_sequence(args, scene, out, voxel, log, label)
     if cmd == "bake":
         progress = console.progress("baking")
         with console.quiet(log):
-            result = pipeline.bake(scene, out, voxel, progress, camera_only=args.camera_only)
+            result = pipeline.bake(
+                scene, out, voxel, progress, camera_only=args.camera_only, half=args.half, velocity=args.velocity
+            )
         nx, ny, nz = result.plan.dims
         return (
             f"baked {label}: {nx}x{ny}x{nz} voxels of {result.plan.voxel_size:g} m, "
@@ -119,6 +123,26 @@ def execute(args, in_blender: bool, log: Path, out: Path) -> str:
         f"compared {label} ({args.mode}) at {w}x{h}: alpha RMSE {m['alpha_rmse']:.4f}, luminance error "
         f"{m['luminance_rel_error'] * 100:.1f}%, silhouette IoU {m['silhouette_iou']:.3f}{capped} "
         f"in {time.perf_counter() - start:.1f} s -> {out}"
+    )
+
+
+def _bake_sequence(args, scene, out: Path, voxel, log: Path, label: str) -> str:
+    """`bake --frames A-B` (files named with # padding) and `bake --distributed` (core/distributed.py)."""
+    frames = sequence.parse_frames(args.frames) if args.frames else [scene.frame_current]
+    engine = distributed.parse_engine(args.distributed) if args.distributed else None
+    options = farm.BakeOptions(voxel, args.camera_only, None, args.half, args.velocity)
+    progress = console.progress("baking")
+    with console.quiet(log):
+        source = farm.source_of(scene, args.preset, args.blend) if engine else None
+        r = farm.bake_sequence(scene, out, frames, options, engine, source, progress)
+    first = r.results[0]
+    nx, ny, nz = first.plan.dims
+    on = f" on {r.engine}" if r.engine else ""
+    where = first.path if len(frames) == 1 else f"{first.path.parent / out.name} ({len(frames)} files)"
+    return (
+        f"baked {label}, frame{'s' if len(frames) > 1 else ''} {args.frames or frames[0]}: {nx}x{ny}x{nz} voxels "
+        f"of {first.plan.voxel_size:g} m, {sum(x.active_voxels for x in r.results)} active{on}, "
+        f"in {r.seconds:.1f} s -> {where}"
     )
 
 

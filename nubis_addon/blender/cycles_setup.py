@@ -102,6 +102,10 @@ def import_volume(scene, vdb_path: str) -> bpy.types.Object:
     obj = bpy.data.objects.new(VOLUME_NAME, vol)
     scene.collection.objects.link(obj)
     names = [g.name for g in vol.grids]
+    if "velocity" in names:
+        # The bake's velocity is in metres per second of animation (docs/bake.md): Cycles motion blur.
+        vol.velocity_grid = "velocity"
+        vol.velocity_unit = "SECOND"
     vol.materials.append(build_material(scene.nubis, "glow" in names, "absorption" in names))
     # The grids carry their world transform; the object must stay at the identity...
     obj.matrix_world.identity()

@@ -392,10 +392,17 @@ class NUBIS_OT_bake_vdb(NeedsCloudscape, NubisOperator, bpy.types.Operator):
     def run(self, context):
         wm = context.window_manager
         path = _absolute(self.filepath)
+        s = context.scene.nubis
         wm.progress_begin(0, 100)
         try:
             result = pipeline.bake(
-                context.scene, path, self.voxel_size or None, lambda f: wm.progress_update(int(f * 100))
+                context.scene,
+                path,
+                self.voxel_size or None,
+                lambda f: wm.progress_update(int(f * 100)),
+                camera_only=s.bake_camera_only,
+                half=s.bake_half,
+                velocity=s.bake_velocity,
             )
         finally:
             wm.progress_end()
@@ -417,13 +424,20 @@ class NUBIS_OT_bake_frames(NeedsCloudscape, NubisOperator, bpy.types.Operator):
         folder = _absolute(self.directory)
         frames = range(scene.frame_start, scene.frame_end + 1, self.step)
         wm = context.window_manager
-        wm.progress_begin(0, len(frames))
+        s = scene.nubis
+        wm.progress_begin(0, 100 * len(frames))
         current = scene.frame_current
         try:
             for i, frame in enumerate(frames):
                 scene.frame_set(frame)
-                pipeline.bake(scene, f"{folder}/clouds_{frame:04d}.vdb")
-                wm.progress_update(i + 1)
+                pipeline.bake(
+                    scene,
+                    f"{folder}/clouds_{frame:04d}.vdb",
+                    progress=lambda f, i=i: wm.progress_update(int((i + f) * 100)),
+                    camera_only=s.bake_camera_only,
+                    half=s.bake_half,
+                    velocity=s.bake_velocity,
+                )
         finally:
             scene.frame_set(current)
             wm.progress_end()

@@ -7,14 +7,37 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .camera import pixel_footprint
 from .errors import NubisError
-from .state import CloudState
+from .state import CloudState, wind_vector
 
-# Float32 density, glow and absorption volumes, the transposed copy handed to OpenVDB and the sparse
-# tree itself.
-BYTES_PER_VOXEL = 20
+# The bake is sparse and tiled (docs/bake.md): the box is cut into columns of TILE x TILE voxels, each
+# evaluated only over the slices where the data field says cloud can be, and the active voxels go
+# straight into OpenVDB trees. Memory follows the clouds: about 4.5 bytes per active float voxel in a
+# tree of full 8^3 leaves (values plus masks), 13.5 for a Vec3 velocity, plus one tile's read-back.
+BYTES_PER_ACTIVE_VOXEL = 4.5
+BYTES_PER_VELOCITY_VOXEL = 13.5
 DEFAULT_MEMORY_LIMIT = 4 * 1024**3
-MAX_SLICE = 8192  # texels per side of one GPU slice
+TILE = 128  # voxels per side of one tile
+MAX_TILES = 200_000  # beyond this the box alone is absurd: refuse before planning every tile
+# What the process holds besides the trees: Blender, the noise textures, one block's read-back.
+BASE_BYTES = 600 * 1024**2
+
+
+@dataclass(frozen=True)
+class Tile:
+    """A column of the bake box: voxels i0.. i0 + nx - 1 and j0.. j0 + ny - 1, and the slice ranges
+    [k0, k1) where the data field allows cloud (empty: nothing to evaluate)."""
+
+    i0: int
+    j0: int
+    nx: int
+    ny: int
+    spans: tuple[tuple[int, int], ...] = ()
+
+    @property
+    def voxels(self) -> int:
+        return self.nx * self.ny * sum(k1 - k0 for k0, k1 in self.spans)
 
 
 @dataclass(frozen=True)
@@ -23,14 +46,23 @@ class BakePlan:
     voxel_size: float
     dims: tuple[int, int, int]  # voxels along x, y, z
     cirrus_slab: float | None = None  # thickness of the baked cirrus slab, when the sky has cirrus
+    tiles: tuple[Tile, ...] = ()
+    velocity: bool = False  # a velocity grid is baked too
+    extra_grids: int = 0  # float grids beside density the field can produce (absorption, glow)
 
     @property
     def voxels(self) -> int:
         return self.dims[0] * self.dims[1] * self.dims[2]
 
     @property
+    def evaluated_voxels(self) -> int:
+        """Voxels the GPU evaluates: those of the tiles' spans (an upper bound on the active ones)."""
+        return sum(t.voxels for t in self.tiles)
+
+    @property
     def bytes_estimate(self) -> int:
-        return self.voxels * BYTES_PER_VOXEL
+        per = BYTES_PER_ACTIVE_VOXEL * (1 + self.extra_grids) + (BYTES_PER_VELOCITY_VOXEL if self.velocity else 0)
+        return int(BASE_BYTES + self.evaluated_voxels * per)
 
 
 def view_footprint(state: CloudState, inv_view_proj: np.ndarray, samples: int = 33) -> tuple[float, ...]:
@@ -80,10 +112,14 @@ def plan_bake(
     voxel_size: float,
     memory_limit: int = DEFAULT_MEMORY_LIMIT,
     region: tuple[float, float, float, float] | None = None,
+    velocity: bool = False,
+    tile: int = TILE,
+    thin_cirrus: bool = False,
 ) -> BakePlan:
     """The box holding every cloud the viewport can draw: the field, clipped to the draw radius (and to
     `region`, x0 x1 y0 y1, when given), and the shell's altitudes, lowered by the planet's curvature at
-    the box's far corners."""
+    the box's far corners; cut into tiles (plan_tiles). Refuses, naming a voxel size that fits, when
+    the estimated memory exceeds `memory_limit`."""
     if not (math.isfinite(voxel_size) and voxel_size > 0):
         raise NubisError(f"the voxel size must be a positive number of metres, not {voxel_size!r}")
     p = state.params
@@ -106,7 +142,9 @@ def plan_bake(
     slab = None
     if state.has_cirrus():
         # The 2D cirrus layer bakes as a slab at least two voxels thick, so voxel centres cannot miss it.
-        slab = max(p["cirrus_thickness"], 2.0 * voxel_size)
+        # `thin_cirrus` makes it just that: a ray at a grazing angle then crosses it over a short
+        # stretch of the cirrus, as the 2D layer the viewport samples at one point (a comparison).
+        slab = 2.0 * voxel_size if thin_cirrus else max(p["cirrus_thickness"], 2.0 * voxel_size)
         hi = max(hi, p["cirrus_altitude"] + slab / 2)
     planet = p["layer_planet_radius"]
     far = max(math.hypot(x, y) for x in (x0, x1) for y in (y0, y1))
@@ -114,21 +152,245 @@ def plan_bake(
     z0, z1 = lo - sag, hi
     v = voxel_size
     dims = tuple(max(1, math.ceil((b - a) / v)) for a, b in ((x0, x1), (y0, y1), (z0, z1)))
-    plan = BakePlan((x0 + v / 2, y0 + v / 2, z0 + v / 2), v, dims, slab)
-    if plan.bytes_estimate > memory_limit or max(dims[:2]) > MAX_SLICE:
-        suggested = v * max((plan.bytes_estimate / memory_limit) ** (1 / 3), max(dims[:2]) / MAX_SLICE) * 1.05
-        raise NubisError(
-            f"a bake at {v:g} m voxels needs {dims[0]}x{dims[1]}x{dims[2]} voxels "
-            f"(about {plan.bytes_estimate / 1024**3:.1f} GB): use a voxel size of at least {math.ceil(suggested)} m"
-        )
+    plan = BakePlan((x0 + v / 2, y0 + v / 2, z0 + v / 2), v, dims, slab, velocity=velocity)
+    extra = _extra_grids(state)
+    n_tiles = math.ceil(dims[0] / tile) * math.ceil(dims[1] / tile)
+    if n_tiles > MAX_TILES:
+        # The box alone: a coarse bound (a tenth of it in cloud) is enough to name a size that fits.
+        need = plan.voxels * 0.1 * BYTES_PER_ACTIVE_VOXEL
+        _refuse(plan, need, memory_limit, n_tiles / MAX_TILES)
+    plan = BakePlan(
+        plan.origin, v, dims, slab, tuple(plan_tiles(state, plan, tile)), velocity=velocity, extra_grids=extra
+    )
+    if plan.bytes_estimate > memory_limit:
+        _refuse(plan, plan.bytes_estimate - BASE_BYTES, memory_limit - BASE_BYTES)
     return plan
+
+
+def _refuse(plan: BakePlan, need: float, limit: float, tiles_over: float = 1.0):
+    v = plan.voxel_size
+    suggested = v * max((need / max(limit, 1.0)) ** (1 / 3), tiles_over**0.5) * 1.05
+    raise NubisError(
+        f"a bake at {v:g} m voxels needs {plan.dims[0]}x{plan.dims[1]}x{plan.dims[2]} voxels "
+        f"(about {(need + BASE_BYTES) / 1024**3:.1f} GB): use a voxel size of at least {math.ceil(suggested)} m"
+    )
+
+
+def _extra_grids(state: CloudState) -> int:
+    """How many float grids beside density the sky can fill: absorption where it rains, glow in storms."""
+    rain = state.field_a is not None and float(np.max(state.field_a[..., 1])) > 0
+    return int(rain or bool(state.storms)) + int(bool(state.storms))
+
+
+def _texel_window(lo: float, hi: float, origin: float, size: float, n: int) -> np.ndarray:
+    """Indices of the field texels a bilinear lookup between world coordinates lo and hi can read, with
+    a texel of margin and both the clamped and the wrapped edge (the lookup clamps its uv)."""
+    s0 = ((lo - origin) / size + 0.5) * n - 0.5
+    s1 = ((hi - origin) / size + 0.5) * n - 0.5
+    a = max(math.floor(s0) - 1, -1)
+    b = min(math.floor(s1) + 2, n)
+    if a >= n or b < 0:
+        return np.array([0 if b < 0 else n - 1])
+    return np.unique(np.clip(np.arange(a, b + 1), 0, n - 1))
+
+
+def _z_at(altitude: float, r: float, planet: float) -> float:
+    """Height above the tangent plane of a point at `altitude` over the sphere, r metres from the axis."""
+    return math.sqrt(max((planet + altitude) ** 2 - r * r, 0.0)) - planet
+
+
+def plan_tiles(state: CloudState, plan: BakePlan, tile: int = TILE) -> list[Tile]:
+    """Cut the box into tiles and find, for each, the slices that can hold cloud: conservative bounds
+    read straight from the data field, so no cloud is ever skipped. The density is zero wherever the
+    bilinear coverage (field A red) or the density multiplier (field B alpha) is zero, and below or
+    above the column's own min and max heights (field B green, blue; the vertical profile is zero
+    outside them, GPU Pro 7); a superstorm's anvil spreads its storm coverage (field B red) downwind
+    under the shell's top (GDC22); the cirrus slab lies around its altitude where field C red is
+    non-zero. Tiles beyond the draw radius, outside the field or outside a clip box are empty."""
+    p = state.params
+    v = plan.voxel_size
+    ox, oy, oz = plan.origin
+    nx, ny, nz = plan.dims
+    planet = p["layer_planet_radius"]
+    bottom, top = p["layer_bottom"], p["layer_top"]
+    thick = top - bottom
+    shell_lo, shell_hi = state.shell()
+    fx, fy, fs = p["field_origin_x"], p["field_origin_y"], p["field_size"]
+    fa, fb, fc = state.field_a, state.field_b, state.field_c
+    if fa is None or fb is None:  # no field to bound the clouds by: every slice of every tile
+        return [
+            Tile(i0, j0, min(tile, nx - i0), min(tile, ny - j0), ((0, nz),))
+            for j0 in range(0, ny, tile)
+            for i0 in range(0, nx, tile)
+        ]
+    res_y, res_x = fa.shape[:2]
+    cover = np.clip(fa[..., 0] * p["density_coverage"], 0.0, 1.0)
+    coverage = (cover > 0) & (fb[..., 3] > 0)
+    top_type, bottom_type = np.clip(fa[..., 2], 0.0, 1.0), np.clip(fa[..., 3], 0.0, 1.0)
+    storm = (fb[..., 0] > 0) & (fb[..., 3] > 0) if state.storms else None
+    cirrus = None
+    if plan.cirrus_slab and p["density_sigma"] > 0 and p["cirrus_opacity"] > 0:
+        cirrus = fc[..., 0] * p["cirrus_coverage"] > 0
+    col_lo = bottom + fb[..., 1] * thick
+    col_hi = bottom + fb[..., 2] * thick
+    # The anvil reads its storm coverage upwind, up to the anvil shift along the wind.
+    from_wind = float(np.hypot(*wind_vector(p["wind_direction"]))) * p["storm_anvil_shift"]
+    band = 0.22 * (shell_hi - bottom)
+    radius = p["layer_draw_radius"]
+    dcx, dcy = state.draw_center
+    clip = state.clip_box
+    margin_z = v + 4.0  # a voxel, and the shader's float32 altitude near a 6371 km sphere
+    tiles = []
+    for j0 in range(0, ny, tile):
+        for i0 in range(0, nx, tile):
+            tx, ty = min(tile, nx - i0), min(tile, ny - j0)
+            xa, xb = ox + i0 * v, ox + (i0 + tx - 1) * v
+            ya, yb = oy + j0 * v, oy + (j0 + ty - 1) * v
+            tiles.append(Tile(i0, j0, tx, ty, ()))
+            # Nearest point of the tile to the draw centre: clouds exist only inside the radius.
+            near = math.hypot(max(xa - dcx, 0.0, dcx - xb), max(ya - dcy, 0.0, dcy - yb))
+            if near >= radius or xb < fx - fs / 2 or xa > fx + fs / 2 or yb < fy - fs / 2 or ya > fy + fs / 2:
+                continue
+            if clip is not None and (xb < clip[0] or xa > clip[2] or yb < clip[1] or ya > clip[3]):
+                continue
+            rmin = math.hypot(max(xa, 0.0, -xb), max(ya, 0.0, -yb))
+            rmax = max(math.hypot(x, y) for x in (xa, xb) for y in (ya, yb))
+            wi = _texel_window(xa, xb, fx, fs, res_x)
+            wj = _texel_window(ya, yb, fy, fs, res_y)
+            window = np.ix_(wj, wi)
+            altitudes = []
+            if coverage[window].any():
+                lo, hi = _column_bounds(
+                    float(cover[window].max()),
+                    float(top_type[window].max()),
+                    float(bottom_type[window].min()),
+                    (float(col_lo[window].min()), float(col_lo[window].max())),
+                    (float(col_hi[window].min()), float(col_hi[window].max())),
+                )
+                lo, hi = max(lo, shell_lo), min(hi, shell_hi)
+                if hi > lo:
+                    altitudes.append((lo, hi))
+            if storm is not None:
+                sw = np.ix_(
+                    _texel_window(ya - from_wind, yb + from_wind, fy, fs, res_y),
+                    _texel_window(xa - from_wind, xb + from_wind, fx, fs, res_x),
+                )
+                if storm[sw].any() and fb[window][..., 3].max() > 0:
+                    altitudes.append((shell_hi - band, shell_hi))
+            if cirrus is not None and cirrus[window].any():
+                c = p["cirrus_altitude"]
+                altitudes.append((c - plan.cirrus_slab / 2, c + plan.cirrus_slab / 2))
+            spans = []
+            for lo, hi in altitudes:
+                k0 = max(math.floor((_z_at(lo, rmax, planet) - margin_z - oz) / v), 0)
+                k1 = min(math.ceil((_z_at(hi, rmin, planet) + margin_z - oz) / v) + 1, nz)
+                if k1 > k0:
+                    spans.append((k0, k1))
+            tiles[-1] = Tile(i0, j0, tx, ty, _merge(spans))
+    return tiles
+
+
+def _column_bounds(
+    c: float, top_type: float, bottom_type: float, lo: tuple[float, float], hi: tuple[float, float]
+) -> tuple[float, float]:
+    """Altitudes outside which a column's density is zero, for coverage up to `c`, top types up to
+    `top_type`, bottom types from `bottom_type` and column bottoms and tops within `lo` and `hi`.
+
+    The base shape (at most 1) times the vertical profile must exceed 1 - coverage before the coverage
+    remap leaves anything (GPU Pro 7's remap of the base shape by coverage), so the profile must: its
+    top ramp (from ramp x to ramp y, both rising with the top type; shaders/nubis_density_lib.glsl)
+    passes 1 - c below ramp x + c (ramp y - ramp x), its bottom ramp passes it above (1 - c) x the
+    bottom ramp's end. Both bounds grow with the types and the coverage, so the extremes bound them."""
+    if top_type < 0.5:
+        rx, ry = 0.10 + (0.40 - 0.10) * top_type * 2, 0.20 + (0.60 - 0.20) * top_type * 2
+    else:
+        rx, ry = 0.40 + (0.70 - 0.40) * (top_type * 2 - 1), 0.60 + (1.00 - 0.60) * (top_type * 2 - 1)
+    h_top = min(rx + c * (ry - rx), 1.0)
+    h_bottom = max((1.0 - c) * (0.05 + 0.30 * bottom_type), 0.0)
+    # altitude = (1 - h) bottom + h top, rising in h, the bottom and the top (the shader divides by at
+    # least a metre of thickness: bounded the same way).
+    return (1 - h_bottom) * lo[0] + h_bottom * hi[0], (1 - h_top) * lo[1] + h_top * hi[1]
+
+
+def _merge(spans: list[tuple[int, int]]) -> tuple[tuple[int, int], ...]:
+    out: list[list[int]] = []
+    for k0, k1 in sorted(spans):
+        if out and k0 <= out[-1][1]:
+            out[-1][1] = max(out[-1][1], k1)
+        else:
+            out.append([k0, k1])
+    return tuple((a, b) for a, b in out)
 
 
 # A comparison bakes only the camera's view, so it can afford finer voxels than a whole-sky bake:
 # trilinear interpolation of coarse voxels thickens thin cloud edges (measured: 40 m voxels showed
 # Cycles thin cloud 15 % more opaque than the viewport, 20 m halved the alpha error).
-COMPARE_VOXEL_BUDGET = 64_000_000
+COMPARE_VOXEL_BUDGET = 64_000_000  # the fixed budget of comparison_voxel_size (the benchmark's EEVEE bake)
 COMPARE_FINEST_VOXEL = 20.0
+
+
+def nearest_cloud_distance(state: CloudState, inv_view_proj: np.ndarray, samples: int = 33) -> float:
+    """Metres from the camera to the nearest point of the cloud shell (or the cirrus) that a ray through
+    the image reaches within the draw radius: 0 from inside the shell."""
+    p = state.params
+    planet = p["layer_planet_radius"]
+    lo, hi = state.shell()
+    t = np.linspace(-1.0, 1.0, samples)
+    nx, ny = np.meshgrid(t, t)
+    ndc = np.stack([nx.ravel(), ny.ravel()], axis=1)
+    m = np.asarray(inv_view_proj, dtype=np.float64)
+
+    def unproject(z: float) -> np.ndarray:
+        h = np.c_[ndc, np.full(len(ndc), z), np.ones(len(ndc))] @ m.T
+        return h[:, :3] / h[:, 3:4]
+
+    origin = unproject(-1.0)
+    direction = unproject(1.0) - origin
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    centre = np.array([0.0, 0.0, -planet])
+    altitude = float(np.linalg.norm(origin[0] - centre)) - planet
+    if lo <= altitude <= hi:
+        return 0.0
+    oc = origin - centre
+    b = np.sum(oc * direction, axis=1)
+    best = math.inf
+    for alt in [lo, hi] + ([p["cirrus_altitude"]] if state.has_cirrus() else []):
+        c = np.sum(oc * oc, axis=1) - (planet + alt) ** 2
+        disc = b * b - c
+        ok = disc >= 0
+        for sign in (-1.0, 1.0):
+            dist = -b + sign * np.sqrt(np.where(ok, disc, 0.0))
+            hit = ok & (dist > 0)
+            points = (origin + direction * dist[:, None])[hit][:, :2]
+            inside = np.linalg.norm(points - np.asarray(state.draw_center), axis=1) < p["layer_draw_radius"]
+            if inside.any():
+                best = min(best, float(dist[hit][inside].min()))
+    return best
+
+
+def camera_voxel_size(
+    state: CloudState,
+    inv_view_proj: np.ndarray,
+    width: int,
+    height: int,
+    start: float,
+    finest: float = COMPARE_FINEST_VOXEL,
+) -> float:
+    """The voxel size a camera needs: one pixel's footprint at the nearest cloud it sees (no finer than
+    `finest`, no coarser than `start`), then doubled while the camera-only bake would not fit in memory."""
+    angle, size = pixel_footprint(inv_view_proj, width, height)
+    near = nearest_cloud_distance(state, inv_view_proj)
+    footprint = near * angle + size if math.isfinite(near) else start
+    voxel = min(max(finest, footprint), max(start, finest))
+    region = view_footprint(state, inv_view_proj)
+    while True:
+        try:
+            plan_bake(state, voxel, region=region)
+            return voxel
+        except NubisError as err:
+            if "voxel size of at least" not in str(err) or voxel >= 10_000:
+                raise
+            voxel *= 2
 
 
 def comparison_voxel_size(

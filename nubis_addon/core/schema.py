@@ -933,6 +933,37 @@ SCENE: tuple[Setting, ...] = (
         panel="bake",
         trigger="none",
     ),
+    # Production VDB export (docs/bake.md): the Bake panel's options, as the command line's flags.
+    S(
+        "bake",
+        "camera_only",
+        "bool",
+        False,
+        "Camera Only",
+        "Bake only what the scene camera sees (finer voxels fit)",
+        panel="bake",
+        trigger="none",
+    ),
+    S(
+        "bake",
+        "half",
+        "bool",
+        False,
+        "Half Float",
+        "Store the grids as half floats (OpenVDB saveFloatAsHalf)",
+        panel="bake",
+        trigger="none",
+    ),
+    S(
+        "bake",
+        "velocity",
+        "bool",
+        False,
+        "Velocity",
+        "Add a velocity grid from the wind and storms, for motion blur",
+        panel="bake",
+        trigger="none",
+    ),
     # -- the weather rules, applied after the layer stack (GPU Pro 7, S15)
     S(
         "rules",

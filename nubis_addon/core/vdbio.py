@@ -57,9 +57,85 @@ def write_vdb(
         grid.name = name
         grid.gridClass = vdb.GridClass.FOG_VOLUME
         out.append(grid)
+    return _write(path, out, metadata)
+
+
+class SparseGrids:
+    """Grids filled block by block as a tiled bake produces them (only active voxels are kept), then
+    written in one atomic file. Float blocks are shaped (z, y, x), vector blocks (z, y, x, 3); `ijk` is
+    the index of a block's first voxel (x, y, z). Each voxel is written once: blocks never overlap."""
+
+    def __init__(self, voxel_size: float, origin: tuple[float, float, float], tolerance: float = DEFAULT_TOLERANCE):
+        self.voxel_size = float(voxel_size)
+        self.origin = tuple(float(c) for c in origin)
+        self.tolerance = float(tolerance)
+        self.grids: dict[str, object] = {}
+        self.classes: dict[str, str] = {}
+
+    def grid(self, name: str, vector: bool = False):
+        if name not in self.grids:
+            vdb = bundled.openvdb()
+            grid = vdb.Vec3SGrid() if vector else vdb.FloatGrid()
+            grid.transform = make_transform(self.voxel_size, self.origin)
+            grid.name = name
+            # Velocity is a plain vector field (class unknown, as Houdini and Blender write it).
+            grid.gridClass = vdb.GridClass.UNKNOWN if vector else vdb.GridClass.FOG_VOLUME
+            if vector:
+                grid.vectorType = vdb.VectorType.CONTRAVARIANT_RELATIVE
+            self.grids[name] = grid
+        return self.grids[name]
+
+    def add(self, name: str, block: np.ndarray, ijk: tuple[int, int, int]) -> None:
+        vector = block.ndim == 4
+        grid = self.grid(name, vector)  # created even when empty: a bake always has its density grid
+        if not np.all(np.isfinite(block)):
+            raise NubisError(f"refusing to write grid '{name}': the bake produced NaN or infinite values")
+        if not np.any(np.abs(block) > self.tolerance):
+            return
+        arr = np.ascontiguousarray(block.transpose(2, 1, 0, 3) if vector else block.transpose(2, 1, 0), np.float32)
+        self._copy(grid, arr, ijk, vector)
+
+    def _copy(self, grid, arr_xyz: np.ndarray, ijk, vector: bool) -> None:
+        tol = (self.tolerance,) * 3 if vector else self.tolerance
+        grid.copyFromArray(arr_xyz, ijk=tuple(int(c) for c in ijk), tolerance=tol)
+
+    def add_region(self, other, lo: tuple[int, int, int], shape: tuple[int, int, int]) -> None:
+        """Copy the voxels of grid `other` (another process's part of the same bake) inside the box of
+        `shape` voxels from index `lo` into the grid of the same name; the box must hold nothing yet."""
+        vector = other.valueTypeName.startswith("vec3")
+        grid = self.grid(other.name, vector)
+        arr = np.zeros((*shape, 3) if vector else shape, np.float32)
+        other.copyToArray(arr, ijk=tuple(int(c) for c in lo))
+        if np.any(np.abs(arr) > self.tolerance):
+            self._copy(grid, arr, lo, vector)
+
+    def active_voxels(self, name: str) -> int:
+        return int(self.grids[name].activeVoxelCount()) if name in self.grids else 0
+
+    def memory_bytes(self) -> int:
+        return sum(int(g.memUsage()) for g in self.grids.values())
+
+    def write(
+        self,
+        path: str | os.PathLike,
+        metadata: dict[str, str | float | int | bool] | None = None,
+        half: bool = False,
+        keep: tuple[str, ...] = ("density",),
+    ) -> Path:
+        """Write the grids that hold active voxels (and those named in `keep` even when empty) to `path`
+        atomically; `half` stores float values as 16-bit halves (OpenVDB's saveFloatAsHalf)."""
+        grids = [g for n, g in self.grids.items() if n in keep or g.activeVoxelCount() > 0]
+        for grid in grids:
+            grid.saveFloatAsHalf = bool(half)
+        return _write(path, grids, metadata)
+
+
+def _write(path: str | os.PathLike, grids: list, metadata: dict | None) -> Path:
+    vdb = bundled.openvdb()
+    path = Path(path)
     with atomic_path(path) as tmp:
         try:
-            vdb.write(str(tmp), grids=out, metadata={k: v for k, v in (metadata or {}).items()})
+            vdb.write(str(tmp), grids=grids, metadata=dict(metadata or {}))
         except (OSError, RuntimeError, ValueError) as err:
             raise NubisError(f"writing '{path}' failed ({err}): check the free disk space and permissions") from None
     return path

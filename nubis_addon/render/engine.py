@@ -65,7 +65,7 @@ STAGES: dict[str, Stage] = {
     # the sun over a plane facing it (the scene's cloud shadows).
     "panorama": Stage((("VEC4", "eye"),)),
     "shadow": Stage((("VEC4", "shadow_origin"), ("VEC4", "shadow_u"), ("VEC4", "shadow_v"))),
-    "bake": Stage((("VEC4", "bake_origin"), ("VEC4", "bake_voxel"))),
+    "bake": Stage((("VEC4", "bake_origin"), ("VEC4", "bake_voxel"), ("VEC4", "bake_tile"))),
     "motion": Stage(_VIEW, blocks=(("NubisMotionCameras", "C"),)),
     # The temporal viewport (render/temporal.py): one pixel of every 4x4 block into the working buffer,
     # the resolve into the full-resolution history, and the upscale onto the view.

@@ -1,0 +1,243 @@
+"""Bakes of frame sequences and bakes spread over Dask workers (docs/bake.md).
+
+A sequence writes one file per frame, named with Blender's `#` padding (`clouds_####.vdb`), all of
+them committed together at the end (core/staging.py). With an engine (core/distributed.py), the frames
+of a sequence, or the tiles of a single frame, run as Dask tasks in worker processes that load the
+same scene themselves (a preset by name or a saved .blend) and bake with the same GPU code; the
+files come back to this process, which writes them atomically. Tiles carry absolute voxel indices,
+so the merged grids equal the serial bake's voxel for voxel."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import bpy
+
+from ..core import bundled, distributed, sequence, vdbio
+from ..core.distributed import BakeOptions, SceneSource
+from ..core.errors import NubisError
+from ..core.fsutil import check_output_path
+from ..core.presets import load_preset
+from ..core.staging import output_set
+from ..render.gpu_context import ensure_gpu_context
+from . import pipeline, scene_io
+from .registration import ensure_registered
+
+Progress = Callable[[float], None]
+_TASK_FRAME = f"{__name__}.worker_bake_frame"
+_TASK_TILES = f"{__name__}.worker_bake_tiles"
+
+
+@dataclass
+class SequenceResult:
+    results: list = field(default_factory=list)  # pipeline.BakeResult per frame
+    seconds: float = 0.0
+    engine: str = ""
+
+
+def source_of(scene, preset: str | None, blend: str | None) -> SceneSource:
+    """The source a worker can load: the command line's --preset or --blend, else the saved file."""
+    if blend:
+        return SceneSource(blend=str(Path(blend).expanduser().resolve()))
+    if preset:
+        path = Path(preset).expanduser()
+        return SceneSource(preset=str(path.resolve()) if path.suffix == ".toml" else preset)
+    if bpy.data.filepath and not bpy.data.is_dirty:
+        return SceneSource(blend=bpy.data.filepath)
+    if bpy.data.filepath:
+        raise NubisError("distributed workers read the saved .blend: save the file first, then bake")
+    return SceneSource(preset=scene.nubis.preset or "default")
+
+
+def bake_sequence(
+    scene,
+    out: str | os.PathLike,
+    frames: list[int],
+    options: BakeOptions,
+    engine: distributed.Engine | None = None,
+    source: SceneSource | None = None,
+    progress: Progress | None = None,
+) -> SequenceResult:
+    """Bake `frames` to the files `out` names (with `#` padding), serially or on `engine`; the files
+    replace earlier ones together or not at all."""
+    start = time.perf_counter()
+    paths = [check_output_path(p, (".vdb",)) for p in sequence.sequence_paths(out, frames)]
+    result = SequenceResult(engine=str(engine or ""))
+    with output_set() as outputs:
+        staged = [outputs.stage(p) for p in paths]
+        if engine is None:
+            for n, (frame, path) in enumerate(zip(frames, staged, strict=True)):
+                scene.frame_set(frame)
+                sub = _sub_progress(progress, n, len(frames))
+                r = pipeline.bake(
+                    scene,
+                    path,
+                    options.voxel_size,
+                    sub,
+                    options.camera_only,
+                    options.size,
+                    options.half,
+                    options.velocity,
+                )
+                r.path = paths[n]
+                result.results.append(r)
+        else:
+            if source is None:
+                raise NubisError("a distributed bake needs the scene's source (a preset or a saved .blend)")
+            with distributed.client(engine) as client:
+                if len(frames) == 1:
+                    scene.frame_set(frames[0])
+                    r = _bake_tiles_distributed(client, scene, source, frames[0], options, staged[0], progress)
+                    r.path = paths[0]
+                    result.results.append(r)
+                else:
+                    result.results.extend(
+                        _bake_frames_distributed(client, source, frames, options, staged, paths, progress)
+                    )
+    result.seconds = time.perf_counter() - start
+    return result
+
+
+def _sub_progress(progress: Progress | None, n: int, total: int) -> Progress | None:
+    if progress is None:
+        return None
+    return lambda f: progress((n + f) / total)
+
+
+def _bake_frames_distributed(client, source, frames, options, staged, paths, progress):
+    futures = [
+        client.submit(distributed.run_task, _TASK_FRAME, source, f, options, pure=False, retries=distributed.RETRIES)
+        for f in frames
+    ]
+    index = {fut.key: n for n, fut in enumerate(futures)}
+    results = [None] * len(frames)
+    done = 0
+    for fut in distributed.distributed.as_completed(futures):
+        n = index[fut.key]
+        out = fut.result()
+        staged[n].write_bytes(out["data"])
+        results[n] = pipeline.BakeResult(
+            paths[n], out["plan"], out["active"], out["seconds"], tuple(out["grids"]), frames[n]
+        )
+        done += 1
+        if progress:
+            progress(done / len(frames))
+    return results
+
+
+def _bake_tiles_distributed(client, scene, source, frame, options, staged, progress):
+    start = time.perf_counter()
+    state, plan = pipeline.bake_plan(scene, options.voxel_size, options.camera_only, options.size, options.velocity)
+    busy = [n for n, t in enumerate(plan.tiles) if t.spans]
+    workers = max(1, sum(client.nthreads().values()))
+    # A few tasks per worker evens out the load and keeps a retried task short.
+    groups = _balanced(busy, [plan.tiles[n].voxels for n in busy], 4 * workers)
+    futures = [
+        client.submit(
+            distributed.run_task,
+            _TASK_TILES,
+            source,
+            frame,
+            options,
+            ids,
+            plan.dims,
+            pure=False,
+            retries=distributed.RETRIES,
+        )
+        for ids in groups
+    ]
+    vdb = bundled.openvdb()
+    merged = vdbio.SparseGrids(plan.voxel_size, plan.origin)
+    merged.grid("density")
+    done = 0
+    ids_of = {fut.key: ids for fut, ids in zip(futures, groups, strict=True)}
+    with tempfile.TemporaryDirectory(prefix="nubis-merge-") as tmp, pipeline._removed_if_interrupted(tmp):
+        for n, fut in enumerate(distributed.distributed.as_completed(futures)):
+            part = Path(tmp) / f"part{n}.vdb"
+            part.write_bytes(fut.result())
+            grids, _meta = vdb.readAll(str(part))
+            part.unlink()
+            for g in grids:
+                # Tiles never overlap: each part's voxels are copied in, tile by tile, unchanged.
+                for t in (plan.tiles[i] for i in ids_of[fut.key]):
+                    for k0, k1 in t.spans:
+                        merged.add_region(g, (t.i0, t.j0, k0), (t.nx, t.ny, k1 - k0))
+            done += 1
+            if progress:
+                progress(done / len(futures))
+    names = tuple(
+        n for n in ("density", "glow", "absorption", "velocity") if n == "density" or merged.active_voxels(n) > 0
+    )
+    merged.write(staged, pipeline.bake_metadata(scene, state, plan, names), half=options.half)
+    return pipeline.BakeResult(staged, plan, merged.active_voxels("density"), time.perf_counter() - start, names, frame)
+
+
+def _balanced(items: list[int], weights: list[int], groups: int) -> list[list[int]]:
+    """Split `items` into at most `groups` lists of similar total weight (largest first, to the lightest)."""
+    groups = max(1, min(groups, len(items)))
+    bins: list[list[int]] = [[] for _ in range(groups)]
+    load = [0] * groups
+    for w, item in sorted(zip(weights, items, strict=True), reverse=True):
+        k = load.index(min(load))
+        bins[k].append(item)
+        load[k] += w
+    return [sorted(b) for b in bins if b]
+
+
+# ---- the worker side: runs in Dask worker processes ---------------------------------------------
+
+_loaded: dict[str, object] = {}
+
+
+def _worker_scene(source: SceneSource, frame: int):
+    """This worker's copy of the scene at `frame` (loaded once per process and source)."""
+    key = repr(source)
+    if _loaded.get("key") != key:
+        if source.blend:
+            bpy.ops.wm.open_mainfile(filepath=source.blend, load_ui=False)
+            ensure_registered()
+        else:
+            bpy.ops.wm.read_factory_settings(use_empty=True)
+            ensure_registered()
+            scene_io.apply_preset(bpy.context.scene, load_preset(source.preset or "default"))
+        ensure_gpu_context()
+        _loaded["key"] = key
+    scene = bpy.context.scene
+    pipeline.check_scene(scene)
+    scene.frame_set(frame)
+    return scene
+
+
+def worker_bake_frame(source: SceneSource, frame: int, options: BakeOptions) -> dict:
+    """One whole frame, baked on this worker: the file's bytes and its summary."""
+    scene = _worker_scene(source, frame)
+    with tempfile.TemporaryDirectory(prefix="nubis-worker-") as tmp:
+        r = pipeline.bake(
+            scene,
+            Path(tmp) / "frame.vdb",
+            options.voxel_size,
+            None,
+            options.camera_only,
+            options.size,
+            options.half,
+            options.velocity,
+        )
+        data = r.path.read_bytes()
+    return {"data": data, "plan": r.plan, "active": r.active_voxels, "seconds": r.seconds, "grids": list(r.grids)}
+
+
+def worker_bake_tiles(source: SceneSource, frame: int, options: BakeOptions, ids: list[int], dims) -> bytes:
+    """Some tiles of one frame, baked on this worker: a partial VDB (no metadata) of their voxels."""
+    scene = _worker_scene(source, frame)
+    state, plan = pipeline.bake_plan(scene, options.voxel_size, options.camera_only, options.size, options.velocity)
+    if tuple(plan.dims) != tuple(dims):
+        raise NubisError(f"this worker planned a {plan.dims} bake, not {tuple(dims)}: it reads a different scene")
+    grids = pipeline.bake_grids(scene, state, plan, [plan.tiles[n] for n in ids])
+    with tempfile.TemporaryDirectory(prefix="nubis-worker-") as tmp:
+        path = grids.write(Path(tmp) / "part.vdb", keep=())
+        return path.read_bytes()

@@ -1,0 +1,59 @@
+"""Frame sequences of bakes: Blender's `#` frame padding (`clouds_####.vdb` -> `clouds_0007.vdb`),
+the name its Volume object loads as a sequence, and `--frames A-B`."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from .errors import NubisError
+from .limits import FRAME_RANGE
+
+MAX_SEQUENCE = 100_000  # frames in one command
+_HASHES = re.compile(r"#+")
+
+
+def has_padding(path: str | Path) -> bool:
+    return "#" in Path(path).name
+
+
+def frame_path(pattern: str | Path, frame: int) -> Path:
+    """The file of `frame`: the last run of `#` in the file name becomes the frame number padded with
+    zeros to the run's length (Blender's convention; a negative frame keeps its sign in front)."""
+    pattern = Path(pattern)
+    runs = list(_HASHES.finditer(pattern.name))
+    if not runs:
+        return pattern
+    run = runs[-1]
+    number = f"{abs(frame):0{len(run.group())}d}"
+    if frame < 0:
+        number = "-" + number
+    return pattern.with_name(pattern.name[: run.start()] + number + pattern.name[run.end() :])
+
+
+def parse_frames(text: str) -> list[int]:
+    """'A-B' or 'N' to the frames it names, within Blender's frame range."""
+    m = re.fullmatch(r"\s*(-?\d+)\s*(?:-\s*(-?\d+)\s*)?", text or "")
+    if not m:
+        raise NubisError(f"--frames takes a frame or a range like 1-24, not '{text}'")
+    a = int(m.group(1))
+    b = int(m.group(2)) if m.group(2) is not None else a
+    if b < a:
+        raise NubisError(f"--frames {text}: the last frame comes before the first; write {b}-{a}")
+    lo, hi = FRAME_RANGE
+    if a < lo or b > hi:
+        raise NubisError(f"--frames {text} is out of range: Blender's frames run from {lo} to {hi}")
+    if b - a + 1 > MAX_SEQUENCE:
+        raise NubisError(f"--frames {text} names {b - a + 1} frames: bake at most {MAX_SEQUENCE} in one command")
+    return list(range(a, b + 1))
+
+
+def sequence_paths(pattern: str | Path, frames: list[int]) -> list[Path]:
+    """One file per frame; several frames need a `#` run in the name, or they would overwrite each other."""
+    if len(frames) > 1 and not has_padding(pattern):
+        name = Path(pattern)
+        raise NubisError(
+            f"--out '{pattern}' has no '#' for the frame number: write it as "
+            f"'{name.with_name(name.stem + '_####' + name.suffix)}' to bake frames {frames[0]}-{frames[-1]}"
+        )
+    return [frame_path(pattern, f) for f in frames]
