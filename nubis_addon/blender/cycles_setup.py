@@ -88,7 +88,9 @@ def build_material(settings, with_glow: bool = False, with_absorption: bool = Fa
     return mat
 
 
-def import_volume(scene, vdb_path: str) -> bpy.types.Object:
+def import_volume(scene, vdb_path: str, sequence: tuple[int, int, int] | None = None) -> bpy.types.Object:
+    """The baked VDB as the scene's Nubis volume; `sequence` (first frame, frame count, step) loads the
+    numbered files beside `vdb_path` (clouds_0001.vdb, ...) as a Volume sequence played with the frames."""
     remove_volume(scene)
     vol = bpy.data.volumes.new(VOLUME_NAME)
     vol.filepath = vdb_path
@@ -96,6 +98,12 @@ def import_volume(scene, vdb_path: str) -> bpy.types.Object:
     if "density" not in [g.name for g in vol.grids]:
         bpy.data.volumes.remove(vol)
         raise NubisError(f"the VDB '{vdb_path}' has no 'density' grid: bake it again with Nubis")
+    if sequence is not None:  # after the check, which reads the first file itself
+        first, count, step = sequence
+        vol.is_sequence = True
+        vol.frame_start = first
+        vol.frame_duration = (count - 1) * step + 1
+        vol.frame_offset = first - 1  # file number = frame (Blender counts the first file as #1)
     # The reference must not round the bake: full-float grids, no clipping of thin edges.
     vol.render.precision = "FULL"
     vol.render.clipping = 0.0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -375,73 +376,176 @@ class NUBIS_OT_render_image(NeedsCloudscape, NubisOperator, bpy.types.Operator):
         return f"Rendered {w}x{h} into the image 'Nubis Render'"
 
 
-class NUBIS_OT_bake_vdb(NeedsCloudscape, NubisOperator, bpy.types.Operator):
-    """Bake the viewport's cloud density to an OpenVDB file for Cycles and other renderers"""
+def _default_bake_path(name: str) -> str:
+    """Beside the .blend when it is saved, else in the home folder: never a `//` path nothing resolves."""
+    return f"//{name}" if bpy.data.filepath else os.path.join(os.path.expanduser("~"), name)
+
+
+class ModalBake:
+    """A bake the artist can cancel: the work runs a group of tiles per timer tick (pipeline.bake_steps),
+    the status bar shows its progress, Esc stops it and nothing is written. In background mode (scripts,
+    the tests) it runs to its end at once."""
+
+    _timer = None
+    _jobs = None
+
+    def jobs(self, context):
+        """(label, stepped bake) pairs, run in order."""
+        raise NotImplementedError
+
+    def finished(self, context, results) -> str:
+        raise NotImplementedError
+
+    def execute(self, context):
+        try:
+            self._jobs = list(self.jobs(context))
+        except NubisError as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        self._results = []
+        if bpy.app.background:
+            try:
+                for _label, steps in self._jobs:
+                    self._results.append(pipeline.run_steps(steps))
+                message = self.finished(context, self._results)
+            except NubisError as err:
+                self.report({"ERROR"}, str(err))
+                return {"CANCELLED"}
+            self.report({"INFO"}, message)
+            return {"FINISHED"}
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(0.01, window=context.window)
+        wm.modal_handler_add(self)
+        wm.progress_begin(0, 100)
+        return {"RUNNING_MODAL"}
+
+    def _end(self, context) -> None:
+        wm = context.window_manager
+        if self._timer is not None:
+            wm.event_timer_remove(self._timer)
+            self._timer = None
+        wm.progress_end()
+        context.workspace.status_text_set(None)
+        for _label, steps in self._jobs or ():
+            steps.close()  # a cancelled bake writes nothing
+
+    def modal(self, context, event):
+        if event.type == "ESC":
+            self._end(context)
+            self.report({"WARNING"}, "Bake cancelled: no file was written, earlier bakes are untouched")
+            return {"CANCELLED"}
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        label, steps = self._jobs[0]
+        try:
+            fraction = next(steps)
+        except StopIteration as done:
+            self._results.append(done.value)
+            self._jobs.pop(0)
+            fraction = 1.0
+        except NubisError as err:
+            self._end(context)
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        total = len(self._results) + len(self._jobs)
+        overall = (len(self._results) + (0.0 if fraction >= 1.0 else fraction)) / max(total, 1)
+        context.window_manager.progress_update(int(overall * 100))
+        context.workspace.status_text_set(f"Nubis: baking {label}, {overall * 100:.0f}% (Esc cancels)")
+        if self._jobs:
+            return {"RUNNING_MODAL"}
+        self._end(context)
+        try:
+            self.report({"INFO"}, self.finished(context, self._results))
+        except NubisError as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        return {"FINISHED"}
+
+
+class NUBIS_OT_bake_vdb(NeedsCloudscape, ModalBake, bpy.types.Operator):
+    """Bake the viewport's cloud density to an OpenVDB file for Cycles and other renderers (Esc cancels)"""
 
     bl_idname = "nubis.bake_vdb"
     bl_label = "Bake OpenVDB"
-    bl_options = {"REGISTER", "UNDO"}
+    bl_options = {"REGISTER"}
 
-    filepath: StringProperty(
-        subtype="FILE_PATH", default="//nubis_clouds.vdb", options={"PATH_SUPPORTS_BLEND_RELATIVE"}
-    )
+    filepath: StringProperty(subtype="FILE_PATH", default="", options={"PATH_SUPPORTS_BLEND_RELATIVE"})
+    filter_glob: StringProperty(default="*.vdb", options={"HIDDEN"})
     voxel_size: FloatProperty(
         name="Voxel Size", default=0.0, min=0.0, unit="LENGTH", description="0 uses the scene's bake voxel size"
     )
 
-    def run(self, context):
-        wm = context.window_manager
-        path = _absolute(self.filepath)
+    def invoke(self, context, _event):
+        if not self.filepath:
+            self.filepath = _default_bake_path("nubis_clouds.vdb")
+        context.window_manager.fileselect_add(self)
+        return {"RUNNING_MODAL"}
+
+    def jobs(self, context):
+        path = _absolute(self.filepath or _default_bake_path("nubis_clouds.vdb"))
         s = context.scene.nubis
-        wm.progress_begin(0, 100)
-        try:
-            result = pipeline.bake(
-                context.scene,
-                path,
-                self.voxel_size or None,
-                lambda f: wm.progress_update(int(f * 100)),
-                camera_only=s.bake_camera_only,
-                half=s.bake_half,
-                velocity=s.bake_velocity,
-            )
-        finally:
-            wm.progress_end()
+        steps = pipeline.bake_steps(
+            context.scene,
+            path,
+            self.voxel_size or None,
+            camera_only=s.bake_camera_only,
+            half=s.bake_half,
+            velocity=s.bake_velocity,
+        )
+        return [(os.path.basename(path), steps)]
+
+    def finished(self, context, results) -> str:
+        result = results[0]
         cycles_setup.import_volume(context.scene, str(result.path))
         return f"Baked {result.active_voxels} voxels to {result.path} and added them as a Cycles volume"
 
 
-class NUBIS_OT_bake_frames(NeedsCloudscape, NubisOperator, bpy.types.Operator):
-    """Bake one VDB per frame of the scene's range (a sequence Blender's Volume object plays back)"""
+class NUBIS_OT_bake_frames(NeedsCloudscape, ModalBake, bpy.types.Operator):
+    """Bake one VDB per frame of the scene's range into a folder, and load them as a Volume sequence
+    (Esc cancels; frames already baked stay)"""
 
     bl_idname = "nubis.bake_frames"
     bl_label = "Bake Sequence"
+    bl_options = {"REGISTER"}
 
-    directory: StringProperty(subtype="DIR_PATH", default="//nubis_vdb/", options={"PATH_SUPPORTS_BLEND_RELATIVE"})
-    step: IntProperty(name="Frame Step", default=1, min=1)
+    directory: StringProperty(subtype="DIR_PATH", default="", options={"PATH_SUPPORTS_BLEND_RELATIVE"})
+    step: IntProperty(name="Frame Step", default=1, min=1, description="Bake every Nth frame of the range")
 
-    def run(self, context):
+    def invoke(self, context, _event):
+        if not self.directory:
+            self.directory = _default_bake_path("nubis_vdb") + os.sep
+        context.window_manager.fileselect_add(self)
+        return {"RUNNING_MODAL"}
+
+    def jobs(self, context):
         scene = context.scene
-        folder = _absolute(self.directory)
-        frames = range(scene.frame_start, scene.frame_end + 1, self.step)
-        wm = context.window_manager
+        folder = _absolute(self.directory or _default_bake_path("nubis_vdb"))
+        os.makedirs(folder, exist_ok=True)
+        frames = list(range(scene.frame_start, scene.frame_end + 1, self.step))
+        self._frames, self._folder = frames, folder
         s = scene.nubis
-        wm.progress_begin(0, 100 * len(frames))
+        for frame in frames:
+            yield (
+                f"frame {frame}",
+                self._frame_steps(scene, frame, os.path.join(folder, f"clouds_{frame:04d}.vdb"), s),
+            )
+
+    @staticmethod
+    def _frame_steps(scene, frame, path, s):
         current = scene.frame_current
+        scene.frame_set(frame)
         try:
-            for i, frame in enumerate(frames):
-                scene.frame_set(frame)
-                pipeline.bake(
-                    scene,
-                    f"{folder}/clouds_{frame:04d}.vdb",
-                    progress=lambda f, i=i: wm.progress_update(int((i + f) * 100)),
-                    camera_only=s.bake_camera_only,
-                    half=s.bake_half,
-                    velocity=s.bake_velocity,
-                )
+            result = yield from pipeline.bake_steps(
+                scene, path, camera_only=s.bake_camera_only, half=s.bake_half, velocity=s.bake_velocity
+            )
         finally:
             scene.frame_set(current)
-            wm.progress_end()
-        return f"Baked {len(frames)} frames into {folder}"
+        return result
+
+    def finished(self, context, results) -> str:
+        first = results[0].path
+        cycles_setup.import_volume(context.scene, str(first), sequence=(self._frames[0], len(self._frames), self.step))
+        return f"Baked {len(results)} frames into {self._folder} and loaded them as a Volume sequence"
 
 
 def _quality_items():

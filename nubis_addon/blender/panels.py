@@ -8,7 +8,7 @@ import bpy
 
 from ..core import quality, schema
 from ..core.errors import NubisError
-from . import operators, runtime, scene_io, status, viewport
+from . import operators, pipeline, runtime, scene_io, status, viewport
 
 
 def draw_settings(layout, owner, settings) -> None:
@@ -292,6 +292,13 @@ class NUBIS_PT_bake(NubisPanel, bpy.types.Panel):
     panel = "bake"
 
     def draw_after(self, context):
+        layout = self.layout
+        try:
+            voxels, nbytes = pipeline.bake_estimate(context.scene)
+            col = layout.column(align=True)
+            col.label(text=f"About {voxels / 1e6:.1f} M voxels evaluated, {nbytes / 2**20:.0f} MB at most", icon="INFO")
+        except NubisError as err:  # the bake would be refused: say why before anyone presses the button
+            layout.label(text=str(err), icon="ERROR")
         self.layout.operator("nubis.bake_vdb", icon="FILE_VOLUME")
         self.layout.operator("nubis.bake_frames", icon="SEQUENCE")
 

@@ -195,10 +195,12 @@ def bake_plan(
     size: tuple[int, int] | None = None,
     velocity: bool = False,
     thin_cirrus: bool = False,
+    wait: bool = True,
 ) -> tuple[CloudState, BakePlan]:
     """The scene's cloud state at its current frame and the bake's plan (tiles, memory estimate:
-    refused politely before any GPU work when it does not fit)."""
-    state = scene_io.state_from_scene(scene)
+    refused politely before any GPU work when it does not fit). `wait` False plans without capturing
+    the World's light (the plan does not depend on it)."""
+    state = scene_io.state_from_scene(scene, wait=wait)
     region = None
     if camera_only:
         w, h = size or resolution(scene, None, None)
@@ -216,6 +218,13 @@ def bake_grids(scene, state: CloudState, plan: BakePlan, tiles=None, progress: P
     sky has them absorption and glow; with the plan's `velocity` a Vec3 `velocity` grid in metres per
     second of animation, from the motion vectors' own model (the wind's scroll and the storms' turn
     over one frame, times the frame rate)."""
+    grids, evaluate = _bake_evaluator(scene, state, plan)
+    evaluate(plan.tiles if tiles is None else tiles, progress)
+    return grids
+
+
+def _bake_evaluator(scene, state: CloudState, plan: BakePlan):
+    """The grids a bake fills and the function that evaluates a group of its tiles into them."""
     fps = scene_io.scene_fps(scene)
     state.motion_dt = scene.nubis.wind_time_scale / fps  # one frame of wind time
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
@@ -225,8 +234,83 @@ def bake_grids(scene, state: CloudState, plan: BakePlan, tiles=None, progress: P
     # Skies whose field can hold no glow or absorption read back the density alone.
     packed = plan.extra_grids == 0 and not plan.velocity
     sink = _grid_sink(grids, plan.velocity, fps, packed)
-    gpu_bake.bake_tiles(clouds, plan, plan.tiles if tiles is None else tiles, sink, progress, plan.velocity, packed)
-    return grids
+
+    def evaluate(tiles, progress=None):
+        gpu_bake.bake_tiles(clouds, plan, tiles, sink, progress, plan.velocity, packed)
+
+    return grids, evaluate
+
+
+# Tiles evaluated between two looks at the interface (a cancel, a progress update) in a modal bake.
+TILES_PER_STEP = 8
+
+
+def bake_steps(
+    scene,
+    path: str | os.PathLike,
+    voxel_size: float | None = None,
+    camera_only: bool = False,
+    size: tuple[int, int] | None = None,
+    half: bool = False,
+    velocity: bool = False,
+    thin_cirrus: bool = False,
+    tiles_per_step: int = TILES_PER_STEP,
+):
+    """The bake in steps, for the interface: a generator yielding the fraction done after each group of
+    tiles; the file is written (atomically) after the last, and the generator returns the BakeResult.
+    Closing it early cancels: nothing is written, an earlier file at `path` stays as it was."""
+    path = check_output_path(path, (".vdb",))
+    start = time.perf_counter()
+    state, plan = bake_plan(scene, voxel_size, camera_only, size, velocity, thin_cirrus)
+    grids, evaluate = _bake_evaluator(scene, state, plan)
+    tiles = plan.tiles
+    step = max(1, int(tiles_per_step))
+    for i in range(0, len(tiles), step):
+        evaluate(tiles[i : i + step])
+        yield min(1.0, (i + step) / len(tiles))
+    names = tuple(
+        n
+        for n in ("density", "glow", "absorption", "velocity")
+        if n in grids.grids and (n == "density" or grids.active_voxels(n) > 0)
+    )
+    grids.write(path, bake_metadata(scene, state, plan, names), half=half)
+    active = grids.active_voxels("density")
+    return BakeResult(path, plan, active, time.perf_counter() - start, names, scene.frame_current)
+
+
+def run_steps(steps, progress: Progress | None = None):
+    """Run a stepped bake to its end; its BakeResult."""
+    while True:
+        try:
+            fraction = next(steps)
+        except StopIteration as done:
+            return done.value
+        if progress:
+            progress(fraction)
+
+
+_estimates: dict = {}
+
+
+def bake_estimate(scene, voxel_size: float | None = None) -> tuple[int, int]:
+    """(voxels the GPU would evaluate, bytes the bake would hold at its peak) with the scene's bake
+    settings, for the Bake panel: planned once per change of the field, the settings or the camera."""
+    s = scene.nubis
+    cam = scene.camera
+    key = (
+        scene.as_pointer(),
+        scene_io.field_generation(),
+        voxel_size or s.bake_voxel_size,
+        s.bake_camera_only,
+        s.bake_velocity,
+        tuple(map(tuple, cam.matrix_world)) if cam else None,
+        tuple(scene_io.params_from_scene(s).items()),
+    )
+    if key not in _estimates:
+        _estimates.clear()
+        _state, plan = bake_plan(scene, voxel_size, s.bake_camera_only, None, s.bake_velocity, wait=False)
+        _estimates[key] = (plan.evaluated_voxels, plan.bytes_estimate)
+    return _estimates[key]
 
 
 def _grid_sink(grids, velocity: bool, fps: float, packed: bool = False):
@@ -283,18 +367,7 @@ def bake(
 
     `camera_only` bakes just the part of the sky the scene camera sees, which allows finer voxels;
     `half` stores the float grids as half floats; `velocity` adds the `velocity` grid."""
-    path = check_output_path(path, (".vdb",))
-    start = time.perf_counter()
-    state, plan = bake_plan(scene, voxel_size, camera_only, size, velocity, thin_cirrus)
-    grids = bake_grids(scene, state, plan, progress=progress)
-    names = tuple(
-        n
-        for n in ("density", "glow", "absorption", "velocity")
-        if n in grids.grids and (n == "density" or grids.active_voxels(n) > 0)
-    )
-    grids.write(path, bake_metadata(scene, state, plan, names), half=half)
-    active = grids.active_voxels("density")
-    return BakeResult(path, plan, active, time.perf_counter() - start, names, scene.frame_current)
+    return run_steps(bake_steps(scene, path, voxel_size, camera_only, size, half, velocity, thin_cirrus), progress)
 
 
 def render_cycles(
