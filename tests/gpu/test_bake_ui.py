@@ -1,12 +1,10 @@
 """Bakes from the sidebar: a bake cancelled half way leaves the earlier VDB byte-identical, the Bake
 panel's estimate comes before any bake, Bake Sequence writes numbered files and loads them as a
-Volume sequence, and a `//` path in an unsaved file is refused with a sentence."""
+Volume sequence (a `//` path in an unsaved file: tests/gpu/test_superstorm.py)."""
 
 from __future__ import annotations
 
 from pathlib import Path
-
-import pytest
 
 
 def test_a_cancelled_bake_leaves_the_earlier_file_byte_identical(make_scene, tmp_path):
@@ -48,10 +46,3 @@ def test_bake_sequence_writes_numbered_files_and_loads_them_as_a_sequence(blende
     vol = scene.objects[cycles_setup.VOLUME_NAME].data
     assert vol.is_sequence and vol.frame_start == 3 and vol.frame_duration == 3 and vol.frame_offset == 2
     assert Path(blender.path.abspath(vol.filepath)).name == "clouds_0003.vdb"
-
-
-def test_an_unsaved_file_refuses_a_relative_bake_path(blender, make_scene):
-    make_scene("default")
-    assert not blender.data.filepath
-    with pytest.raises(RuntimeError, match="not saved yet"):
-        blender.ops.nubis.bake_vdb(filepath="//clouds.vdb")
