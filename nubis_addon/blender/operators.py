@@ -68,14 +68,9 @@ class NeedsCloudscape:
         return True
 
 
-class NUBIS_OT_new_cloudscape(NubisOperator, bpy.types.Operator):
-    """Create the cloud settings, data-field images, sun, sky and camera of a preset"""
+class KeepOptions:
+    """What New Cloudscape and Load Preset leave as the artist had it (scene_io.Keep)."""
 
-    bl_idname = "nubis.new_cloudscape"
-    bl_label = "New Cloudscape"
-    bl_options = {"REGISTER", "UNDO"}
-
-    preset: EnumProperty(name="Preset", items=preset_items)
     keep_camera: BoolProperty(
         name="Keep Scene Camera", default=False, description="Render from the scene's camera, unmoved and unchanged"
     )
@@ -88,6 +83,25 @@ class NUBIS_OT_new_cloudscape(NubisOperator, bpy.types.Operator):
     keep_sun: BoolProperty(
         name="Use Scene Sun", default=False, description="Light the clouds with the scene's own Sun lamp"
     )
+    build_sky: BoolProperty(
+        name="Build Sky",
+        default=True,
+        description="Make a new World with Blender's physical Sky Texture, its sun tied to the Sun lamp (the "
+        "scene's own World is kept in the file); off sets the preset's flat color",
+    )
+
+    def keep(self):
+        return scene_io.Keep(self.keep_camera, self.keep_world, self.keep_render, self.keep_sun, self.build_sky)
+
+
+class NUBIS_OT_new_cloudscape(KeepOptions, NubisOperator, bpy.types.Operator):
+    """Create the cloud settings, data-field images, sun, sky and camera of a preset"""
+
+    bl_idname = "nubis.new_cloudscape"
+    bl_label = "New Cloudscape"
+    bl_options = {"REGISTER", "UNDO"}
+
+    preset: EnumProperty(name="Preset", items=preset_items)
 
     def invoke(self, context, _event):
         """In a scene that already has a camera, World or Sun of the artist's, ask what to keep."""
@@ -100,17 +114,10 @@ class NUBIS_OT_new_cloudscape(NubisOperator, bpy.types.Operator):
         self.keep_camera, self.keep_world, self.keep_render, self.keep_sun = own_camera, own_world, True, own_sun
         return context.window_manager.invoke_props_dialog(self)
 
-    build_sky: BoolProperty(
-        name="Build Sky",
-        default=True,
-        description="Make a new World with Blender's physical Sky Texture, its sun tied to the Sun lamp (the "
-        "scene's own World is kept in the file); off sets the preset's flat color",
-    )
-
     def run(self, context):
         entry = find_preset_entry(self.preset)
         preset = presets.load_preset(str(entry.path) if entry else self.preset)
-        keep = scene_io.Keep(self.keep_camera, self.keep_world, self.keep_render, self.keep_sun, self.build_sky)
+        keep = self.keep()
         with _field_progress(context) as progress:
             scene_io.apply_preset(context.scene, preset, progress, keep)
         return f"Cloudscape '{preset.name}' created"
@@ -656,7 +663,7 @@ def active_preset(context) -> PresetEntry | None:
     )
 
 
-class NUBIS_OT_preset_load(NubisOperator, bpy.types.Operator):
+class NUBIS_OT_preset_load(KeepOptions, NubisOperator, bpy.types.Operator):
     """Load a preset into this scene's cloudscape (or make one from it)"""
 
     bl_idname = "nubis.preset_load"
@@ -664,18 +671,6 @@ class NUBIS_OT_preset_load(NubisOperator, bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     filepath: StringProperty(subtype="FILE_PATH", options={"HIDDEN", "SKIP_SAVE"})
-    keep_camera: BoolProperty(
-        name="Keep Scene Camera", default=False, description="Render from the scene's camera, unmoved and unchanged"
-    )
-    keep_world: BoolProperty(name="Keep World", default=False, description="Keep the scene's World as the sky")
-    keep_render: BoolProperty(
-        name="Keep Render Settings",
-        default=False,
-        description="Keep resolution, frame, view transform and Cycles samples and bounces",
-    )
-    keep_sun: BoolProperty(
-        name="Use Scene Sun", default=False, description="Light the clouds with the scene's own Sun lamp"
-    )
 
     @classmethod
     def description(cls, _context, properties):
@@ -690,7 +685,7 @@ class NUBIS_OT_preset_load(NubisOperator, bpy.types.Operator):
         if not self.filepath:
             raise NubisError("choose a preset from the menu")
         preset = presets.load_preset(self.filepath)
-        keep = scene_io.Keep(self.keep_camera, self.keep_world, self.keep_render, self.keep_sun, self.build_sky)
+        keep = self.keep()
         with _field_progress(context) as progress:
             scene_io.apply_preset(context.scene, preset, progress, keep)
         return f"Preset '{preset.name}' loaded"

@@ -498,7 +498,10 @@ def preset_from_scene(scene, name: str, description: str = "") -> Preset:
             angle=math.degrees(sun.data.angle),
         )
     world = scene.world
-    if world is not None:
+    if sky.is_nubis_sky(world):
+        extra["world"].update(sky.atmosphere(world))
+    elif world is not None:
+        extra["world"].update(sky=False)
         bg = next((n for n in world.node_tree.nodes if n.type == "BACKGROUND"), None) if world.node_tree else None
         if bg is not None:
             extra["world"].update(color=list(bg.inputs["Color"].default_value)[:3])

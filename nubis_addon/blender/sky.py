@@ -30,6 +30,22 @@ def sky_type() -> str:
     return "MULTIPLE_SCATTERING" if bpy.app.version >= (5, 0, 0) else "NISHITA"
 
 
+STRENGTH_KEY = "nubis_sky_strength"
+
+
+def atmosphere(world) -> dict:
+    """A Nubis sky's preset values: [world] color, strength, air, aerosol, ozone (sky = true)."""
+    tex = sky_node(world)
+    return {
+        "sky": True,
+        "color": list(world.color),
+        "strength": float(world.get(STRENGTH_KEY, 1.0)),
+        "air": float(tex.air_density),
+        "aerosol": float(getattr(tex, _aerosol_attr())),
+        "ozone": float(tex.ozone_density),
+    }
+
+
 def _aerosol_attr() -> str:
     return "aerosol_density" if bpy.app.version >= (5, 0, 0) else "dust_density"
 
@@ -74,6 +90,7 @@ def build_world(scene, cfg: dict, sun) -> bpy.types.World:
     nt.links.new(bg.outputs["Background"], out.inputs["Surface"])
     tex.location, bg.location, out.location = (-300, 0), (0, 0), (250, 0)
     world.color = cfg["color"]
+    world[STRENGTH_KEY] = float(cfg["strength"])  # the preset's, before calibration: saving a preset reads it
     scene.world = world
     if bpy.context.view_layer is not None:
         bpy.context.view_layer.update()  # the lamp's matrix_world after a script turned it

@@ -185,9 +185,13 @@ def _edit_everything(scene, blender):
     sun = scene_io.find_sun(scene)
     sun.rotation_euler = (math.radians(30.0), math.radians(10.0), math.radians(200.0))
     sun.data.color, sun.data.energy, sun.data.angle = (0.9, 0.8, 0.7), 7.5, math.radians(1.5)
-    bg = next(n for n in scene.world.node_tree.nodes if n.type == "BACKGROUND")
-    bg.inputs["Color"].default_value = (0.1, 0.2, 0.3, 1.0)
-    bg.inputs["Strength"].default_value = 1.75
+    from nubis_addon.blender import sky
+
+    assert sky.is_nubis_sky(scene.world)  # the preset's physically based sky: its atmosphere round-trips
+    scene.world.color = (0.1, 0.2, 0.3)
+    scene.world[sky.STRENGTH_KEY] = 1.75
+    node = sky.sky_node(scene.world)
+    node.air_density, node.ozone_density = 1.5, 0.5
     scene.camera.location = (100.0, -200.0, 30.0)
     scene.camera.rotation_euler = (math.radians(85.0), 0.0, math.radians(-20.0))
     scene.camera.data.lens, scene.camera.data.clip_end = 35.0, 150000.0
@@ -206,13 +210,14 @@ def _snapshot(scene):
     s = scene.nubis
     sun = scene_io.find_sun(scene)
     direction = scene_io.evaluated_matrix(sun).to_3x3().col[2]
-    bg = next(n for n in scene.world.node_tree.nodes if n.type == "BACKGROUND")
+    from nubis_addon.blender import sky
+
     return {
         "settings": {k.key: scene_io._from_blender(k, getattr(s, k.key)) for k in schema.PRESET_SCENE},
         "layers": [scene_io.layer_to_dict(layer) for layer in s.layers],
         "storms": [(scene_io.table_to_dict(st, schema.STORM), scene_io.storm_centre(st)) for st in s.storms],
         "sun": (list(direction), list(sun.data.color), sun.data.energy, sun.data.angle),
-        "world": (list(bg.inputs["Color"].default_value), bg.inputs["Strength"].default_value),
+        "world": sky.atmosphere(scene.world),
         "camera": (
             list(scene.camera.location),
             list(scene.camera.rotation_euler),
