@@ -15,7 +15,7 @@ import bpy
 
 from ..core import schema
 from ..core.errors import NubisError
-from . import scene_io, status, viewport
+from . import handlers, scene_io, status, viewport
 
 # Seconds of quiet after the last edit before the field is composited again.
 DEBOUNCE_S = 0.15
@@ -161,15 +161,11 @@ _HANDLERS = (
 
 
 def register() -> None:
-    for handlers, fn in _HANDLERS:
-        if fn not in handlers:
-            handlers.append(fn)
+    handlers.add(_HANDLERS)
 
 
 def unregister() -> None:
-    for handlers, fn in _HANDLERS:
-        if fn in handlers:
-            handlers.remove(fn)
+    handlers.remove(_HANDLERS)
     scene_io.forget_stale()
     if bpy.app.timers.is_registered(composite_stale):
         bpy.app.timers.unregister(composite_stale)

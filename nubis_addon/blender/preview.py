@@ -6,7 +6,6 @@ from __future__ import annotations
 import contextlib
 import json
 import math
-import re
 import statistics
 import tempfile
 import time
@@ -18,7 +17,7 @@ import bpy
 import mathutils
 import numpy as np
 
-from ..core import camera, imageio, quality, staging
+from ..core import camera, imageio, quality, sequence, staging
 from ..core.bakeplan import comparison_voxel_size, view_footprint
 from ..core.errors import NubisError
 from ..core.fsutil import check_output_dir
@@ -35,16 +34,7 @@ def parse_frames(text: str | None, current: int) -> list[int]:
     """'A-B' or 'N' to the frames it names; None is the current frame."""
     if text is None:
         return [current]
-    m = re.fullmatch(r"\s*(-?\d+)\s*(?:-\s*(-?\d+)\s*)?", text)
-    if not m:
-        raise NubisError(f"--frames takes a frame or a range like 1-24, not '{text}'")
-    a = int(m.group(1))
-    b = int(m.group(2)) if m.group(2) is not None else a
-    if b < a:
-        raise NubisError(f"--frames {text}: the last frame comes before the first; write {b}-{a}")
-    if b - a + 1 > MAX_FRAMES:
-        raise NubisError(f"--frames {text} names {b - a + 1} frames: preview at most {MAX_FRAMES} at a time")
-    return list(range(a, b + 1))
+    return sequence.parse_frames(text, MAX_FRAMES, "preview")
 
 
 def apply_quality(scene, name: str | None) -> str:

@@ -32,7 +32,7 @@ from ..core.errors import NubisError
 from ..core.fsutil import check_output_path
 from ..core.staging import output_set
 from ..render import engine
-from . import cycles_setup, pipeline, runtime, scene_io, sky
+from . import cycles_setup, handlers, pipeline, runtime, scene_io, sky
 
 RENDER_WORLD = "Nubis Render World"
 CAMERA_IMAGE = "Nubis Camera Clouds"
@@ -352,15 +352,11 @@ HANDLERS = (
 
 
 def register() -> None:
-    for handlers, fn in HANDLERS:
-        if fn not in handlers:
-            handlers.append(fn)
+    handlers.add(HANDLERS)
 
 
 def unregister() -> None:
-    for handlers, fn in HANDLERS:
-        if fn in handlers:
-            handlers.remove(fn)
+    handlers.remove(HANDLERS)
 
 
 # ---- the panorama command --------------------------------------------------------------------------

@@ -17,6 +17,7 @@ import numpy as np
 
 from ..core import imageio, interrupt, metrics
 from ..core import sky as skymath
+from . import handlers
 
 WORLD_NAME = "Nubis Sky"
 SKY_NODE = "Nubis Sky Texture"
@@ -379,12 +380,8 @@ HANDLERS = (
 
 
 def register() -> None:
-    for handlers, fn in HANDLERS:
-        if fn not in handlers:
-            handlers.append(fn)
+    handlers.add(HANDLERS)
 
 
 def unregister() -> None:
-    for handlers, fn in HANDLERS:
-        if fn in handlers:
-            handlers.remove(fn)
+    handlers.remove(HANDLERS)

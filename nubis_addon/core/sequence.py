@@ -31,8 +31,10 @@ def frame_path(pattern: str | Path, frame: int) -> Path:
     return pattern.with_name(pattern.name[: run.start()] + number + pattern.name[run.end() :])
 
 
-def parse_frames(text: str) -> list[int]:
-    """'A-B' or 'N' to the frames it names, within Blender's frame range."""
+def parse_frames(text: str, most: int | None = None, what: str = "bake") -> list[int]:
+    """'A-B' or 'N' to the frames it names, within Blender's frame range and at most `most` of them
+    (MAX_SEQUENCE by default) for one command that does `what` to them."""
+    most = MAX_SEQUENCE if most is None else most
     m = re.fullmatch(r"\s*(-?\d+)\s*(?:-\s*(-?\d+)\s*)?", text or "")
     if not m:
         raise NubisError(f"--frames takes a frame or a range like 1-24, not '{text}'")
@@ -43,8 +45,8 @@ def parse_frames(text: str) -> list[int]:
     lo, hi = FRAME_RANGE
     if a < lo or b > hi:
         raise NubisError(f"--frames {text} is out of range: Blender's frames run from {lo} to {hi}")
-    if b - a + 1 > MAX_SEQUENCE:
-        raise NubisError(f"--frames {text} names {b - a + 1} frames: bake at most {MAX_SEQUENCE} in one command")
+    if b - a + 1 > most:
+        raise NubisError(f"--frames {text} names {b - a + 1} frames: {what} at most {most} in one command")
     return list(range(a, b + 1))
 
 
