@@ -19,10 +19,10 @@ sys.path.insert(0, str(ROOT))
 
 # label, sun elevation, sun azimuth (compass degrees), camera pitch, heading.
 SHOTS = (
-    ("sunrise, towards the sun", 4.0, 80.0, 100.0, -70.0),
-    ("noon", 70.0, 180.0, 100.0, 20.0),
-    ("sunset, towards the sun", 4.0, 250.0, 100.0, 100.0),
-    ("sun behind the camera", 20.0, 200.0, 100.0, 20.0),
+    ("sunrise, towards the sun", 4.0, 80.0, 116.0, -70.0),
+    ("noon", 70.0, 180.0, 116.0, 20.0),
+    ("sunset, towards the sun", 4.0, 250.0, 116.0, 100.0),
+    ("sun behind the camera", 20.0, 200.0, 116.0, 20.0),
 )
 
 
