@@ -246,4 +246,17 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out v
   return vec4(radiance, alpha);
 }
 
-
+/* One ray as the full-resolution stages show it (the render, the panorama): the march, this frame's
+ * lightning flashes, and the cirrus layer in the order the camera sees it. */
+vec4 nubis_shade_ray(vec3 origin, vec3 dir, vec2 pixel)
+{
+  float cloud_depth;
+  vec4 flash_mask;
+  vec4 clouds = nubis_march(origin, dir, pixel, cloud_depth, flash_mask);
+  clouds.rgb += NUBIS_FLASH_COLOUR * dot(flash_mask, nubis_flash_intensities());
+#if NUBIS_CIRRUS
+  float behind;
+  clouds = nubis_with_cirrus(clouds, origin, dir, behind);
+#endif
+  return clouds;
+}

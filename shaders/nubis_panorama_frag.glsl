@@ -7,13 +7,6 @@ void main()
   float elevation = (uv.y - 0.5) * NUBIS_PI;
   vec3 dir = vec3(cos(elevation) * cos(azimuth), cos(elevation) * sin(azimuth), sin(elevation));
   vec3 origin = eye.xyz;
-  float cloud_depth;
-  vec4 flash_mask;
-  vec4 clouds = nubis_march(origin, dir, gl_FragCoord.xy, cloud_depth, flash_mask);
-  clouds.rgb += NUBIS_FLASH_COLOUR * dot(flash_mask, nubis_flash_intensities());
-#if NUBIS_CIRRUS
-  float behind;
-  clouds = nubis_with_cirrus(clouds, origin, dir, behind);
-#endif
+  vec4 clouds = nubis_shade_ray(origin, dir, gl_FragCoord.xy);
   color = clouds;
 }

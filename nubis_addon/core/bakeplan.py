@@ -65,14 +65,8 @@ class BakePlan:
         return int(BASE_BYTES + self.evaluated_voxels * per)
 
 
-def view_footprint(state: CloudState, inv_view_proj: np.ndarray, samples: int = 33) -> tuple[float, ...]:
-    """XY bounds of the cloud layer a camera sees: rays through a grid over the image, cut by the
-    shell's spheres (and the cirrus sphere) within the draw radius. Baking only this box lets a
-    shot's bake use voxels several times finer than a bake of the whole sky."""
-    p = state.params
-    planet = p["layer_planet_radius"]
-    lo, hi = state.shell()
-    altitudes = [lo, hi] + ([p["cirrus_altitude"]] if state.has_cirrus() else [])
+def _camera_rays(inv_view_proj: np.ndarray, samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """Origins and unit directions of a samples x samples grid of the camera's rays over the image."""
     t = np.linspace(-1.0, 1.0, samples)
     nx, ny = np.meshgrid(t, t)
     ndc = np.stack([nx.ravel(), ny.ravel()], axis=1)
@@ -85,9 +79,13 @@ def view_footprint(state: CloudState, inv_view_proj: np.ndarray, samples: int = 
     origin = unproject(-1.0)
     direction = unproject(1.0) - origin
     direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-    centre = np.array([0.0, 0.0, -planet])
-    points = [origin[:, :2]]
-    oc = origin - centre
+    return origin, direction
+
+
+def _sphere_hits(origin: np.ndarray, direction: np.ndarray, planet: float, altitudes):
+    """For each altitude's sphere about the planet's centre and each of its two crossings: (distance
+    along every ray, which rays cross it ahead of their origin)."""
+    oc = origin - np.array([0.0, 0.0, -planet])
     b = np.sum(oc * direction, axis=1)
     for alt in altitudes:
         c = np.sum(oc * oc, axis=1) - (planet + alt) ** 2
@@ -95,8 +93,21 @@ def view_footprint(state: CloudState, inv_view_proj: np.ndarray, samples: int = 
         ok = disc >= 0
         for sign in (-1.0, 1.0):
             dist = -b + sign * np.sqrt(np.where(ok, disc, 0.0))
-            hit = ok & (dist > 0)
-            points.append((origin + direction * dist[:, None])[hit][:, :2])
+            yield dist, ok & (dist > 0)
+
+
+def view_footprint(state: CloudState, inv_view_proj: np.ndarray, samples: int = 33) -> tuple[float, ...]:
+    """XY bounds of the cloud layer a camera sees: rays through a grid over the image, cut by the
+    shell's spheres (and the cirrus sphere) within the draw radius. Baking only this box lets a
+    shot's bake use voxels several times finer than a bake of the whole sky."""
+    p = state.params
+    planet = p["layer_planet_radius"]
+    lo, hi = state.shell()
+    altitudes = [lo, hi] + ([p["cirrus_altitude"]] if state.has_cirrus() else [])
+    origin, direction = _camera_rays(inv_view_proj, samples)
+    points = [origin[:, :2]]
+    for dist, hit in _sphere_hits(origin, direction, planet, altitudes):
+        points.append((origin + direction * dist[:, None])[hit][:, :2])
     xy = np.concatenate(points)
     # Beyond the draw radius there is nothing to bake: pull far hits back onto its circle.
     draw = np.asarray(state.draw_center)
@@ -335,36 +346,17 @@ def nearest_cloud_distance(state: CloudState, inv_view_proj: np.ndarray, samples
     p = state.params
     planet = p["layer_planet_radius"]
     lo, hi = state.shell()
-    t = np.linspace(-1.0, 1.0, samples)
-    nx, ny = np.meshgrid(t, t)
-    ndc = np.stack([nx.ravel(), ny.ravel()], axis=1)
-    m = np.asarray(inv_view_proj, dtype=np.float64)
-
-    def unproject(z: float) -> np.ndarray:
-        h = np.c_[ndc, np.full(len(ndc), z), np.ones(len(ndc))] @ m.T
-        return h[:, :3] / h[:, 3:4]
-
-    origin = unproject(-1.0)
-    direction = unproject(1.0) - origin
-    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-    centre = np.array([0.0, 0.0, -planet])
-    altitude = float(np.linalg.norm(origin[0] - centre)) - planet
+    origin, direction = _camera_rays(inv_view_proj, samples)
+    altitude = float(np.linalg.norm(origin[0] - np.array([0.0, 0.0, -planet]))) - planet
     if lo <= altitude <= hi:
         return 0.0
-    oc = origin - centre
-    b = np.sum(oc * direction, axis=1)
+    altitudes = [lo, hi] + ([p["cirrus_altitude"]] if state.has_cirrus() else [])
     best = math.inf
-    for alt in [lo, hi] + ([p["cirrus_altitude"]] if state.has_cirrus() else []):
-        c = np.sum(oc * oc, axis=1) - (planet + alt) ** 2
-        disc = b * b - c
-        ok = disc >= 0
-        for sign in (-1.0, 1.0):
-            dist = -b + sign * np.sqrt(np.where(ok, disc, 0.0))
-            hit = ok & (dist > 0)
-            points = (origin + direction * dist[:, None])[hit][:, :2]
-            inside = np.linalg.norm(points - np.asarray(state.draw_center), axis=1) < p["layer_draw_radius"]
-            if inside.any():
-                best = min(best, float(dist[hit][inside].min()))
+    for dist, hit in _sphere_hits(origin, direction, planet, altitudes):
+        points = (origin + direction * dist[:, None])[hit][:, :2]
+        inside = np.linalg.norm(points - np.asarray(state.draw_center), axis=1) < p["layer_draw_radius"]
+        if inside.any():
+            best = min(best, float(dist[hit][inside].min()))
     return best
 
 
