@@ -73,6 +73,10 @@ const uint NUBIS_PCG_RXS_M_XS_MULTIPLIER = 277803737u;
 /* 2^24: the hash's top 24 bits, the most a float's mantissa holds exactly, scaled to [0, 1). */
 const float NUBIS_HASH_24_BITS = 16777216.0;
 
+/* Each accumulation pass shifts the step jitter by the golden ratio's fractional part, so N passes cover
+ * the step evenly (docs/sources.md#step-jitter). */
+const float NUBIS_GOLDEN_RATIO_FRACT = 0.61803399;
+
 /* A per-pixel value in [0, 1) from an integer hash (PCG-style): white noise, so undersampled steps
  * show as grain rather than the diagonal hatching of interleaved gradient noise. */
 float nubis_pixel_hash(vec2 pixel)

@@ -31,6 +31,8 @@ const float NUBIS_NEAR_VERTICAL = 0.9;
  * by the golden angle (docs/sources.md#numerical-methods). */
 const float NUBIS_TWO_PI = 6.2831853;
 const vec2 NUBIS_SKY_HASH_OFFSET = vec2(0.5, 17.5);
+const vec2 NUBIS_SHADOW_HASH_OFFSET = vec2(29.5, 3.5);
+const vec2 NUBIS_STRATUM_HASH_OFFSET = vec2(7.5, 41.5);
 const float NUBIS_R2_STEP = 0.7548777;
 const float NUBIS_GOLDEN_ANGLE = 2.39996323;
 
@@ -218,10 +220,23 @@ vec3 nubis_storm_glow(vec3 p, float fine_density)
   return nubis_storm_steady_glow(p, fine_density) + NUBIS_FLASH_COLOUR * (flashes.x + flashes.y + flashes.z + flashes.w);
 }
 
+/* The reference light samples' offset within their strata for this pixel and accumulation pass (the
+ * middle when the march is not jittered). */
+float nubis_reference_jitter(vec2 pixel)
+{
+  if (P.jitter <= 0.5) {
+    return 0.5;
+  }
+  return fract(nubis_pixel_hash(pixel + NUBIS_SHADOW_HASH_OFFSET) + NUBIS_R2_STEP * P.jitter_pass);
+}
+
 /* Reference optical depth (without sigma): the full-detail density along `dir` until the ray leaves
  * the cloud shell (or the draw radius ends the clouds), with rain's and storms' absorption; `plain`
- * returns the density alone, for the powder term. */
-float nubis_reference_depth(vec3 p, vec3 dir, int samples, out float plain)
+ * returns the density alone, for the powder term. `jitter` in [0, 1) places the samples within their
+ * strata: a fixed placement (0.5) would sample every shadow ray at the same distances, which misses or
+ * doubles whole puffs consistently over a region of the image; jittered per pixel and per pass, the
+ * supersampled, accumulated estimate converges to the integral (docs/sources.md#reference-march). */
+float nubis_reference_depth(vec3 p, vec3 dir, int samples, float jitter, out float plain)
 {
   float altitude = nubis_altitude(p, P.layer_planet_radius);
   vec2 top = nubis_ray_sphere(p, dir, P.layer_planet_radius, P.shell_top);
@@ -246,7 +261,7 @@ float nubis_reference_depth(vec3 p, vec3 dir, int samples, out float plain)
   plain = 0.0;
   float n = float(samples);
   for (int i = 0; i < samples; i++) {
-    float u = (float(i) + 0.5) / n;
+    float u = (float(i) + jitter) / n;
     vec3 q = p + dir * (len * u * u);
     NubisDensity s = nubis_density(q, false, 0.0);
     float w = s.fine * (2.0 * len * u / n);
@@ -267,46 +282,74 @@ float nubis_henyey_greenstein_sample(float g, float u)
   return clamp((1.0 + g * g - s * s) / (2.0 * g), -1.0, 1.0);
 }
 
+/* The directions the reference sky light samples around a view ray: drawn from the phase function's two
+ * lobes in proportion to their weights (importance sampling, stratified in the lobe's cosine), turned
+ * about the view ray by a per-pixel angle so neighbouring pixels see different directions and
+ * supersampling averages them out. The phase is far from isotropic (the silver-lining lobe peaks ~45x
+ * above it), which is why the directions follow it. */
+struct NubisSkyDirections {
+  vec3 view, side, up;
+  float spin;
+  float stratum; /* the directions' offset within their strata of the lobe's cosine */
+  int silver;    /* the first `silver` directions are the silver-lining lobe's */
+};
+
+NubisSkyDirections nubis_sky_directions(vec3 view_dir, vec2 pixel)
+{
+  NubisSkyDirections s;
+  const int count = NUBIS_REFERENCE_SKY_DIRECTIONS;
+  s.silver = int(floor(float(count) * P.lighting_phase_mix + 0.5));
+  s.silver = clamp(s.silver, P.lighting_phase_mix > 0.0 ? 1 : 0, P.lighting_phase_mix < 1.0 ? count - 1 : count);
+  s.view = view_dir;
+  s.side = normalize(abs(view_dir.z) < NUBIS_NEAR_VERTICAL ? cross(view_dir, vec3(0.0, 0.0, 1.0)) :
+                                                  cross(view_dir, vec3(1.0, 0.0, 0.0)));
+  s.up = cross(view_dir, s.side);
+  float turn = fract(nubis_pixel_hash(pixel + NUBIS_SKY_HASH_OFFSET) + NUBIS_R2_STEP * P.jitter_pass);
+  s.spin = NUBIS_TWO_PI * turn;
+  s.stratum = P.jitter > 0.5 ?
+                  fract(nubis_pixel_hash(pixel + NUBIS_STRATUM_HASH_OFFSET) + NUBIS_GOLDEN_RATIO_FRACT * P.jitter_pass) :
+                  0.5;
+  return s;
+}
+
+/* Direction i of the set; `weight` is its share of its lobe (1 / the lobe's count) times the lobe's
+ * weight, so the weighted sum of the World's radiance over the set estimates its phase-weighted mean. */
+vec3 nubis_sky_direction(NubisSkyDirections s, int i, out float weight)
+{
+  const int count = NUBIS_REFERENCE_SKY_DIRECTIONS;
+  bool in_silver = i < s.silver;
+  int k = in_silver ? i : i - s.silver;
+  int n = in_silver ? s.silver : count - s.silver;
+  float g = in_silver ? P.lighting_phase_g1 : P.lighting_phase_g0;
+  weight = (in_silver ? P.lighting_phase_mix : 1.0 - P.lighting_phase_mix) / float(n);
+  /* Jittered within its stratum: fixed strata would sample each lobe at the same few cone angles in
+   * every pixel, a quadrature error no supersampling averages out. */
+  float cos_t = nubis_henyey_greenstein_sample(g, (float(k) + s.stratum) / float(n));
+  float sin_t = sqrt(max(0.0, 1.0 - cos_t * cos_t));
+  float phi = s.spin + float(i) * NUBIS_GOLDEN_ANGLE;
+  return s.view * cos_t + (s.side * cos(phi) + s.up * sin(phi)) * sin_t;
+}
+
 /* Reference sky light: single scattering of the World's radiance (as Cycles lights the baked volume
  * with the same World) is the radiance times the transmittance, weighted by the phase function over
- * all directions. The phase is far from isotropic (the silver-lining lobe peaks ~45x above it), so the
- * directions are drawn from the two lobes in proportion to their weights (importance sampling,
- * stratified in the lobe's cosine), turned about the view ray by a per-pixel angle so neighbouring
- * pixels see different directions and supersampling averages them out. */
+ * all directions. */
 vec3 nubis_reference_sky_light(vec3 p, vec3 view_dir, vec2 pixel)
 {
   /* Budget: Mesa's llvmpipe stops a shader's loops after 65535 iterations in total (its loop
    * limiter), which silently cut long reference marches short; 12 x 16 + 48 per cloud sample keeps
    * a 128-step view ray under it. */
-  const int count = NUBIS_REFERENCE_SKY_DIRECTIONS;
-  int silver = int(floor(float(count) * P.lighting_phase_mix + 0.5));
-  silver = clamp(silver, P.lighting_phase_mix > 0.0 ? 1 : 0, P.lighting_phase_mix < 1.0 ? count - 1 : count);
-  vec3 side = normalize(abs(view_dir.z) < NUBIS_NEAR_VERTICAL ? cross(view_dir, vec3(0.0, 0.0, 1.0)) :
-                                                cross(view_dir, vec3(1.0, 0.0, 0.0)));
-  vec3 up = cross(view_dir, side);
-  float spin = NUBIS_TWO_PI * fract(nubis_pixel_hash(pixel + NUBIS_SKY_HASH_OFFSET) + NUBIS_R2_STEP * P.jitter_pass);
-  vec3 main_lobe = vec3(0.0), silver_lobe = vec3(0.0);
-  for (int i = 0; i < count; i++) {
-    bool in_silver = i < silver;
-    int k = in_silver ? i : i - silver;
-    int n = in_silver ? silver : count - silver;
-    float g = in_silver ? P.lighting_phase_g1 : P.lighting_phase_g0;
-    float cos_t = nubis_henyey_greenstein_sample(g, (float(k) + 0.5) / float(n));
-    float sin_t = sqrt(max(0.0, 1.0 - cos_t * cos_t));
-    float phi = spin + float(i) * NUBIS_GOLDEN_ANGLE;
-    vec3 dir = view_dir * cos_t + (side * cos(phi) + up * sin(phi)) * sin_t;
+  NubisSkyDirections s = nubis_sky_directions(view_dir, pixel);
+  vec3 light = vec3(0.0);
+  for (int i = 0; i < NUBIS_REFERENCE_SKY_DIRECTIONS; i++) {
+    float weight;
+    vec3 dir = nubis_sky_direction(s, i, weight);
     float plain;
-    float tau = nubis_reference_depth(p, dir, NUBIS_REFERENCE_SKY_SAMPLES, plain) * P.density_sigma + nubis_cirrus_optical_depth(p, dir, 0.0);
-    /* The phase sampling makes the estimate the mean of the World's radiance times the transmittance. */
-    vec3 seen = nubis_sky_radiance(dir) * (exp(-tau) / float(n));
-    if (in_silver) {
-      silver_lobe += seen;
-    }
-    else {
-      main_lobe += seen;
-    }
+    float jitter = fract(nubis_reference_jitter(pixel) + float(i) * NUBIS_GOLDEN_RATIO_FRACT);
+    float tau = nubis_reference_depth(p, dir, NUBIS_REFERENCE_SKY_SAMPLES, jitter, plain) * P.density_sigma +
+                nubis_cirrus_optical_depth(p, dir, 0.0);
+    light += nubis_sky_radiance(dir) * (exp(-tau) * weight);
   }
-  return P.lighting_ambient * mix(main_lobe, silver_lobe, P.lighting_phase_mix);
+  return P.lighting_ambient * light;
 }
 
 /* What the light of one view ray shares along its length (for a sun light they are constant along
@@ -351,12 +394,12 @@ NubisRayLight nubis_ray_light(vec3 view_dir)
  * once the view ray is half opaque (S15: "2x faster"); the naive march of the benchmark keeps full
  * samples. The reference permutation marches many fine samples out of the
  * layer instead, for measuring the real-time one. */
-float nubis_light_optical_depth(vec3 p, float view_alpha, float lod, out float powder_depth)
+float nubis_light_optical_depth(vec3 p, float view_alpha, float lod, vec2 pixel, out float powder_depth)
 {
   float tau = 0.0;
   powder_depth = 0.0;
 #if NUBIS_REFERENCE
-  tau = nubis_reference_depth(p, P.sun_dir.xyz, NUBIS_REFERENCE_SUN_SAMPLES, powder_depth);
+  tau = nubis_reference_depth(p, P.sun_dir.xyz, NUBIS_REFERENCE_SUN_SAMPLES, nubis_reference_jitter(pixel), powder_depth);
 #else
 #  if NUBIS_NAIVE
   bool cheap = false;
@@ -396,7 +439,7 @@ vec3 nubis_in_scattering(
    * the powder the density alone: rain's and storms' absorption darken the light, not thin the
    * dark sun-facing rim. */
   float powder_depth;
-  float tau = nubis_light_optical_depth(p, view_alpha, lod, powder_depth);
+  float tau = nubis_light_optical_depth(p, view_alpha, lod, pixel, powder_depth);
   /* NOT from the Guerrilla sources: Wrenninge et al.'s octaves (Oz, 2013; docs/sources.md#multiple-scattering)
    * stand in for the light
    * that scatters more than once: each octave sees a thinner cloud and a flatter phase. Octave 1 alone

@@ -11,9 +11,7 @@ const float NUBIS_COARSEST_LOD = 2.0;
 
 /* The march's loop bound: far above any step count, only a guard for the compiler. */
 const int NUBIS_MAX_ITERATIONS = 4096;
-/* Each accumulation pass shifts the step jitter by the golden ratio's fractional part, so N passes cover
- * the step evenly (docs/sources.md#step-jitter); the mip dither is the jitter scrambled by this factor. */
-const float NUBIS_GOLDEN_RATIO_FRACT = 0.61803399;
+/* The mip dither is the step jitter scrambled by this factor. */
 const float NUBIS_DITHER_SCRAMBLE = 7.0;
 /* GPU Pro 7: back to the cheap search after six empty fine samples in a row (docs/sources.md#coarse-to-fine). */
 const int NUBIS_EMPTY_FINE_SAMPLES = 6;
@@ -23,14 +21,31 @@ const float NUBIS_OPAQUE_TRANSMITTANCE = 0.005;
  * radius sideways. */
 const float NUBIS_VERTICAL_RAY = 1e-12;
 
+/* The single scattering of a thin homogeneous slab of vertical optical depth tau towards the eye, per
+ * unit of incoming radiance and phase: with slant factors m = 1 / |cos(zenith)| for the view ray (mu_v,
+ * the cosine of its direction to the zenith) and the light (mu_l, the cosine of the direction towards
+ * it), light that passes through the slab towards the eye gives
+ * m_v / (m_v - m_l) (e^(-tau m_l) - e^(-tau m_v)), light scattered back to the side it came from
+ * m_v / (m_v + m_l) (1 - e^(-tau (m_v + m_l))) (docs/sources.md#cirrus-lighting). */
+float nubis_slab_scattering(float mu_v, float mu_l, float tau)
+{
+  float m_v = 1.0 / max(abs(mu_v), NUBIS_MIN_SLANT_COS);
+  float m_l = 1.0 / max(abs(mu_l), NUBIS_MIN_SLANT_COS);
+  if ((mu_v > 0.0) == (mu_l > 0.0)) {
+    float dm = m_v - m_l;
+    return abs(dm) < NUBIS_EQUAL_SLANTS ? m_v * tau * exp(-tau * m_v) :
+                                          m_v / dm * (exp(-tau * m_l) - exp(-tau * m_v));
+  }
+  return m_v / (m_v + m_l) * (1.0 - exp(-tau * (m_v + m_l)));
+}
+
 /* GPU Pro 7, S15: the cirrus layer, sampled once where the ray crosses its sphere
- * (docs/sources.md#cirrus-layer, docs/sources.md#cirrus-lighting). Its light is the exact
- * single scattering of a thin homogeneous slab (the layer Cycles renders from the bake): with slant
- * factors m = 1 / cos(zenith) for the view and the sun and vertical optical depth tau, sunlight
- * that passes through the slab towards the eye gives m_v / (m_v - m_s) (e^(-tau m_s) - e^(-tau m_v)),
- * sunlight scattered back to the side it came from m_v / (m_v + m_s) (1 - e^(-tau (m_v + m_s))).
- * Sky light is taken as scattered in proportion to the layer's opacity. Premultiplied radiance, alpha. */
-vec4 nubis_cirrus(vec3 origin, vec3 dir)
+ * (docs/sources.md#cirrus-layer, docs/sources.md#cirrus-lighting), lit as the thin homogeneous slab
+ * Cycles renders from the bake (nubis_slab_scattering). The sun's light is exact. The reference
+ * permutation lights it by the World the same way, in the phase-sampled directions of the reference sky
+ * light; the real-time one takes the sky light as scattered in proportion to the layer's opacity.
+ * Premultiplied radiance, alpha. */
+vec4 nubis_cirrus(vec3 origin, vec3 dir, vec2 pixel)
 {
   float altitude = nubis_altitude(origin, P.layer_planet_radius);
   vec2 ground = nubis_ray_sphere(origin, dir, P.layer_planet_radius, 0.0);
@@ -46,30 +61,31 @@ vec4 nubis_cirrus(vec3 origin, vec3 dir)
   }
   vec3 up = normalize(origin + dir * t + vec3(0.0, 0.0, P.layer_planet_radius));
   float mu_v = dot(dir, up);
-  float mu_s = dot(P.sun_dir.xyz, up);
-  float m_v = 1.0 / max(abs(mu_v), NUBIS_MIN_SLANT_COS);
-  float m_s = 1.0 / max(abs(mu_s), NUBIS_MIN_SLANT_COS);
-  float tau = tau_view / m_v;
-  float sun_fraction;
-  if ((mu_v > 0.0) == (mu_s > 0.0)) {
-    float dm = m_v - m_s;
-    sun_fraction = abs(dm) < NUBIS_EQUAL_SLANTS ? m_v * tau * exp(-tau * m_v) :
-                                    m_v / dm * (exp(-tau * m_s) - exp(-tau * m_v));
-  }
-  else {
-    sun_fraction = m_v / (m_v + m_s) * (1.0 - exp(-tau * (m_v + m_s)));
-  }
+  float tau = tau_view * max(abs(mu_v), NUBIS_MIN_SLANT_COS);
   float alpha = 1.0 - exp(-tau_view);
-  vec3 light = P.sun_radiance.rgb * nubis_phase(dot(dir, P.sun_dir.xyz), 1.0) * sun_fraction + P.ambient.rgb * alpha;
+  vec3 light = P.sun_radiance.rgb * nubis_phase(dot(dir, P.sun_dir.xyz), 1.0) *
+               nubis_slab_scattering(mu_v, dot(P.sun_dir.xyz, up), tau);
+#if NUBIS_REFERENCE
+  NubisSkyDirections s = nubis_sky_directions(dir, pixel);
+  vec3 sky = vec3(0.0);
+  for (int i = 0; i < NUBIS_REFERENCE_SKY_DIRECTIONS; i++) {
+    float weight;
+    vec3 l = nubis_sky_direction(s, i, weight);
+    sky += nubis_sky_radiance(l) * (nubis_slab_scattering(mu_v, dot(l, up), tau) * weight);
+  }
+  light += P.lighting_ambient * sky;
+#else
+  light += P.ambient.rgb * alpha;
+#endif
   return vec4(light, alpha);
 }
 
 /* The clouds and the cirrus layer together, in the order the camera sees them (GPU Pro 7 and S15 sample
  * the high layer at the end of the march, behind the volume, as seen from the ground): from above
  * the cirrus altitude the layer is in front of the clouds below it, the storm's anvil cirrus too. */
-vec4 nubis_with_cirrus(vec4 clouds, vec3 origin, vec3 dir, out float behind)
+vec4 nubis_with_cirrus(vec4 clouds, vec3 origin, vec3 dir, vec2 pixel, out float behind)
 {
-  vec4 cirrus = nubis_cirrus(origin, dir);
+  vec4 cirrus = nubis_cirrus(origin, dir, pixel);
   /* `behind`: what the layer lets through of the clouds' own light (their flashes too). */
   if (nubis_altitude(origin, P.layer_planet_radius) > P.cirrus_altitude) {
     behind = 1.0 - cirrus.a;
@@ -256,7 +272,7 @@ vec4 nubis_shade_ray(vec3 origin, vec3 dir, vec2 pixel)
   clouds.rgb += NUBIS_FLASH_COLOUR * dot(flash_mask, nubis_flash_intensities());
 #if NUBIS_CIRRUS
   float behind;
-  clouds = nubis_with_cirrus(clouds, origin, dir, behind);
+  clouds = nubis_with_cirrus(clouds, origin, dir, pixel, behind);
 #endif
   return clouds;
 }

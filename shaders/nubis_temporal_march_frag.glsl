@@ -29,7 +29,7 @@ void main()
   vec4 clouds = nubis_march(origin, dir, centre, cloud_depth, flash_mask);
 #if NUBIS_CIRRUS
   float behind;
-  clouds = nubis_with_cirrus(clouds, origin, dir, behind);
+  clouds = nubis_with_cirrus(clouds, origin, dir, centre, behind);
   flash_mask *= behind;
 #endif
 #if NUBIS_FETCH_STATS

@@ -22,7 +22,10 @@ from . import handlers
 WORLD_NAME = "Nubis Sky"
 SKY_NODE = "Nubis Sky Texture"
 MARKER = "nubis_sky"  # custom property on a World that Nubis built (and so may keep in step with the sun)
-ENV_WIDTH = 64  # the clouds' sky-light environment: 64 x 32 holds the sky's gradients
+# The clouds' sky-light environment. 64 x 32 texels (5.6 degrees) smeared the bright band above the
+# horizon into the black below it; 128 x 64 brought the sky-lit single scattering at the default
+# camera within 1.8 % of Cycles on average (64 x 32: 2.8 %).
+ENV_WIDTH = 128
 ENV_SAMPLES = 4  # Cycles samples per pixel of a capture: a sky is smooth
 BACKGROUND_WIDTH = 512  # the sky behind the clouds in pictures (render's PNG, panorama)
 
