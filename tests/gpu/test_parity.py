@@ -27,21 +27,31 @@ def world(request):
     return request.param
 
 
-@pytest.fixture(scope="module")
-def single(tmp_path_factory, blender, world):
-    from nubis_addon.blender import ensure_registered, pipeline, scene_io
+def _looking_up(sky: bool):
+    """The default preset with the camera looking steeply up, under the sky World or the flat one."""
     from nubis_addon.core.presets import load_preset
 
     preset = load_preset("default")
-    preset.extra["world"]["sky"] = world == "sky"
-    preset.params["cirrus_coverage"] = 0.0
+    preset.extra["world"]["sky"] = sky
     preset.extra["camera"]["rotation"] = [150.0, 0.0, 20.0]
+    return preset
+
+
+def _compare_single(blender, preset, out, samples: int) -> dict:
+    from nubis_addon.blender import ensure_registered, pipeline, scene_io
+
     blender.ops.wm.read_factory_settings(use_empty=True)
     ensure_registered()
     scene = blender.context.scene
     scene_io.apply_preset(scene, preset)
-    out = tmp_path_factory.mktemp("parity")
-    return pipeline.compare(scene, out, 48, 27, samples=4096, mode="single", voxel_size=20.0, noise_estimate=True)
+    return pipeline.compare(scene, out, 48, 27, samples=samples, mode="single", voxel_size=20.0, noise_estimate=True)
+
+
+@pytest.fixture(scope="module")
+def single(tmp_path_factory, blender, world):
+    preset = _looking_up(world == "sky")
+    preset.params["cirrus_coverage"] = 0.0
+    return _compare_single(blender, preset, tmp_path_factory.mktemp("parity"), 4096)
 
 
 def test_single_scattering_parity(single, world):
@@ -70,23 +80,13 @@ CIRRUS_BIAS_MAX = 0.04
 
 @pytest.fixture(scope="module")
 def cirrus_only(tmp_path_factory, blender):
-    from nubis_addon.blender import ensure_registered, pipeline, scene_io
-    from nubis_addon.core.presets import load_preset
-
-    preset = load_preset("default")
-    preset.extra["world"]["sky"] = True
+    preset = _looking_up(True)
     preset.layers = [layer for layer in preset.layers if layer["channel"] != "coverage"]
     for layer in preset.layers:
         if layer["channel"] == "cirrus_coverage":
             layer["remap"] = [0.0, 1.0, 0.4, 1.0]  # cirrus over most of the view, thin to thick
     preset.params["cirrus_coverage"] = 1.0
-    preset.extra["camera"]["rotation"] = [150.0, 0.0, 20.0]
-    blender.ops.wm.read_factory_settings(use_empty=True)
-    ensure_registered()
-    scene = blender.context.scene
-    scene_io.apply_preset(scene, preset)
-    out = tmp_path_factory.mktemp("parity_cirrus")
-    return pipeline.compare(scene, out, 48, 27, samples=1024, mode="single", voxel_size=20.0, noise_estimate=True)
+    return _compare_single(blender, preset, tmp_path_factory.mktemp("parity_cirrus"), 1024)
 
 
 def test_cirrus_is_lit_as_its_slab(cirrus_only):
