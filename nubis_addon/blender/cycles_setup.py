@@ -159,8 +159,9 @@ def configure_render(
         if hasattr(scene.cycles, "volume_biased"):
             # Blender 5.0's null-scattering volumes are unbiased but noisier than the ray marching
             # 4.5 uses (at voxel-sized steps): 6.6 % against 4.9 % in the same shot, with their mean
-            # luminance 0.6 % apart, within the noise.
-            scene.cycles.volume_biased = True
+            # luminance 0.6 % apart, within the noise. Only for single scattering, where it was
+            # measured: with bounces every bounce marches, and the full comparison took longer.
+            scene.cycles.volume_biased = (bounces if bounces is not None else scene.cycles.volume_bounces) == 0
     scene.cycles.device = "CPU"
     if samples:
         scene.cycles.samples = samples

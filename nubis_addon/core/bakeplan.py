@@ -376,8 +376,9 @@ def camera_voxel_size(
     finest: float = CAMERA_FINEST_VOXEL,
 ) -> float:
     """The voxel size a camera needs: a pixel's footprint at the nearest cloud it sees over
-    CAMERA_VOXELS_PER_FOOTPRINT (no finer than `finest`, no coarser than `start`), then doubled while
-    the camera-only bake would not fit in memory."""
+    CAMERA_VOXELS_PER_FOOTPRINT (no finer than `finest`, no coarser than `start`), then grown by a
+    quarter at a time while the camera-only bake would not fit in memory (doubling would overshoot:
+    15 m that does not fit would become 30 m where 20 m fits)."""
     angle, size = pixel_footprint(inv_view_proj, width, height)
     near = nearest_cloud_distance(state, inv_view_proj)
     footprint = (near * angle + size) / CAMERA_VOXELS_PER_FOOTPRINT if math.isfinite(near) else start
@@ -390,7 +391,7 @@ def camera_voxel_size(
         except NubisError as err:
             if "voxel size of at least" not in str(err) or voxel >= 10_000:
                 raise
-            voxel *= 2
+            voxel *= 1.25
 
 
 def comparison_voxel_size(
