@@ -339,12 +339,14 @@ vec3 nubis_reference_sky_light(vec3 p, vec3 view_dir, vec2 pixel)
    * limiter), which silently cut long reference marches short; 12 x 16 + 48 per cloud sample keeps
    * a 128-step view ray under it. */
   NubisSkyDirections s = nubis_sky_directions(view_dir, pixel);
+  float first_jitter = nubis_reference_jitter(pixel);
   vec3 light = vec3(0.0);
   for (int i = 0; i < NUBIS_REFERENCE_SKY_DIRECTIONS; i++) {
     float weight;
     vec3 dir = nubis_sky_direction(s, i, weight);
     float plain;
-    float jitter = fract(nubis_reference_jitter(pixel) + float(i) * NUBIS_GOLDEN_RATIO_FRACT);
+    /* Each direction's samples sit elsewhere in their strata (golden-ratio steps). */
+    float jitter = fract(first_jitter + float(i) * NUBIS_GOLDEN_RATIO_FRACT);
     float tau = nubis_reference_depth(p, dir, NUBIS_REFERENCE_SKY_SAMPLES, jitter, plain) * P.density_sigma +
                 nubis_cirrus_optical_depth(p, dir, 0.0);
     light += nubis_sky_radiance(dir) * (exp(-tau) * weight);

@@ -156,17 +156,17 @@ def configure_render(
         # Measured at the default camera, 160x90, 256 samples, single scattering: the light tree's
         # noise 7.4 % of the luminance, sampling the sun and the sky alike 6.6 %.
         scene.cycles.use_light_tree = False
-        if hasattr(scene.cycles, "volume_biased"):
-            # Blender 5.0's null-scattering volumes are unbiased but noisier than the ray marching
-            # 4.5 uses (at voxel-sized steps): 6.6 % against 4.9 % in the same shot, with their mean
-            # luminance 0.6 % apart, within the noise. Only for single scattering, where it was
-            # measured: with bounces every bounce marches, and the full comparison took longer.
-            scene.cycles.volume_biased = (bounces if bounces is not None else scene.cycles.volume_bounces) == 0
     scene.cycles.device = "CPU"
     if samples:
         scene.cycles.samples = samples
     if bounces is not None:
         scene.cycles.volume_bounces = bounces
+    if exact_samples and hasattr(scene.cycles, "volume_biased"):
+        # Blender 5.0's null-scattering volumes are unbiased but noisier than the ray marching 4.5
+        # uses (at voxel-sized steps): 6.6 % against 4.9 % in the same shot, with their mean luminance
+        # 0.6 % apart, within the noise. Only for single scattering, where it was measured: with
+        # bounces every bounce marches, and the full comparison took longer.
+        scene.cycles.volume_biased = scene.cycles.volume_bounces == 0
     scene.cycles.use_denoising = False
     # A one-pixel box filter: each pixel is the mean over its own area, what a supersampled viewport
     # render gives, so comparisons measure the clouds rather than the reconstruction filter.

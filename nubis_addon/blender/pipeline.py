@@ -445,8 +445,9 @@ def compare(
 THIN_CIRRUS = True
 
 # Jittered passes the comparison's viewport accumulates (in two halves). Measured at the default camera,
-# 160x90, single mode: 2 passes left the luminance error at 6.6 %, 8 passes 6.1 %, with Cycles' own
-# noise 3.6 %; 4 are most of the way for half the time of 8.
+# 160x90, single mode, before the other changes of docs/sources.md#comparison-set-up: 2 passes left the
+# luminance error at 6.6 %, 8 passes 6.1 %, with Cycles' own noise 3.6 %; 4 are most of the way for
+# half the time of 8.
 COMPARE_PASSES = 4
 
 
