@@ -108,7 +108,8 @@ def cloud_gpu_nowait(seed: int, on_ready: Callable[[], None] | None = None) -> C
     the worker thread (once the one running, if any, is done: a slider drag makes the first and the last
     seed, not every one in between), and this returns what is on the GPU now, the previous seed's set or
     None. `on_ready` is called on the main thread when the worker finishes (to redraw)."""
-    ensure_gpu_context()
+    if bpy.app.background:
+        ensure_gpu_context()  # a draw callback in the interface has its window's context current
     if seed in _gpu:
         return _gpu[seed]
     for other in [s for s in _failed if s != seed]:

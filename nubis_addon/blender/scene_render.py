@@ -19,7 +19,7 @@ is in the README ("Final renders").
 from __future__ import annotations
 
 import os
-import threading
+import traceback
 from pathlib import Path
 
 import bpy
@@ -32,7 +32,7 @@ from ..core.errors import NubisError
 from ..core.fsutil import check_output_path
 from ..core.staging import output_set
 from ..render import engine
-from . import cycles_setup, handlers, pipeline, runtime, scene_io, sky
+from . import cycles_setup, handlers, mainthread, pipeline, runtime, scene_io, sky
 
 RENDER_WORLD = "Nubis Render World"
 CAMERA_IMAGE = "Nubis Camera Clouds"
@@ -223,19 +223,15 @@ def _caster_material(image) -> bpy.types.Material:
 # ---- the render World -------------------------------------------------------------------------------
 
 
-def render_world(scene) -> bpy.types.World:
-    """A copy of the scene's World with the clouds composited over it: camera rays see the camera's
-    clouds image (window coordinates), other rays the clouds panorama; both are premultiplied, so the
-    World's own shader is kept where the clouds let it through and their light is added."""
-    base = scene.world
+def render_world(base) -> bpy.types.World:
+    """A copy of the World `base` (or none) with the clouds composited over it: camera rays see the
+    camera's clouds image (window coordinates), other rays the clouds panorama; both are premultiplied, so
+    the World's own shader is kept where the clouds let it through and their light is added."""
     old = bpy.data.worlds.get(RENDER_WORLD)
-    if old is not None:
+    world = base.copy() if base is not None else bpy.data.worlds.new(RENDER_WORLD)
+    if old is not None:  # the previous frame's (copied first: a file saved mid-render may have it as base)
         bpy.data.worlds.remove(old)
-    if base is not None:
-        world = base.copy()
-        world.name = RENDER_WORLD
-    else:
-        world = bpy.data.worlds.new(RENDER_WORLD)
+    world.name = RENDER_WORLD
     if sky.MARKER in world:
         del world[sky.MARKER]
     if world.node_tree is None:
@@ -291,13 +287,14 @@ def _mix_rgb(nt, fac, a, b):
 
 
 def attach(scene) -> None:
-    """Prepare the frame and show the clouds through the render World (until detach)."""
+    """Prepare the frame and show the clouds through the render World (until detach). The artist's World
+    is remembered once: a frame whose render World is still in place (an animation's next frame, a render
+    that ended without render_post) is built on it again, never on the render World."""
     prepare_frame(scene)
-    original = scene.world
-    world = render_world(scene)
     if scene.name not in _swapped:
-        _swapped[scene.name] = original.name if original is not None else ""
-    scene.world = world
+        _swapped[scene.name] = scene.world.name if scene.world is not None else ""
+    name = _swapped[scene.name]
+    scene.world = render_world(bpy.data.worlds.get(name) if name else None)
 
 
 def detach(scene) -> None:
@@ -306,42 +303,55 @@ def detach(scene) -> None:
     if name is None:
         return
     scene.world = bpy.data.worlds.get(name) if name else None
-    # The render copy stays (unsaved, it has no users) for renders whose handlers run off the main thread.
 
 
-@bpy.app.handlers.persistent
-def on_render_pre(scene, _depsgraph=None) -> None:
-    if sky.capturing():
-        return
+def _before_frame(scene) -> None:
+    """On the main thread, before a frame renders: the clouds of the frame the render is at, shown through
+    the render World; a render without them gets no stale shadow."""
     if not wants_clouds(scene):
         # An earlier frame's shadow must not fall on a render without the clouds (or on the VDB's).
         caster = scene.objects.get(CASTER_NAME)
         if caster is not None and not caster.hide_render:
             caster.hide_render = True
         return
-    if threading.current_thread() is not threading.main_thread():
-        # An interface render runs its handlers on the render thread, where the GPU module has no
-        # context: the frame's clouds must be prepared on the main thread (README, "Final renders").
-        # Only the World pointer changes here; the render World and its images are the main thread's.
-        world = bpy.data.worlds.get(RENDER_WORLD)
-        if world is None or any(bpy.data.images.get(n) is None for n in (CAMERA_IMAGE, PANORAMA_IMAGE, PANORAMA_ALPHA)):
-            return
-        original = scene.world
-        _swapped.setdefault(scene.name, original.name if original is not None else "")
-        scene.world = world
+    # An animation rendered from the interface moves the scene's frame on the render thread; the main
+    # thread's evaluated scene (the camera, the sun, keyed settings) follows it here.
+    evaluated = bpy.context.evaluated_depsgraph_get().scene_eval
+    if (evaluated.frame_current, evaluated.frame_subframe) != (scene.frame_current, scene.frame_subframe):
+        scene.frame_set(scene.frame_current, subframe=scene.frame_subframe)
+    attach(scene)
+
+
+@bpy.app.handlers.persistent
+def on_render_pre(scene, _depsgraph=None) -> None:
+    """Every frame of every render, on the thread that renders it. In the interface that is a job thread
+    without a GPU context: the frame is prepared on the main thread (blender/mainthread.py) while the
+    render thread waits, before its engine reads the scene."""
+    if sky.capturing():
         return
     try:
-        attach(scene)
+        mainthread.call(lambda: _before_frame(scene))
     except NubisError as err:
         last_error[:] = [str(err)]
-        print(f"Nubis: no clouds in this render: {err}")
+        mainthread.report(f"no clouds in the render of frame {scene.frame_current}: {err}")
+    except Exception as err:  # noqa: BLE001 - a handler must not fail silently; the artist is told
+        traceback.print_exc()
+        last_error[:] = [str(err)]
+        mainthread.report(
+            f"no clouds in the render of frame {scene.frame_current}: internal error "
+            f"({type(err).__name__}: {err}); the console has the details"
+        )
 
 
 @bpy.app.handlers.persistent
 def on_render_post(scene, _depsgraph=None) -> None:
+    """After a frame (or a cancelled render): the artist's World back, on the main thread when it responds."""
     if sky.capturing():
         return
-    detach(scene)
+    try:
+        mainthread.call(lambda: detach(scene), timeout=60.0)
+    except NubisError:
+        detach(scene)  # the main thread is not taking work (Blender quitting): only a pointer changes
 
 
 HANDLERS = (
@@ -352,11 +362,13 @@ HANDLERS = (
 
 
 def register() -> None:
+    mainthread.register()
     handlers.add(HANDLERS)
 
 
 def unregister() -> None:
     handlers.remove(HANDLERS)
+    mainthread.unregister()
 
 
 # ---- the panorama command --------------------------------------------------------------------------

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import tempfile
+import threading
 from pathlib import Path
 
 import bpy
@@ -279,8 +280,9 @@ _busy = [False]
 
 
 def capturing() -> bool:
-    """True while a capture renders (the render handlers must leave that render alone)."""
-    return _busy[0]
+    """True on the main thread while a capture renders there: the handlers it runs must leave that render
+    alone. A render job of the interface may end on its own thread meanwhile; its handlers see False."""
+    return _busy[0] and threading.current_thread() is threading.main_thread()
 
 
 def _without_nubis_handlers(fn):
@@ -370,8 +372,14 @@ def _capture_pending():
 
 @bpy.app.handlers.persistent
 def on_update(scene, _depsgraph=None) -> None:
-    """Turning the Sun lamp (by hand, by animation) moves the Nubis sky's sun and recolours the lamp."""
-    if capturing() or getattr(scene, "nubis", None) is None:
+    """Turning the Sun lamp (by hand, by animation) moves the Nubis sky's sun and recolours the lamp. An
+    animation rendered from the interface changes frames on its render thread: the frame's render handler
+    syncs the sun on the main thread then (blender/scene_render.py)."""
+    if (
+        capturing()
+        or getattr(scene, "nubis", None) is None
+        or threading.current_thread() is not threading.main_thread()
+    ):
         return
     sync_sun(scene)
 

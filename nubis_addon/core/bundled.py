@@ -37,7 +37,8 @@ def _import(name: str, what: str) -> ModuleType:
         return importlib.import_module(name)
     except ImportError:
         raise NubisError(
-            f"the {what} module '{name}' is missing: use Blender 4.5 or newer (or the bpy 5.0.1 wheel), which ships it"
+            f"the {what} module '{name}' is missing from this Python ({sys.version.split()[0]}): run Blender 4.5 or "
+            f"newer, or its bpy wheel (pip install bpy, 4.5 or newer), which ships it"
         ) from None
 
 

@@ -19,13 +19,33 @@ def _gpu_works() -> bool:
     return True
 
 
+def _context_current() -> bool:
+    """Whether a GPU context is current on this thread (in the interface, a window's, made current when it
+    draws; none after a window closed until the next redraw)."""
+    try:
+        gpu.types.GPUTexture((1, 1), format="RGBA8")
+    except (RuntimeError, SystemError):
+        return False
+    return True
+
+
 def ensure_gpu_context() -> None:
-    """Make the gpu module usable; in background mode, rendering one tiny Workbench frame creates
-    Blender's GPU context, which then lives for the rest of the session."""
+    """Make the gpu module usable. In background mode, rendering one tiny Workbench frame creates
+    Blender's GPU context, which then lives for the rest of the session. In the interface, work outside a
+    draw callback (a timer, an operator) finds whichever window drew last current, or none right after a
+    window closed: a redraw of the main window makes its context current."""
     global _ready
+    if not bpy.app.background:
+        if not _context_current():
+            win = bpy.context.window_manager.windows[0]
+            with bpy.context.temp_override(window=win, screen=win.screen):
+                bpy.ops.wm.redraw_timer(type="DRAW_WIN", iterations=1)
+            if not _context_current():
+                raise NubisError("no GPU context is current on Blender's main thread: redraw the window and try again")
+        return
     if _ready:
         return
-    if not bpy.app.background or _gpu_works():
+    if _gpu_works():
         _ready = True
         return
     scene = bpy.data.scenes.new(".nubis_gpu_init")

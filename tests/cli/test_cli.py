@@ -1,6 +1,7 @@
 """The command line as users and render farms run it: exit codes, one-line messages, no partial files."""
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -63,6 +64,38 @@ def test_bake_and_cycles_commands(tmp_path):
     r = run_cli("cycles", "--out", str(png), "--width", "32", "--height", "18", "--samples", "2", "--voxel-size", "500")
     assert r.returncode == 0, r.stderr
     assert imageio.read_image(png).shape == (18, 32, 4)
+
+
+def test_openvdb_10_reads_the_bake_of_this_line(tmp_path):
+    """docs/bake.md, "Older readers": Debian's OpenVDB 10 `vdb_print` reads every line's bake with the same
+    voxels and values. OpenVDB 12 (Blender 4.5, 5.0) writes file format 224, read without a word; OpenVDB
+    13 (Blender 5.2, 5.3) writes 225, which OpenVDB 10 reads after one warning, and the binding has no
+    way to write an older format."""
+    import shutil
+    import struct
+    import subprocess
+
+    from nubis_addon.core import bundled, vdbio
+
+    tool = shutil.which("vdb_print")
+    assert tool, "vdb_print is missing: ./.ci/setup installs it (Debian's libopenvdb-tools)"
+    vdb = tmp_path / "c.vdb"
+    assert run_cli("bake", "--out", str(vdb), "--voxel-size", "500").returncode == 0
+    version = struct.unpack("<I", vdb.read_bytes()[8:12])[0]
+    assert version == bundled.openvdb().FILE_FORMAT_VERSION
+    r = subprocess.run([tool, "-l", str(vdb)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    ours = vdbio.read_grid_info(vdb)["density"]
+    active = int(re.search(r"Number of active voxels:\s+([\d,]+)", r.stdout).group(1).replace(",", ""))
+    low = float(re.search(r"Min value:\s+(\S+)", r.stdout).group(1))
+    high = float(re.search(r"Max value:\s+(\S+)", r.stdout).group(1))
+    assert active == ours.active_voxels > 1000
+    assert np.allclose((low, high), ours.min_max, rtol=1e-5)
+    warning = "unsupported VDB file format (expected version 224 or earlier, got version 225)"
+    if version <= 224:
+        assert "WARN" not in r.stdout + r.stderr
+    else:
+        assert version == 225 and warning in r.stdout + r.stderr
 
 
 @pytest.mark.parametrize(

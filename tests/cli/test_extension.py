@@ -36,10 +36,11 @@ def test_built_zip_installs_enables_and_unregisters_cleanly(tmp_path):
     )
     assert r.returncode == 0, r.stdout + r.stderr
     (zip_path,) = build.glob("*.zip")
+    assert zip_path.stat().st_size < 2_000_000, "the zip holds more than the extension (a virtual environment?)"
     names = zipfile.ZipFile(zip_path).namelist()
     assert "blender_manifest.toml" in names and "__init__.py" in names
     assert any(n.startswith("shaders/") for n in names) and any(n.startswith("presets/") for n in names)
-    assert not any(n.startswith(("tests/", ".ci/", ".venv/", ".venv-4.5/", ".git/")) for n in names), names
+    assert not any(n.startswith(("tests/", ".ci/", ".venv", ".git/")) for n in names), names
     assert sum(zipfile.ZipFile(zip_path).getinfo(n).file_size for n in names) < 2_000_000
 
     script = textwrap.dedent(f"""
@@ -78,9 +79,9 @@ def test_built_zip_installs_enables_and_unregisters_cleanly(tmp_path):
     assert "EXTENSION-OK" in r.stdout, r.stdout[-3000:] + r.stderr[-3000:]
 
 
-def test_ci_runs_readme_command_2_on_both_blender_lines():
-    """CI (`.ci/run`) runs exactly the README's test command, which covers both Blender lines, each with
-    its own pinned requirements and virtual environment."""
+def test_ci_runs_readme_command_2_on_every_blender_line():
+    """CI (`.ci/run`) runs exactly the README's test command: the suite on 5.3, 5.2 LTS and 4.5 LTS, each
+    with its own pinned requirements and virtual environment, then the real-application stage."""
     import re
 
     root = Path(__file__).resolve().parents[2]
@@ -88,12 +89,17 @@ def test_ci_runs_readme_command_2_on_both_blender_lines():
     blocks = re.findall(r"```\n(.*?)```", readme, re.S)
     command_2 = [ln for ln in blocks[1].splitlines() if ln.strip()]
     assert command_2 == [
-        "./.ci/setup && .venv/bin/python -m pytest -q && ./.ci/setup 4.5 && .venv-4.5/bin/python -m pytest -q"
+        "./.ci/setup 5.3 && .venv-5.3/bin/python -m pytest -q && ./.ci/setup 5.2 && .venv-5.2/bin/python -m pytest -q"
+        " && ./.ci/setup 4.5 && .venv-4.5/bin/python -m pytest -q && tests/app/run"
     ]
     run = (root / ".ci" / "run").read_text()
     assert command_2[0] in run.splitlines()
-    assert len(blocks[0].strip().splitlines()) == 1  # the README starts with exactly two commands
-    assert "bpy==5.0.1" in (root / ".ci" / "requirements.txt").read_text().splitlines()
-    assert "bpy==4.5.15" in (root / ".ci" / "requirements-4.5.txt").read_text().splitlines()
+    assert blocks[0].strip().splitlines() == [
+        "./.ci/setup 5.3 && .venv-5.3/bin/python -m nubis_addon compare --out out/default"
+    ]
+    pins = {
+        line: (root / ".ci" / f"requirements-{line}.txt").read_text().splitlines() for line in ("5.3", "5.2", "4.5")
+    }
+    assert "bpy==5.3.0" in pins["5.3"] and "bpy==5.2.3" in pins["5.2"] and "bpy==4.5.15" in pins["4.5"]
     manifest = (root / "blender_manifest.toml").read_text()
     assert 'blender_version_min = "4.5.0"' in manifest

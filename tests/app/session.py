@@ -1,0 +1,724 @@
+"""An artist's session in the real Blender application (a window on Xvfb), run by tests/app/run.
+
+    blender --factory-startup -p 0 0 1600 900 --python session.py -- --out DIR --zip nubis.zip --phase main
+    blender -p 0 0 1600 900 DIR/scene.blend --python session.py -- --out DIR --phase reopen
+
+Blender must redraw between the steps, so the steps are generators stepped by a `bpy.app.timers` timer:
+each `yield SECONDS` hands control back to Blender for that long. Keys and clicks are real X events
+(xdotool), screenshots are the X display (xwd, ImageMagick), sidebar panel headers are found by OCR
+(tesseract). Every step is written to DIR/results-PHASE.json as it ends (a crash leaves what was done):
+ok, the checks it made with their numbers, the screenshots, and the errors it saw: Python tracebacks and
+error lines in Blender's console (DIR/console-PHASE.log), reports the extension made, and the extension's
+own last error. tests/app/check.py turns that file into a verdict.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import time
+import traceback
+
+import bpy
+
+ARGS = argparse.ArgumentParser()
+ARGS.add_argument("--out", required=True)
+ARGS.add_argument("--zip", default="")
+ARGS.add_argument("--phase", choices=("main", "reopen"), required=True)
+ARGS.add_argument("--converge", type=float, default=30.0, help="seconds the viewport gets to converge")
+ARGS.add_argument("--render-timeout", type=float, default=600.0)
+ARGS.add_argument("--skip", default="", help="steps to leave out, comma-separated (for working on one step)")
+ARGS = ARGS.parse_args(sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else [])
+OUT = os.path.abspath(ARGS.out)
+SHOTS = os.path.join(OUT, "shots")
+RENDERS = os.path.join(OUT, "renders")
+os.makedirs(SHOTS, exist_ok=True)
+os.makedirs(RENDERS, exist_ok=True)
+CONSOLE = os.path.join(OUT, f"console-{ARGS.phase}.log")
+EXT = "bl_ext.user_default.nubis"
+T0 = time.monotonic()
+RESULTS: list[dict] = []
+RENDER_W, RENDER_H = 192, 108  # small: llvmpipe renders EEVEE and Cycles slowly on 2 cores
+# A render shows the clouds when it differs from the same render without them by at least this much
+# (mean absolute difference of 8-bit sRGB values, 0-1); the default cloudscape measures 0.05-0.15.
+CLOUDS_MIN_MAE = 0.01
+# The same for the viewport with the clouds shown and hidden (the view crop).
+VIEW_MIN_MAE = 0.01
+# Console lines that are errors. Blender's own start-up noise on llvmpipe (EGL, ALSA, ...) is not matched.
+# The extension's reports to the artist are echoed there as "Nubis error: ..." (blender/mainthread.py).
+ERROR_LINE = re.compile(r"Traceback \(most recent call last\)|^\w*Error\b|Error in bpy\.app\.handlers|Nubis error")
+
+
+def log(msg: str) -> None:
+    line = f"[{time.monotonic() - T0:7.1f}s] {msg}"
+    print("SESSION " + line, flush=True)
+    with open(os.path.join(OUT, f"session-{ARGS.phase}.log"), "a") as f:
+        f.write(line + "\n")
+
+
+# ---- the console and the extension's own errors ----------------------------------------------------------
+
+_console_at = [0]
+
+
+def console_errors() -> list[str]:
+    """Error lines Blender printed since the last call, with the traceback lines that belong to them."""
+    if not os.path.exists(CONSOLE):
+        return []
+    with open(CONSOLE, "rb") as f:
+        f.seek(_console_at[0])
+        text = f.read().decode("utf-8", "replace")
+        _console_at[0] = f.tell()
+    out, in_tb = [], False
+    for line in text.splitlines():
+        if line.startswith("SESSION "):
+            in_tb = False
+            continue
+        if line.startswith("Traceback"):
+            in_tb = True
+        if in_tb or ERROR_LINE.search(line):
+            out.append(line)
+        if in_tb and re.match(r"^\w*(Error|Exception)\b", line):
+            in_tb = False
+    return out
+
+
+def ext_module(name: str):
+    return sys.modules.get(f"{EXT}.nubis_addon.blender.{name}")
+
+
+def nubis_error() -> str:
+    """The extension's last error (the sidebar's error line), cleared after reading."""
+    status = ext_module("status")
+    if status is None:
+        return ""
+    msg = status.last_error()
+    status.clear_error()
+    return msg
+
+
+class Step:
+    def __init__(self, name: str):
+        self.name = name
+        self.rec = {"step": name, "ok": True, "checks": [], "notes": [], "shots": [], "errors": []}
+        self.t = time.monotonic()
+
+    def note(self, msg: str) -> None:
+        log(f"  {self.name}: {msg}")
+        self.rec["notes"].append(msg)
+
+    def check(self, ok: bool, what: str) -> bool:
+        log(f"  {self.name}: {'ok  ' if ok else 'FAIL'} {what}")
+        self.rec["checks"].append({"ok": bool(ok), "what": what})
+        if not ok:
+            self.rec["ok"] = False
+        return ok
+
+
+# ---- the window, X events and screenshots ----------------------------------------------------------------
+
+
+def window():
+    return bpy.context.window_manager.windows[0]
+
+
+def view3d_area():
+    return next((a for a in window().screen.areas if a.type == "VIEW_3D"), None)
+
+
+def region(area, kind="WINDOW"):
+    return next((r for r in area.regions if r.type == kind), None)
+
+
+def override(area=None, kind="WINDOW"):
+    win = window()
+    area = area or view3d_area()
+    kw = {"window": win, "screen": win.screen, "area": area, "region": region(area, kind)}
+    if area.type == "VIEW_3D":
+        kw["space_data"] = area.spaces.active
+    return bpy.context.temp_override(**kw)
+
+
+def box_of(r) -> tuple[int, int, int, int]:
+    """(left, top, width, height) of a region on the X screen (the window sits at 0, 0)."""
+    return (r.x, window().height - (r.y + r.height), r.width, r.height)
+
+
+def xdo(*args) -> None:
+    subprocess.run(["xdotool", *map(str, args)], check=False, timeout=30)
+
+
+def mouse_to(x: float, y: float) -> None:
+    xdo("mousemove", "--sync", int(x), int(y))
+
+
+def mouse_over_view() -> None:
+    left, top, w, h = box_of(region(view3d_area()))
+    mouse_to(left + w * 0.3, top + h * 0.5)
+
+
+# Xvfb's keymap has F12 at keycode 96; by name, xdotool may pick a level that needs Alt (Alt+F12 renders
+# the sequencer's scene instead).
+KEYCODES = {"F12": "96"}
+
+
+def key(name: str) -> None:
+    xdo("key", "--clearmodifiers", KEYCODES.get(name, name))
+
+
+def redraw() -> None:
+    with override():
+        bpy.ops.wm.redraw_timer(type="DRAW_WIN_SWAP", iterations=1)
+
+
+def shot(step: Step | None, name: str, crop: str = "") -> str:
+    """The whole X screen as OUT/shots/NAME.png, and with `crop` ('view' or 'sidebar') that part alone as
+    NAME_CROP.png, whose path is returned then."""
+    redraw()
+    path = os.path.join(SHOTS, name + ".png")
+    subprocess.run(f"xwd -root -silent | convert xwd:- png:'{path}'", shell=True, check=False, timeout=120)
+    if not os.path.exists(path):
+        raise RuntimeError(f"screenshot {name} failed")
+    if step is not None:
+        step.rec["shots"].append(os.path.relpath(path, OUT))
+    if not crop:
+        return path
+    area = view3d_area()
+    left, top, w, h = box_of(region(area))
+    ui = region(area, "UI")
+    if crop == "sidebar":
+        left, top, w, h = box_of(ui)
+    elif ui is not None and area.spaces.active.show_region_ui and ui.width > 1:
+        w = ui.x - region(area).x  # the sidebar overlaps the view's right side
+    cropped = os.path.join(SHOTS, f"{name}_{crop}.png")
+    subprocess.run(["convert", path, "-crop", f"{w}x{h}+{left}+{top}", "+repage", cropped], check=False, timeout=60)
+    if step is not None:
+        step.rec["shots"].append(os.path.relpath(cropped, OUT))
+    return cropped
+
+
+def mae(a: str, b: str) -> float:
+    """Mean absolute difference of two pictures of the same size, 0-1 (ImageMagick)."""
+    r = subprocess.run(["compare", "-metric", "MAE", a, b, "null:"], capture_output=True, text=True, timeout=60)
+    m = re.search(r"\(([0-9.eE+-]+)\)", r.stderr)
+    if m is None:
+        raise RuntimeError(f"compare {a} {b}: {r.stderr.strip()}")
+    return float(m.group(1))
+
+
+def ocr(png: str, box) -> list[dict]:
+    """Words tesseract reads in `box` of the screenshot `png`, in screen coordinates."""
+    left, top, w, h = box
+    tmp = os.path.join(SHOTS, "_ocr.png")
+    subprocess.run(
+        [
+            "convert",
+            png,
+            "-crop",
+            f"{w}x{h}+{left}+{top}",
+            "+repage",
+            "-colorspace",
+            "Gray",
+            "-negate",
+            "-resize",
+            "300%",
+            tmp,
+        ],
+        check=False,
+        timeout=60,
+    )
+    r = subprocess.run(["tesseract", tmp, "-", "--psm", "11", "tsv"], capture_output=True, text=True, timeout=120)
+    words = []
+    for line in r.stdout.splitlines()[1:]:
+        f = line.split("\t")
+        if len(f) >= 12 and f[11].strip():
+            x, y, ww, hh = (int(v) / 3 for v in f[6:10])
+            words.append({"text": re.sub(r"[^a-z]", "", f[11].lower()), "x": left + x, "y": top + y, "w": ww, "h": hh})
+    return words
+
+
+# ---- renders ---------------------------------------------------------------------------------------------
+
+_events: list[tuple[str, float]] = []
+
+
+def _recorder(kind):
+    @bpy.app.handlers.persistent
+    def record(*_args):
+        _events.append((kind, time.monotonic()))
+
+    return record
+
+
+for _kind in ("render_pre", "render_post", "render_complete", "render_cancel"):
+    getattr(bpy.app.handlers, _kind).append(_recorder(_kind))
+
+
+def eevee() -> str:
+    items = {i.identifier for i in bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items}
+    return "BLENDER_EEVEE_NEXT" if "BLENDER_EEVEE_NEXT" in items else "BLENDER_EEVEE"
+
+
+def small_render(scene, engine: str) -> None:
+    scene.render.engine = engine
+    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = RENDER_W, RENDER_H, 100
+    scene.render.image_settings.file_format = "PNG"
+    if engine == "CYCLES":
+        scene.cycles.device = "CPU"
+        scene.cycles.samples = 8
+        scene.cycles.use_denoising = False
+    else:
+        scene.eevee.taa_render_samples = 4
+
+
+def save_result(name: str) -> str:
+    path = os.path.join(RENDERS, name + ".png")
+    img = bpy.data.images.get("Render Result")
+    if img is None:
+        return ""
+    img.save_render(filepath=path)
+    return path if os.path.exists(path) else ""
+
+
+def wait_render(step: Step, since: float):
+    """Until the render job that started after `since` has ended."""
+    t = time.monotonic()
+    while time.monotonic() - t < ARGS.render_timeout:
+        mine = [k for k, at in _events if at >= since]
+        if mine and mine[-1] in ("render_complete", "render_cancel") and not bpy.app.is_job_running("RENDER"):
+            step.note(f"render ended ({mine[-1]}) after {time.monotonic() - t:.0f} s; events {mine}")
+            return mine
+        if not mine and not bpy.app.is_job_running("RENDER") and time.monotonic() - t > 30:
+            shot(step, f"no_render_{int(time.monotonic() - T0)}")
+            step.check(False, "a render started within 30 s")
+            return mine
+        yield 1.0
+    step.check(False, f"the render ended within {ARGS.render_timeout:.0f} s")
+    return []
+
+
+def close_render_window():
+    """Esc over the render window, as an artist closes it."""
+    if len(bpy.context.window_manager.windows) < 2:
+        return
+    main = window()
+    out = subprocess.run(["xwininfo", "-root", "-children"], capture_output=True, text=True, timeout=30).stdout
+    for m in re.finditer(r'(0x[0-9a-f]+) "([^"]*)".*?\s(\d+)x(\d+)\+(-?\d+)\+(-?\d+)', out):
+        _, name, w, h, x, y = m.groups()
+        w, h, x, y = int(w), int(h), int(x), int(y)
+        if "Blender" in name and w > 50 and (w, h) != (main.width, main.height):
+            mouse_to(max(x, 0) + min(w, 200) // 2, max(y, 0) + min(h, 150) // 2)
+            key("Escape")
+    yield 2.0
+    mouse_over_view()
+
+
+def render_ui(step: Step, name: str, how: str, animation: bool = False):
+    """A render started from the interface: the F12 key, or Render > Render Image / Render Animation
+    (render.render with INVOKE_DEFAULT, the operator the menu calls). Returns the saved result's path."""
+    scene = bpy.context.scene
+    world = scene.world.name if scene.world else None
+    mouse_over_view()
+    since = time.monotonic()
+    if how == "key":
+        key("F12")
+    else:
+        with override():
+            step.note(
+                f"render.render(INVOKE_DEFAULT, animation={animation}) -> "
+                f"{bpy.ops.render.render('INVOKE_DEFAULT', animation=animation)}"
+            )
+    yield from wait_render(step, since)
+    yield 2.0
+    shot(step, name + "_window")
+    path = "" if animation else save_result(name)
+    after = scene.world.name if scene.world else None
+    step.note(
+        f"{name}: World {after!r}; worlds {[w.name for w in bpy.data.worlds]}; "
+        f"swapped {getattr(ext_module('scene_render'), '_swapped', None)}"
+    )
+    step.check(after == world, f"{name}: the scene's World is the artist's after the render ({after!r}, was {world!r})")
+    yield from close_render_window()
+    return path
+
+
+def render_script(step: Step, name: str, clouds: bool = True) -> str:
+    """A render from Python on the main thread (what an add-on or the Python console does)."""
+    scene = bpy.context.scene
+    scene.nubis.sky_render_clouds = clouds
+    scene.render.filepath = os.path.join(RENDERS, name + ".png")
+    t = time.monotonic()
+    with override():
+        bpy.ops.render.render(write_still=True)
+    scene.nubis.sky_render_clouds = True
+    step.note(f"{name}: render.render(write_still=True) in {time.monotonic() - t:.0f} s")
+    return scene.render.filepath
+
+
+def has_clouds(step: Step, path: str, without: str, what: str) -> bool:
+    if not path or not os.path.exists(path):
+        return step.check(False, f"{what}: a render result was saved")
+    d = mae(path, without)
+    return step.check(
+        d >= CLOUDS_MIN_MAE,
+        f"{what} shows the clouds: differs from the render without them by MAE {d:.4f} (>= {CLOUDS_MIN_MAE})",
+    )
+
+
+# ---- the steps -------------------------------------------------------------------------------------------
+
+
+def s_startup(step: Step):
+    import gpu
+
+    step.note(
+        f"Blender {bpy.app.version_string}, Python {sys.version.split()[0]}, GPU "
+        f"{gpu.platform.renderer_get()} ({gpu.platform.backend_type_get()}), window "
+        f"{window().width}x{window().height}, file {bpy.data.filepath or '(new)'}"
+    )
+    step.check(not bpy.app.background, "Blender runs with a window, not in background mode")
+    yield 3.0
+    mouse_over_view()
+    key("Escape")  # the splash screen of a fresh profile
+    yield 1.0
+    shot(step, "00_startup")
+
+
+def s_install(step: Step):
+    with override():
+        res = bpy.ops.extensions.package_install_files(filepath=ARGS.zip, repo="user_default", enable_on_install=True)
+    step.note(f"package_install_files -> {res}")
+    yield 2.0
+    step.check(EXT in bpy.context.preferences.addons, f"the extension is enabled as {EXT}")
+    step.check(hasattr(bpy.ops, "nubis") and len(dir(bpy.ops.nubis)) >= 20, "its operators are registered")
+    bpy.ops.wm.save_userpref()  # the reopen phase starts with the extension enabled
+
+
+def view_has_clouds(step: Step, tag: str):
+    """The camera view with the clouds shown against the same view with them hidden (the sidebar's eye)."""
+    shown = shot(step, f"{tag}_clouds", "view")
+    with override():
+        bpy.ops.nubis.view_toggle()
+    yield 3.0
+    hidden = shot(step, f"{tag}_hidden", "view")
+    with override():
+        bpy.ops.nubis.view_toggle()
+    d = mae(shown, hidden)
+    step.check(
+        d >= VIEW_MIN_MAE, f"{tag}: the viewport draws the clouds (shown vs hidden MAE {d:.4f} >= {VIEW_MIN_MAE})"
+    )
+    yield 2.0
+    return shown
+
+
+def s_new_cloudscape(step: Step):
+    """New Cloudscape as an artist calls it on the startup file: its dialog asks what to keep, and Return
+    accepts (the startup file's camera looks down at the cube). Then New Cloudscape with everything of its
+    own (camera, sun, sky), and the camera view converging."""
+    mouse_over_view()
+    with override():
+        step.note(
+            f"new_cloudscape(INVOKE_DEFAULT) -> {bpy.ops.nubis.new_cloudscape('INVOKE_DEFAULT', preset='default')}"
+        )
+    yield 2.0
+    shot(step, "01_new_cloudscape_dialog")
+    key("Return")
+    yield 3.0
+    scene = bpy.context.scene
+    step.check(scene.nubis.field_a is not None, "the dialog's New Cloudscape made a cloudscape")
+    with override():
+        bpy.ops.nubis.new_cloudscape(
+            preset="default", keep_camera=False, keep_world=False, keep_render=False, keep_sun=False, build_sky=True
+        )
+    step.note(
+        f"camera {scene.camera.name if scene.camera else None}, World {scene.world.name if scene.world else None}"
+    )
+    with override():
+        if view3d_area().spaces.active.region_3d.view_perspective != "CAMERA":
+            bpy.ops.view3d.view_camera()
+        bpy.ops.view3d.view_center_camera()
+    t = time.monotonic()
+    prev = None
+    for at in (5, 15, ARGS.converge):
+        while time.monotonic() - t < at:
+            yield 1.0
+        cur = shot(step, f"02_camera_view_t{int(at):02d}", "view")
+        if prev:
+            step.note(f"viewport change {at} s: MAE {mae(prev, cur):.4f}")
+        prev = cur
+    yield from view_has_clouds(step, "02_camera_view")
+
+
+def s_sidebar(step: Step):
+    """Every sidebar panel opened with a Ctrl+click on its header (found by OCR; Blender closes the others),
+    shot at its top and scrolled to its end."""
+    area = view3d_area()
+    area.spaces.active.show_region_ui = True
+    yield 1.0
+    region(area, "UI").active_panel_category = "Nubis"
+    yield 2.0
+    shot(step, "03_sidebar", "sidebar")
+    labels = [cls.bl_label for cls in ext_module("panels").CLASSES if hasattr(cls, "bl_parent_id")]
+    for i, label in enumerate(labels):
+        console_errors()
+        if not (yield from click_header(step, label, ctrl=True)):
+            step.check(False, f"panel {label!r}: its header was found")
+            continue
+        name = f"03_panel_{i:02d}_{label.lower().replace(' ', '_')}"
+        top = shot(step, name, "sidebar")
+        scroll(+15)
+        yield from settle()
+        end = shot(None, name + "_end", "sidebar")
+        if mae(top, end) > 0.001:  # the panel is taller than the sidebar: keep its end too
+            step.rec["shots"].append(os.path.relpath(end, OUT))
+        errors = console_errors()
+        step.check(not errors, f"panel {label!r} draws without errors" + (f": {errors[:4]}" if errors else ""))
+
+
+def settle(timeout: float = 15.0):
+    """Until two shots of the sidebar a moment apart agree: Blender animates a panel's opening one step
+    per redraw, and on llvmpipe the window redraws slowly while the clouds are drawn."""
+    prev = None
+    t = time.monotonic()
+    n = 0
+    while time.monotonic() - t < timeout:
+        yield 0.4
+        n += 1
+        cur = shot(None, f"_settle_{n % 2}", "sidebar")  # two files in turn: this shot and the one before
+        if prev is not None and mae(prev, cur) < 0.0003:
+            return
+        prev = cur
+
+
+def scroll(notches: int) -> None:
+    left, top, w, h = box_of(region(view3d_area(), "UI"))
+    mouse_to(left + w / 2, top + h / 2)
+    xdo("click", "--repeat", abs(notches), "--delay", 20, 5 if notches > 0 else 4)
+
+
+def click_header(step: Step, label: str, ctrl: bool = False):
+    """Scroll the sidebar to its top, find the header `label` by OCR (scrolling down if it is below),
+    click it (Ctrl+click: open it and close the others) and let the panel finish its animation."""
+    ui = region(view3d_area(), "UI")
+    scroll(-30)
+    yield from settle()
+    words_of = [re.sub(r"[^a-z]", "", w.lower()) for w in label.split()]
+    for _ in range(4):
+        words = ocr(shot(None, "_ocr_source"), box_of(ui))
+        hits = [w for w in words if w["text"] == words_of[0]]
+        if len(words_of) > 1:  # "Sky and Final Renders": the next word follows on the same line
+            hits = [w for w in hits if any(v["text"] == words_of[1] and abs(v["y"] - w["y"]) < 6 for v in words)]
+        if hits:
+            w = min(hits, key=lambda w: w["y"])
+            mouse_to(w["x"] + w["w"] / 2, w["y"] + w["h"] / 2)
+            xdo(*(["keydown", "ctrl"] if ctrl else []), "click", 1, *(["keyup", "ctrl"] if ctrl else []))
+            yield from settle()
+            return True
+        scroll(+6)
+        yield from settle()
+    step.note(f"header {label!r} not found by OCR")
+    return False
+
+
+def s_edit(step: Step):
+    """One edit an artist makes, through the setting's RNA property as the sidebar sets it: the clouds'
+    density scale halves, and the viewport must change."""
+    scene = bpy.context.scene
+    before = shot(step, "04_before_edit", "view")
+    old = scene.nubis.density_scale
+    scene.nubis.density_scale = old * 0.4
+    yield 15.0
+    after = shot(step, "04_after_edit", "view")
+    d = mae(before, after)
+    step.check(d >= 0.005, f"the viewport changed after Density Scale {old:.3g} -> {old * 0.4:.3g} (MAE {d:.4f})")
+    scene.nubis.density_scale = old
+    yield 10.0
+
+
+def render_series(step: Step, engine: str, tag: str):
+    scene = bpy.context.scene
+    small_render(scene, engine)
+    first = yield from render_ui(step, f"{tag}_1_f12_first", "key")
+    second = yield from render_ui(step, f"{tag}_2_f12_again", "key")
+    menu = yield from render_ui(step, f"{tag}_3_render_image_menu", "invoke")
+    without = render_script(step, f"{tag}_0_no_clouds", clouds=False)
+    for path, what in ((first, "the first F12"), (second, "a second F12"), (menu, "Render > Render Image")):
+        has_clouds(step, path, without, f"{engine}: {what}")
+    return without
+
+
+def s_render_eevee(step: Step):
+    without = yield from render_series(step, eevee(), "eevee")
+    # Right after the render window closes, before Blender redraws the main window: a script render.
+    mouse_over_view()
+    since = time.monotonic()
+    key("F12")
+    yield from wait_render(step, since)
+    yield 2.0
+    yield from close_render_window()
+    path = render_script(step, "eevee_4_script_right_after_close")
+    has_clouds(step, path, without, "a script render right after closing the render window")
+
+
+def s_render_cycles(step: Step):
+    yield from render_series(step, "CYCLES", "cycles")
+
+
+def s_animation(step: Step):
+    """Render > Render Animation of three frames 120 apart (five seconds of wind): each frame has clouds,
+    and they move."""
+    scene = bpy.context.scene
+    small_render(scene, eevee())
+    keep = (scene.frame_start, scene.frame_end, scene.frame_step, scene.frame_current, scene.render.filepath)
+    scene.frame_start, scene.frame_end, scene.frame_step = 1, 241, 120
+    scene.render.filepath = os.path.join(RENDERS, "anim_####")
+    yield from render_ui(step, "anim", "invoke", animation=True)
+    frames = [os.path.join(RENDERS, f"anim_{f:04d}.png") for f in (1, 121, 241)]
+    step.check(all(os.path.exists(f) for f in frames), f"three frames written: {[os.path.basename(f) for f in frames]}")
+    scene.frame_start, scene.frame_end, scene.frame_step = 1, 1, 1
+    without = render_script(step, "anim_0001_no_clouds", clouds=False)
+    if all(os.path.exists(f) for f in frames):
+        for f in frames:
+            has_clouds(step, f, without, f"animation frame {os.path.basename(f)}")
+        for a, b in ((0, 1), (1, 2)):
+            d = mae(frames[a], frames[b])
+            step.check(
+                d >= 0.002,
+                f"the clouds move between {os.path.basename(frames[a])} and "
+                f"{os.path.basename(frames[b])} (MAE {d:.4f})",
+            )
+    scene.frame_start, scene.frame_end, scene.frame_step, _, scene.render.filepath = keep
+    scene.frame_set(keep[3])
+    yield 1.0
+
+
+def s_bake(step: Step):
+    """Bake VDB from the sidebar: its file browser, Return, the modal bake to its end."""
+    path = os.path.join(OUT, "bake", "clouds.vdb")
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    scene = bpy.context.scene
+    scene.nubis.bake_voxel_size = max(scene.nubis.bake_voxel_size, 200.0)  # coarse: minutes on llvmpipe otherwise
+    mouse_over_view()
+    with override():
+        step.note(f"bake_vdb(INVOKE_DEFAULT) -> {bpy.ops.nubis.bake_vdb('INVOKE_DEFAULT', filepath=path)}")
+    yield 3.0
+    shot(step, "05_bake_file_browser")
+    key("Return")
+    t = time.monotonic()
+    while time.monotonic() - t < 600 and bpy.data.objects.get("Nubis Clouds VDB") is None:
+        yield 2.0
+    shot(step, "05_bake_done", "view")
+    vol = bpy.data.objects.get("Nubis Clouds VDB")
+    size = os.path.getsize(path) if os.path.exists(path) else 0
+    step.check(
+        vol is not None and size > 1000,
+        f"the bake wrote {size} bytes and loaded its Volume in {time.monotonic() - t:.0f} s",
+    )
+    if vol is not None:
+        bpy.data.objects.remove(vol)  # the reopened file renders its clouds through F12, not the VDB
+
+
+def s_save(step: Step):
+    path = os.path.join(OUT, "scene.blend")
+    with override():
+        bpy.ops.wm.save_as_mainfile(filepath=path)
+    step.check(os.path.exists(path), f"saved {path}")
+    yield 1.0
+
+
+def s_reopen(step: Step):
+    scene = bpy.context.scene
+    step.check(EXT in bpy.context.preferences.addons, "the extension is enabled in the new process")
+    step.check(
+        getattr(scene, "nubis", None) is not None and scene.nubis.field_a is not None,
+        "the cloudscape came back with the file",
+    )
+    yield max(ARGS.converge, 10.0)
+    yield from view_has_clouds(step, "06_reopened_view")
+    small_render(scene, eevee())
+    path = yield from render_ui(step, "reopen_f12", "key")
+    without = render_script(step, "reopen_no_clouds", clouds=False)
+    has_clouds(step, path, without, "the first F12 after reopening")
+
+
+MAIN = [
+    s_startup,
+    s_install,
+    s_new_cloudscape,
+    s_sidebar,
+    s_edit,
+    s_render_eevee,
+    s_render_cycles,
+    s_animation,
+    s_bake,
+    s_save,
+]
+REOPEN = [s_startup, s_reopen]
+
+
+# ---- the runner ------------------------------------------------------------------------------------------
+
+
+class Runner:
+    def __init__(self, steps):
+        skip = set(ARGS.skip.split(","))
+        self.steps = [f for f in steps if f.__name__[2:] not in skip]
+        self.step: Step | None = None
+        self.gen = None
+
+    def end_step(self) -> None:
+        step = self.step
+        errors = console_errors()
+        err = nubis_error()
+        if err:
+            errors.append(f"the extension's last error: {err}")
+        step.rec["errors"].extend(errors)
+        step.check(
+            not step.rec["errors"],
+            "no Python traceback, error line or error report while the step ran"
+            + (f": {step.rec['errors'][:6]}" if step.rec["errors"] else ""),
+        )
+        step.rec["seconds"] = round(time.monotonic() - step.t, 1)
+        log(f"== {step.name}: {'ok' if step.rec['ok'] else 'FAILED'} ({step.rec['seconds']} s)")
+        RESULTS.append(step.rec)
+        with open(os.path.join(OUT, f"results-{ARGS.phase}.json"), "w") as f:
+            json.dump(RESULTS, f, indent=1)
+
+    def tick(self):
+        while True:
+            if self.gen is None:
+                if not self.steps:
+                    return self.finish()
+                fn = self.steps.pop(0)
+                self.step = Step(fn.__name__[2:])
+                log(f"== {self.step.name}")
+                out = fn(self.step)
+                self.gen = out if hasattr(out, "__next__") else iter(())
+            try:
+                return float(next(self.gen))
+            except StopIteration:
+                pass
+            except Exception:  # noqa: BLE001 - the step fails; the session goes on
+                self.step.rec["errors"].append(traceback.format_exc())
+                self.step.rec["ok"] = False
+                log(traceback.format_exc())
+            self.end_step()
+            self.gen = None
+
+    def finish(self):
+        log(f"phase {ARGS.phase} done in {time.monotonic() - T0:.0f} s")
+        for f in os.listdir(SHOTS):
+            if f.startswith("_"):
+                os.remove(os.path.join(SHOTS, f))
+        with override():
+            bpy.ops.wm.quit_blender()
+        return None
+
+
+if __name__ == "__main__":
+    log(f"session phase {ARGS.phase}, out {OUT}")
+    bpy.app.timers.register(Runner(MAIN if ARGS.phase == "main" else REOPEN).tick, first_interval=3.0, persistent=True)
