@@ -454,20 +454,39 @@ def s_new_cloudscape(step: Step):
 
 
 def s_sidebar(step: Step):
-    """Every sidebar panel opened with a Ctrl+click on its header (found by OCR; Blender closes the others),
-    shot at its top and scrolled to its end."""
+    """Every sidebar panel opened with a click on its header, shot at its top and scrolled to its end, and
+    closed again, as an artist looks through them. The headers are found by OCR once every sub-panel is
+    closed; a panel that opens below the others moves no header above it, so each is clicked where it was."""
     area = view3d_area()
     area.spaces.active.show_region_ui = True
     yield 1.0
-    region(area, "UI").active_panel_category = "Nubis"
-    yield 2.0
+    ui = region(area, "UI")
+    ui.active_panel_category = "Nubis"
+    yield from settle()
     shot(step, "03_sidebar", "sidebar")
-    labels = [cls.bl_label for cls in ext_module("panels").CLASSES if hasattr(cls, "bl_parent_id")]
-    for i, label in enumerate(labels):
+    panels = ext_module("panels")
+    labels = [cls.bl_label for cls in panels.CLASSES if hasattr(cls, "bl_parent_id")]
+    closed = [c.bl_label for c in panels.CLASSES if "DEFAULT_CLOSED" in getattr(c, "bl_options", ())]
+    heads = {}
+    for _ in range(4):  # close the sub-panels open by default, the lowest first
+        heads = headers(labels)
+        still_open = [label for label in labels if label not in closed and label in heads]
+        if not still_open and len(heads) == len(labels):
+            break
+        for label in sorted(still_open, key=lambda lb: -heads[lb][1]):
+            yield from click(heads[label])
+            closed.append(label)
+        yield from settle()
+    missing = [label for label in labels if label not in heads]
+    step.check(
+        not missing,
+        f"the headers of all {len(labels)} sub-panels were found" + (f" (not: {missing})" if missing else ""),
+    )
+    shot(step, "03_sidebar_closed", "sidebar")
+    for i, label in enumerate(label for label in labels if label in heads):
         console_errors()
-        if not (yield from click_header(step, label, ctrl=True)):
-            step.check(False, f"panel {label!r}: its header was found")
-            continue
+        yield from click(heads[label])
+        yield from settle()
         name = f"03_panel_{i:02d}_{label.lower().replace(' ', '_')}"
         top = shot(step, name, "sidebar")
         scroll(+15)
@@ -475,20 +494,64 @@ def s_sidebar(step: Step):
         end = shot(None, name + "_end", "sidebar")
         if mae(top, end) > 0.001:  # the panel is taller than the sidebar: keep its end too
             step.rec["shots"].append(os.path.relpath(end, OUT))
+        scroll(-30)
+        yield from settle()
+        yield from click(heads[label])  # closed again
+        yield from settle()
         errors = console_errors()
         step.check(not errors, f"panel {label!r} draws without errors" + (f": {errors[:4]}" if errors else ""))
 
 
+def headers(labels) -> dict[str, tuple[float, float]]:
+    """Where each label's header text is on the screen (OCR of the sidebar), for the labels it finds."""
+    words = ocr(shot(None, "_ocr_source"), box_of(region(view3d_area(), "UI")))
+    found = {}
+    for label in labels:
+        parts = [re.sub(r"[^a-z]", "", w.lower()) for w in label.split()]
+        hits = [w for w in words if w["text"] == parts[0]]
+        if len(parts) > 1:  # "Sky and Final Renders": the next word follows on the same line
+            hits = [w for w in hits if any(v["text"] == parts[1] and abs(v["y"] - w["y"]) < 6 for v in words)]
+        if hits:
+            w = min(hits, key=lambda w: w["y"])
+            found[label] = (w["x"] + w["w"] / 2, w["y"] + w["h"] / 2)
+    return found
+
+
+def click(at: tuple[float, float]):
+    """A click as a hand makes it: the pointer arrives, Blender sees it over the header, then the button."""
+    mouse_to(*at)
+    yield 0.4
+    xdo("click", 1)
+    yield 0.4
+    mouse_over_view()  # no tooltip in the next picture
+
+
+def grab(box, path: str) -> str:
+    """One region of the X screen as a PNG (cheaper than a whole screenshot, for `settle`)."""
+    left, top, w, h = box
+    subprocess.run(
+        f"xwd -root -silent | convert xwd:- -crop {w}x{h}+{left}+{top} +repage png:'{path}'",
+        shell=True,
+        check=False,
+        timeout=60,
+    )
+    return path
+
+
 def settle(timeout: float = 15.0):
-    """Until two shots of the sidebar a moment apart agree: Blender animates a panel's opening one step
-    per redraw, and on llvmpipe the window redraws slowly while the clouds are drawn."""
+    """Until two pictures of the sidebar a moment apart agree: Blender animates a panel's opening one step
+    per redraw of its region, and on llvmpipe the window redraws slowly while the clouds are drawn."""
+    area = view3d_area()
+    box = box_of(region(area, "UI"))
     prev = None
     t = time.monotonic()
     n = 0
     while time.monotonic() - t < timeout:
-        yield 0.4
+        yield 0.3
+        with override(area, "UI"):
+            bpy.ops.wm.redraw_timer(type="DRAW_SWAP", iterations=3)
         n += 1
-        cur = shot(None, f"_settle_{n % 2}", "sidebar")  # two files in turn: this shot and the one before
+        cur = grab(box, os.path.join(SHOTS, f"_settle_{n % 2}.png"))  # this picture and the one before
         if prev is not None and mae(prev, cur) < 0.0003:
             return
         prev = cur
@@ -498,44 +561,21 @@ def scroll(notches: int) -> None:
     left, top, w, h = box_of(region(view3d_area(), "UI"))
     mouse_to(left + w / 2, top + h / 2)
     xdo("click", "--repeat", abs(notches), "--delay", 20, 5 if notches > 0 else 4)
-
-
-def click_header(step: Step, label: str, ctrl: bool = False):
-    """Scroll the sidebar to its top, find the header `label` by OCR (scrolling down if it is below),
-    click it (Ctrl+click: open it and close the others) and let the panel finish its animation."""
-    ui = region(view3d_area(), "UI")
-    scroll(-30)
-    yield from settle()
-    words_of = [re.sub(r"[^a-z]", "", w.lower()) for w in label.split()]
-    for _ in range(4):
-        words = ocr(shot(None, "_ocr_source"), box_of(ui))
-        hits = [w for w in words if w["text"] == words_of[0]]
-        if len(words_of) > 1:  # "Sky and Final Renders": the next word follows on the same line
-            hits = [w for w in hits if any(v["text"] == words_of[1] and abs(v["y"] - w["y"]) < 6 for v in words)]
-        if hits:
-            w = min(hits, key=lambda w: w["y"])
-            mouse_to(w["x"] + w["w"] / 2, w["y"] + w["h"] / 2)
-            xdo(*(["keydown", "ctrl"] if ctrl else []), "click", 1, *(["keyup", "ctrl"] if ctrl else []))
-            yield from settle()
-            return True
-        scroll(+6)
-        yield from settle()
-    step.note(f"header {label!r} not found by OCR")
-    return False
+    mouse_over_view()  # no tooltip in the next picture
 
 
 def s_edit(step: Step):
-    """One edit an artist makes, through the setting's RNA property as the sidebar sets it: the clouds'
-    density scale halves, and the viewport must change."""
+    """One edit an artist makes, through the setting's RNA property as the sidebar sets it: Shape >
+    Extinction from 0.10 to 0.03, and the viewport must change."""
     scene = bpy.context.scene
     before = shot(step, "04_before_edit", "view")
-    old = scene.nubis.density_scale
-    scene.nubis.density_scale = old * 0.4
+    old = scene.nubis.density_sigma
+    scene.nubis.density_sigma = 0.03
     yield 15.0
     after = shot(step, "04_after_edit", "view")
     d = mae(before, after)
-    step.check(d >= 0.005, f"the viewport changed after Density Scale {old:.3g} -> {old * 0.4:.3g} (MAE {d:.4f})")
-    scene.nubis.density_scale = old
+    step.check(d >= 0.005, f"the viewport changed after Extinction {old:.3g} -> 0.03 (MAE {d:.4f})")
+    scene.nubis.density_sigma = old
     yield 10.0
 
 
