@@ -185,11 +185,25 @@ def _execute(args, in_blender: bool, log: Path) -> str:
         out = check_output_path(args.out, IMAGE_SUFFIXES)
     if getattr(args, "motion", None):
         args.motion = check_output_path(args.motion, (".exr",))
+        if _same_file(args.motion, out):
+            raise NubisError(
+                f"--out and --motion name the same file '{out}': give the motion vectors a file of their own"
+            )
     if args.command == "bake":
         _check_bake_arguments(args, out)
     from .blender import commands  # bpy loads only now: `--help` and argument errors stay fast
 
     return commands.execute(args, in_blender, log, out)
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether two output paths are one file: the same path once resolved, or two links to one file."""
+    if os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist yet
+        return False
 
 
 def _check_bake_arguments(args, out: Path) -> None:

@@ -23,6 +23,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
+import re
 import tempfile
 import warnings
 import zipfile
@@ -822,8 +823,11 @@ _EXPECTED = {
     "curl": (CURL_SIZE, CURL_SIZE, 3),
     "cirrus": (CIRRUS_SIZE, CIRRUS_SIZE, 3),
 }
-_CACHE_GLOB = "noise_v*_s*.npz"
-_TEMP_GLOB = ".noise_v*_s*-*.tmp"
+# Exactly the names this module writes (any version, any seed), so eviction and Clear Cache never touch a
+# file of the user's that only looks alike ("noise_vs_signal_study.npz"). Temporary files are mkstemp's:
+# ".<cache name stem>-<8 of [a-z0-9_]>.tmp".
+_CACHE_NAME = re.compile(r"noise_v\d+_s\d+\.npz")
+_TEMP_NAME = re.compile(r"\.noise_v\d+_s\d+-[a-z0-9_]{8}\.tmp")
 
 
 def cache_file_name(seed: int = 0) -> str:
@@ -916,9 +920,17 @@ def _write_cache(path: Path, ns: NoiseSet) -> None:
         interrupt.unregister(tmp)
 
 
+def _named(folder: Path, pattern: re.Pattern) -> list[Path]:
+    """The files in `folder` whose whole name matches `pattern` (none for a missing folder)."""
+    try:
+        return [folder / n for n in os.listdir(folder) if pattern.fullmatch(n)]
+    except OSError:
+        return []
+
+
 def _cache_files(folder: Path) -> list[tuple[Path, os.stat_result]]:
     out = []
-    for p in folder.glob(_CACHE_GLOB):
+    for p in _named(folder, _CACHE_NAME):
         with contextlib.suppress(OSError):  # another process may delete it meanwhile
             out.append((p, p.stat()))
     return out
@@ -946,7 +958,7 @@ def clear_cache(cache_dir: str | os.PathLike) -> CacheUsage:
     folder = Path(cache_dir).expanduser()
     freed = 0
     count = 0
-    for p, st in _cache_files(folder) + [(p, None) for p in folder.glob(_TEMP_GLOB)]:
+    for p, st in _cache_files(folder) + [(p, None) for p in _named(folder, _TEMP_NAME)]:
         try:
             p.unlink()
         except FileNotFoundError:

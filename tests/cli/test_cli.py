@@ -122,6 +122,19 @@ def test_errors_are_one_line_and_leave_the_good_file(tmp_path, args, message):
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["garbage.blend", out.name])
 
 
+def test_one_file_for_two_outputs_is_refused_before_any_work(tmp_path):
+    """`render --out X.exr --motion X.exr` would write the motion vectors over the render."""
+    out = tmp_path / "x.exr"
+    out.write_bytes(b"an earlier render")
+    (tmp_path / "link.exr").symlink_to(out)
+    for motion in (out, tmp_path / "sub" / ".." / "x.exr", tmp_path / "link.exr"):
+        (tmp_path / "sub").mkdir(exist_ok=True)
+        r = run_cli("render", "--out", str(out), "--motion", str(motion))
+        assert r.returncode == 1, r.stderr
+        assert "name the same file" in _one_line(r.stderr)
+    assert out.read_bytes() == b"an earlier render"
+
+
 def test_unwritable_output_is_refused_before_any_work(tmp_path):
     r = run_cli("render", "--out", "/proc/nubis/clouds.png")
     assert r.returncode == 1

@@ -456,7 +456,7 @@ def test_corrupt_compressed_file_is_refused_cleanly(tmp_path: Path, full_set) ->
 def test_clear_cache_empties_it_and_touches_nothing_else(tmp_path: Path, counting_generator: list[int]) -> None:
     for seed in (0, 1):
         noise.load_or_generate(tmp_path, seed)
-    (tmp_path / ".noise_v1_s2-abc.tmp").write_bytes(b"left by an interrupted write")
+    (tmp_path / ".noise_v1_s2-k3x_9q0a.tmp").write_bytes(b"left by an interrupted write")
     (tmp_path / "benchmark").mkdir()
     (tmp_path / "notes.txt").write_text("mine")
     before = noise.cache_usage(tmp_path)
@@ -466,3 +466,24 @@ def test_clear_cache_empties_it_and_touches_nothing_else(tmp_path: Path, countin
     assert noise.cache_usage(tmp_path) == noise.CacheUsage(tmp_path, 0, 0)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["benchmark", "notes.txt"]
     assert noise.clear_cache(tmp_path / "never-made").sets == 0
+
+
+def test_eviction_and_clearing_never_delete_a_look_alike_file(tmp_path: Path, counting_generator: list[int]) -> None:
+    """Only names the cache writes go: a user's study or backup whose name merely looks alike stays, whatever
+    the bounds (the probe lost a 70 MB noise_vs_signal_study.npz to the old glob noise_v*_s*.npz)."""
+    look_alikes = [
+        "noise_vs_signal_study.npz",
+        "noise_v1_s0.npz.bak",
+        "noise_v1_s0 (copy).npz",
+        "noise_v1_s0_old.npz",
+        ".noise_v1_s0-mine.tmp",
+        "noise_vX_s1.npz",
+    ]
+    for name in look_alikes:
+        (tmp_path / name).write_bytes(b"the user's")
+    noise.load_or_generate(tmp_path, 0)
+    noise.evict(tmp_path, max_sets=0, max_bytes=0)
+    assert noise.cache_usage(tmp_path).sets == 0
+    noise.load_or_generate(tmp_path, 1)
+    assert noise.clear_cache(tmp_path).sets == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(look_alikes)
