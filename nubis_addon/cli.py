@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 import tempfile
 import traceback
@@ -125,6 +126,15 @@ def _realtime_commands(sub, common, size) -> None:
     p.add_argument("--quality", choices=levels, help="quality level (default: the scene's settings)")
 
 
+_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
+
+
+def printable(text: str) -> str:
+    """A message with its control characters escaped (\\x1b, \\x00): names from a preset, an image path or
+    the command line reach the terminal as text, never as escape sequences that drive it."""
+    return _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}", str(text))
+
+
 def run(argv: Sequence[str], in_blender: bool = False) -> int:
     """Run one command; returns the exit code. Never raises for user errors."""
     try:
@@ -132,7 +142,7 @@ def run(argv: Sequence[str], in_blender: bool = False) -> int:
     except SystemExit as exc:  # --help
         return int(exc.code or 0)
     except NubisError as err:
-        print(f"{PROG}: error: {err}", file=sys.stderr)
+        print(f"{PROG}: error: {printable(err)}", file=sys.stderr)
         return 2
     # One log file for Blender's chatter, kept only when an internal fault needs it.
     fd, log_name = tempfile.mkstemp(prefix="nubis-", suffix=".log")
@@ -148,7 +158,7 @@ def run(argv: Sequence[str], in_blender: bool = False) -> int:
                 summary = _execute(args, in_blender, log)
             except NubisError as err:
                 interrupt.stop()  # a failure caused by an interrupt's clean-up ends as the interrupt
-                print(f"{PROG}: error: {err}", file=sys.stderr)
+                print(f"{PROG}: error: {printable(err)}", file=sys.stderr)
                 return 1
             except Exception as err:  # an unexpected fault: one line, the details in the log
                 interrupt.stop()
@@ -157,7 +167,10 @@ def run(argv: Sequence[str], in_blender: bool = False) -> int:
                     traceback.print_exc(file=f)
                 if os.environ.get("NUBIS_DEBUG"):
                     traceback.print_exc()
-                print(f"{PROG}: internal error: {type(err).__name__}: {err} (details in {log})", file=sys.stderr)
+                print(
+                    f"{PROG}: internal error: {type(err).__name__}: {printable(err)} (details in {log})",
+                    file=sys.stderr,
+                )
                 return 3
             interrupt.stop()
             print(summary)

@@ -18,6 +18,9 @@ BOUNCES_RANGE = (0, 1024)  # Cycles' own limit on volume bounces
 SIZE_RANGE = (4, 16384)
 PASSES_RANGE = (1, 1024)
 VOXEL_MAX = 10000.0  # metres: the bake_voxel_size setting's maximum (core/schema.py)
+# metres: below a centimetre the box's voxel count overflows the arithmetic before the memory estimate can
+# name a size that fits; clouds need nothing near it (the finest bakes use metres).
+VOXEL_MIN = 0.01
 # Positions (camera, storms, field centre) within 10,000 km of the origin: the GPU gets float32
 # offsets from the camera, and the view rays a float64 inverse that stays well conditioned there.
 POSITION_MAX = 1e7
@@ -38,6 +41,8 @@ def check_voxel_size(flag: str, value: float | None) -> None:
         raise NubisError(f"{flag} must be a positive number of metres, not {value:g}")
     if value > VOXEL_MAX:
         raise NubisError(f"{flag} {value:g} is out of range: use a voxel edge of at most {VOXEL_MAX:g} metres")
+    if value < VOXEL_MIN:
+        raise NubisError(f"{flag} {value:g} is out of range: use a voxel edge of at least {VOXEL_MIN:g} metres")
 
 
 def check_position(what: str, xyz: Sequence[float], fix: str) -> None:

@@ -75,7 +75,8 @@ def preset_from_bytes(raw: bytes, path: Path | None = None) -> Preset:
     """A preset from a file's bytes: a Preset, or a NubisError that names the file and what to fix."""
     where = str(path) if path else "<preset>"
     try:
-        data = tomllib.loads(raw.decode("utf-8"))
+        # utf-8-sig: a byte-order mark, as Windows editors write one, is no part of the TOML.
+        data = tomllib.loads(raw.decode("utf-8-sig"))
     except UnicodeDecodeError:
         raise NubisError(f"preset '{where}' is not UTF-8 text: restore it from the presets folder") from None
     except tomllib.TOMLDecodeError as err:

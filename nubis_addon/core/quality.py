@@ -41,7 +41,7 @@ def qualities(path: Path | None = None) -> dict[str, Quality]:
     """The rows by name, in file order; every error names the file and the row and says what to do."""
     path = path or quality_file()
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        data = tomllib.loads(path.read_text(encoding="utf-8-sig"))  # a byte-order mark is no part of the TOML
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as err:
         raise NubisError(
             f"cannot read the quality levels '{path}' ({err}): restore the file from the extension"

@@ -185,6 +185,8 @@ def test_world_at_its_maximum_strength_writes_finite_float_exr(tmp_path):
         (["cycles", "--bounces", "99999999999"], "--bounces 99999999999 is out of range: use a whole number"),
         (["compare", "--samples", "99999999999999"], "--samples 99999999999999 is out of range"),
         (["bake", "--voxel-size", "1e300"], "--voxel-size 1e+300 is out of range: use a voxel edge of at most"),
+        (["bake", "--voxel-size", "1e-300"], "--voxel-size 1e-300 is out of range: use a voxel edge of at least"),
+        (["bake", "--voxel-size", "5e-324"], "--voxel-size 4.94066e-324 is out of range: use a voxel edge of at least"),
         (["render", "--passes", "100000000"], "--passes 100000000 is out of range"),
     ],
 )
@@ -377,3 +379,14 @@ print("committed")
     r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
     assert r.returncode == 143 and r.stderr.strip() == "nubis: interrupted" and r.stdout == "", r
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt"] and (tmp_path / "a.txt").read_text() == "old a"
+
+
+def test_control_characters_in_names_are_printed_escaped(tmp_path):
+    """A preset name or path holding terminal escape sequences (clear the screen, set the title) is echoed
+    with them escaped: the error line must not drive the user's terminal."""
+    env = _tmp_env(tmp_path)
+    r = run_cli("render", "--preset", "evil\x1b[2J\x1b]0;owned\x07", "--out", str(tmp_path / "x.png"), env=env)
+    assert r.returncode == 1, r.stderr
+    line = _one_line(r.stderr)
+    assert "\x1b" not in line and "\x07" not in line, repr(line)
+    assert "evil\\x1b[2J\\x1b]0;owned\\x07" in line, line

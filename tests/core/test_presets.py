@@ -46,6 +46,14 @@ def test_broken_preset_names_file_and_field(tmp_path: Path, text: str, message: 
     assert str(path) in str(info.value)
 
 
+def test_a_byte_order_mark_is_no_part_of_the_preset(tmp_path: Path):
+    """Windows editors save UTF-8 with a byte-order mark; the preset reads as it would without one."""
+    shipped = Path(__file__).resolve().parents[2] / "presets" / "stratocumulus.toml"
+    path = tmp_path / "bom.toml"
+    path.write_bytes(b"\xef\xbb\xbf" + shipped.read_bytes())
+    assert load_preset(str(path)).params == load_preset(str(shipped)).params
+
+
 def test_binary_garbage_is_reported(tmp_path: Path):
     path = tmp_path / "garbage.toml"
     path.write_bytes(b"\xff\xfe\x00garbage")
