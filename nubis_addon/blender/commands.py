@@ -10,6 +10,7 @@ import bpy
 
 from ..core import console, distributed, fields, imageio, interrupt, sequence, staging
 from ..core.errors import NubisError
+from ..core.fsutil import not_a_file
 from ..core.presets import load_preset
 from ..render.gpu_context import ensure_gpu_context
 from . import farm, pipeline, preview, registration, scene_io, scene_render
@@ -34,8 +35,9 @@ def load_scene(args, in_blender: bool):
     """The scene to work on: a saved .blend, a preset, or (inside Blender) the open file's cloudscape."""
     if args.blend:
         path = Path(args.blend).expanduser()
-        if not path.is_file():
-            raise NubisError(f"the .blend file '{path}' does not exist: check the path")
+        why = not_a_file(path)
+        if why:
+            raise NubisError(f"the .blend file '{path}' {why}: give the path of a saved .blend file")
         try:
             bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False)
         except RuntimeError as err:

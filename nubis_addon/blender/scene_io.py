@@ -11,11 +11,12 @@ import bpy
 import numpy as np
 from mathutils import Euler, Matrix, Vector
 
-from ..core import camera, schema, userpresets
+from ..core import bundled, camera, limits, schema, userpresets
 from ..core import fields as fieldgen
 from ..core import sky as skymath
 from ..core import storms as stormgen
 from ..core.errors import NubisError
+from ..core.fsutil import not_a_file
 from ..core.presets import Preset
 from ..core.state import MAX_STORMS, CloudState, StormLight, sun_vector, wind_vector
 from . import sky
@@ -540,14 +541,25 @@ def _load_layer_image(ref: str, preset_path: Path | None) -> str:
     path = Path(ref)
     if not path.is_absolute() and preset_path is not None:
         path = preset_path.parent / path
-    if not path.is_file():
+    why = not_a_file(path)
+    if why == "does not exist":
         raise NubisError(f"the image '{ref}' of a field layer was not found: put it beside the preset or fix the path")
+    if why:
+        raise NubisError(f"the image '{ref}' of a field layer {why}: point the layer at an image file")
     try:
         size = path.stat().st_size
     except OSError as err:
         raise NubisError(f"cannot read the image '{path}' ({err.strerror}): check its permissions") from None
     if size == 0:
         raise NubisError(f"the image '{path}' of a field layer is an empty file (0 bytes): export it again")
+    header = _image_header_size(path)
+    if header is not None and max(header) > limits.LAYER_IMAGE_MAX:
+        w, h = header
+        raise NubisError(
+            f"the image '{path}' of a field layer is {w}x{h} pixels, which would take about "
+            f"{w * h * 20 / 2**30:.1f} GB to read: scale it to at most {limits.LAYER_IMAGE_MAX} pixels a side "
+            "(the finest field has 4096)"
+        )
     try:
         img = bpy.data.images.load(str(path), check_existing=True)
     except RuntimeError as err:
@@ -564,6 +576,19 @@ def _load_layer_image(ref: str, preset_path: Path | None) -> str:
         )
     img.colorspace_settings.name = "Non-Color"
     return img.name
+
+
+def _image_header_size(path: Path) -> tuple[int, int] | None:
+    """An image's width and height from its header alone (OpenImageIO reads no pixels), or None when
+    OpenImageIO cannot open it (Blender's loader then says what is wrong)."""
+    inp = bundled.oiio().ImageInput.open(str(path))
+    if inp is None:
+        return None
+    try:
+        spec = inp.spec()
+        return int(spec.width), int(spec.height)
+    finally:
+        inp.close()
 
 
 def _setup_sun(scene, sun: dict):

@@ -3,13 +3,33 @@
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
+import stat
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
 from . import staging
 from .errors import NubisError
+
+
+def not_a_file(path: Path) -> str:
+    """Why `path` cannot be read as a regular file, in a few words ("" when it can): it does not exist, it
+    is a folder, a device or another special file, or its name is longer than the file system allows."""
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        return "does not exist"
+    except OSError as err:
+        if err.errno == errno.ENAMETOOLONG:
+            return "has a name longer than the file system allows"
+        return f"cannot be read ({err.strerror})"
+    if stat.S_ISDIR(st.st_mode):
+        return "is a folder, not a file"
+    if not stat.S_ISREG(st.st_mode):
+        return "is a device or special file, not a regular file"
+    return ""
 
 
 def check_output_path(path: str | os.PathLike, suffixes: tuple[str, ...] | None = None) -> Path:

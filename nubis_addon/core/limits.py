@@ -24,6 +24,9 @@ VOXEL_MIN = 0.01
 # Positions (camera, storms, field centre) within 10,000 km of the origin: the GPU gets float32
 # offsets from the camera, and the view rays a float64 inverse that stays well conditioned there.
 POSITION_MAX = 1e7
+# pixels per side of an image layer: twice the finest field (4096) is all a layer can give, and decoding
+# a bigger one costs 20 bytes a pixel (Blender's bytes and the float copy composited) before it is scaled.
+LAYER_IMAGE_MAX = 8192
 MAX_LAYERS = 128  # field layers per scene; each costs one full-resolution pass (estimate below)
 
 

@@ -104,6 +104,7 @@ def test_openvdb_10_reads_the_bake_of_this_line(tmp_path):
         (["render", "--preset", "no_such_preset"], "no preset named 'no_such_preset': choose one of"),
         (["render", "--blend", "{tmp}/garbage.blend"], "cannot open"),
         (["render", "--blend", "{tmp}/missing.blend"], "does not exist"),
+        (["render", "--blend", "{tmp}"], "is a folder, not a file"),
         (["bake", "--voxel-size", "0.5"], "use a voxel size of at least"),
         (["bake", "--voxel-size", "-3"], "--voxel-size must be a positive number"),
         (["render", "--width", "0"], "--width 0 is out of range: use a whole number between 4 and 16384"),

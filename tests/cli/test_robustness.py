@@ -287,6 +287,39 @@ def test_an_unreadable_image_layer_is_not_reported_missing(make_scene, tmp_path,
     assert ("empty file (0 bytes)" if not content else "cannot be read as an image") in text
 
 
+def _png_header_only(width: int, height: int) -> bytes:
+    """A valid PNG that claims width x height RGBA pixels in a few hundred bytes (one empty row of data)."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 6, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(b"\x00")) + chunk(b"IEND", b"")
+
+
+def test_an_image_layer_bomb_is_refused_from_its_header(make_scene, tmp_path):
+    """A 20000x20000 PNG of a few hundred bytes took 12 GB before the probe killed it: the size is read
+    from the header, and the layer refused, before any pixel is decoded."""
+    import resource
+
+    from nubis_addon.blender import scene_io
+    from nubis_addon.core.errors import NubisError
+    from nubis_addon.core.presets import load_preset
+
+    (tmp_path / "paint.png").write_bytes(_png_header_only(20000, 20000))
+    layer = '\n[[field.layers]]\nname = "painted"\nkind = "image"\nimage = "paint.png"\n'
+    preset = load_preset(_preset(tmp_path, DEFAULT + layer))
+    scene = make_scene("default")
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    t0 = time.monotonic()
+    with pytest.raises(NubisError, match=r"is 20000x20000 pixels, which would take about 7\.5 GB to read: scale it"):
+        scene_io.apply_preset(scene, preset)
+    assert time.monotonic() - t0 < 10
+    assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before < 200 * 1024  # KiB: nothing decoded
+
+
 def test_a_saved_scene_beyond_reach_is_refused(make_scene):
     """A .blend may hold what no preset can: a camera at 1e30 m, five storms."""
     from nubis_addon.blender import pipeline, scene_io

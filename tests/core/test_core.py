@@ -215,3 +215,15 @@ def test_view_rays_keep_their_direction_through_a_deep_frustum():
 
     pixel_deg = np.degrees(2 * np.arctan(half_w)) / 48
     assert angle_deg(directions(ray_inverse_view_projection(proj, view))) < 0.01 * pixel_deg
+
+
+def test_not_a_file_says_what_the_path_is(tmp_path):
+    """A .blend or image-layer path that is a folder or a device is named as such, not as missing."""
+    from nubis_addon.core.fsutil import not_a_file
+
+    (tmp_path / "real.png").write_bytes(b"x")
+    assert not_a_file(tmp_path / "real.png") == ""
+    assert not_a_file(tmp_path / "missing.png") == "does not exist"
+    assert not_a_file(tmp_path) == "is a folder, not a file"
+    assert not_a_file(Path("/dev/zero")) == "is a device or special file, not a regular file"
+    assert not_a_file(tmp_path / ("n" * 300 + ".png")) == "has a name longer than the file system allows"
