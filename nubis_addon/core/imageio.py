@@ -86,7 +86,27 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray) -> Path:
         if out is None or not out.open(str(tmp), spec):
             raise NubisError(f"cannot write '{path}' ({oiio.geterror().strip()}): check the folder's permissions")
         ok = out.write_image(pixels)
-        out.close()
-        if not ok:
+        closed = out.close()  # the PNG writer flushes most of the file only here
+        if not (ok and closed):
             raise NubisError(f"writing '{path}' failed ({out.geterror().strip()}): check the free disk space")
+        _check_written(tmp, path, (h, w, c))
     return path
+
+
+def _check_written(tmp: Path, path: Path, shape: tuple[int, int, int]) -> None:
+    """The staged file on disk (fsync), then read back whole: a writer that ran out of disk space without
+    saying so leaves a file that does not read, and it must not replace a good one."""
+    try:
+        fd = os.open(tmp, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+    except OSError as err:
+        raise NubisError(f"writing '{path}' failed ({err.strerror}): check the free disk space") from None
+    try:
+        back = read_image(tmp)
+    except NubisError:
+        back = None
+    if back is None or back.shape != shape:
+        raise NubisError(f"writing '{path}' failed (the file came out incomplete): check the free disk space")

@@ -138,7 +138,33 @@ def _write(path: str | os.PathLike, grids: list, metadata: dict | None) -> Path:
             vdb.write(str(tmp), grids=grids, metadata=dict(metadata or {}))
         except (OSError, RuntimeError, ValueError) as err:
             raise NubisError(f"writing '{path}' failed ({err}): check the free disk space and permissions") from None
+        _check_written(tmp, path, grids)
     return path
+
+
+def _check_written(tmp: Path, path: Path, grids: list) -> None:
+    """The staged file on disk (fsync), its grids' headers readable and its last grid read back whole with
+    the voxels written: OpenVDB does not report a full disk, and a file cut short ends early, so the last
+    grid is the one that would be missing. (One grid read back, not all: the memory stays bounded.)"""
+    vdb = bundled.openvdb()
+    failed = NubisError(f"writing '{path}' failed (the file came out incomplete): check the free disk space")
+    try:
+        fd = os.open(tmp, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+    except OSError as err:
+        raise NubisError(f"writing '{path}' failed ({err.strerror}): check the free disk space") from None
+    if not grids:
+        return
+    try:
+        names = [g.name for g in vdb.readAllGridMetadata(str(tmp))]
+        last = vdb.read(str(tmp), grids[-1].name)
+    except (OSError, RuntimeError, ValueError, KeyError):
+        raise failed from None
+    if names != [g.name for g in grids] or last.activeVoxelCount() != grids[-1].activeVoxelCount():
+        raise failed
 
 
 def read_grid_info(path: str | os.PathLike) -> dict[str, GridInfo]:

@@ -4,6 +4,7 @@ Each test runs the command line as a child process (`python -m nubis_addon`), wi
 that anything left in the temporary folder is seen.
 """
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -423,3 +424,80 @@ def test_control_characters_in_names_are_printed_escaped(tmp_path):
     line = _one_line(r.stderr)
     assert "\x1b" not in line and "\x07" not in line, repr(line)
     assert "evil\\x1b[2J\\x1b]0;owned\\x07" in line, line
+
+
+@pytest.fixture
+def full_disk(tmp_path):
+    """A 4 MB tmpfs holding a good file, then filled to the last byte: yields (folder, the good file's
+    name and bytes). Needs root (CI runs as root); without it the test fails, it never skips."""
+    import subprocess
+
+    folder = tmp_path / "full"
+    folder.mkdir()
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=4m", "tmpfs", str(folder)], capture_output=True, text=True)
+    assert r.returncode == 0, f"a full disk needs a tmpfs mount (run the tests as root): {r.stderr.strip()}"
+    try:
+        yield folder
+    finally:
+        subprocess.run(["umount", "-l", str(folder)], check=False)
+
+
+def _fill(folder):
+    with open(folder / "filler", "wb") as f:
+        try:
+            while True:
+                f.write(b"\0" * 65536)
+                f.flush()
+        except OSError:
+            pass
+    with contextlib.suppress(OSError), open(folder / "filler2", "wb") as f:
+        while True:
+            f.write(b"\0")
+            f.flush()
+
+
+@pytest.mark.parametrize("suffix", [".png", ".exr"])
+def test_a_full_disk_never_replaces_a_good_image_with_a_bad_one(full_disk, suffix):
+    """`render --out /full/old.png` on a full disk said "rendered" and left an unreadable PNG in place of
+    the good one: the writer now checks what it wrote before the rename."""
+    from nubis_addon.core import imageio
+    from nubis_addon.core.errors import NubisError
+
+    old = full_disk / f"old{suffix}"
+    good = np.random.default_rng(1).random((64, 64, 4), dtype=np.float32)
+    imageio.write_image(old, good)
+    before = old.read_bytes()
+    _fill(full_disk)
+    noise = np.random.default_rng(2).random((512, 512, 4), dtype=np.float32)  # incompressible: about 1 MB
+    with pytest.raises(NubisError, match="check the free disk space|No space left"):
+        imageio.write_image(old, noise)
+    assert old.read_bytes() == before
+    assert not [p.name for p in full_disk.iterdir() if p.name.startswith(".nubis")]
+
+
+def test_a_full_disk_never_replaces_a_good_vdb_with_a_bad_one(full_disk, tmp_path):
+    """`bake --out /full/c.vdb` on a full disk said "baked" and left an unreadable 8192-byte VDB: OpenVDB
+    does not report the full disk, so the written file is read back before it replaces the old one."""
+    old = full_disk / "c.vdb"
+    r = run_cli("bake", "--out", str(old), "--voxel-size", "2000", env=_tmp_env(tmp_path))
+    assert r.returncode == 0, r.stderr
+    before = old.read_bytes()
+    _fill(full_disk)
+    r = run_cli("bake", "--out", str(old), "--voxel-size", "500", env=_tmp_env(tmp_path))
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert "check the free disk space" in _one_line(r.stderr)
+    assert old.read_bytes() == before
+
+
+def test_a_full_disk_keeps_a_good_vdb_sequence_whole(full_disk, tmp_path):
+    """`bake --frames 1-3` over a good set on a full disk said "baked" and left three 0-byte files."""
+    pattern = full_disk / "c_####.vdb"
+    r = run_cli("bake", "--out", str(pattern), "--frames", "1-3", "--voxel-size", "2000", env=_tmp_env(tmp_path))
+    assert r.returncode == 0, r.stderr
+    files = sorted(full_disk.glob("c_*.vdb"))
+    before = [f.read_bytes() for f in files]
+    assert len(files) == 3
+    _fill(full_disk)
+    r = run_cli("bake", "--out", str(pattern), "--frames", "1-3", "--voxel-size", "500", env=_tmp_env(tmp_path))
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert [f.read_bytes() for f in files] == before
