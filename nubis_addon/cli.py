@@ -145,12 +145,13 @@ def run(argv: Sequence[str], in_blender: bool = False) -> int:
         print(f"{PROG}: error: {printable(err)}", file=sys.stderr)
         return 2
     # One log file for Blender's chatter, kept only when an internal fault needs it.
-    fd, log_name = tempfile.mkstemp(prefix="nubis-", suffix=".log")
-    os.close(fd)
-    log = Path(log_name)
+    with interrupt.making():
+        fd, log_name = tempfile.mkstemp(prefix="nubis-", suffix=".log")
+        os.close(fd)
+        log = Path(log_name)
+        interrupt.register(log)
     console = Console()
     terminal.push(console)
-    interrupt.register(log)
     keep_log = False
     try:
         with interrupt.handle_signals(console.fd):

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import bpy
 
-from ..core import bundled, distributed, sequence, vdbio
+from ..core import bundled, distributed, interrupt, sequence, vdbio
 from ..core.distributed import BakeOptions, SceneSource
 from ..core.errors import NubisError
 from ..core.fsutil import check_output_path
@@ -156,7 +156,7 @@ def _bake_tiles_distributed(client, scene, source, frame, options, staged, progr
     merged.grid("density")
     done = 0
     ids_of = {fut.key: ids for fut, ids in zip(futures, groups, strict=True)}
-    with tempfile.TemporaryDirectory(prefix="nubis-merge-") as tmp, pipeline._removed_if_interrupted(tmp):
+    with interrupt.temporary_dir("nubis-merge-") as tmp:
         for n, fut in enumerate(distributed.distributed.as_completed(futures)):
             part = Path(tmp) / f"part{n}.vdb"
             part.write_bytes(fut.result())

@@ -2,10 +2,8 @@
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
-import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -383,7 +381,7 @@ def render_cycles(
     exact_samples: bool = False,
 ) -> np.ndarray:
     """Bake (unless given a VDB), import it with the matched material, render with Cycles; premultiplied RGBA."""
-    with tempfile.TemporaryDirectory(prefix="nubis-cycles-") as tmp, _removed_if_interrupted(tmp):
+    with interrupt.temporary_dir("nubis-cycles-") as tmp:
         if vdb_path is None:
             vdb_path = str(Path(tmp) / "clouds.vdb")
             bake(scene, vdb_path, voxel_size)
@@ -398,15 +396,6 @@ def render_cycles(
         rgba = imageio.read_image(exr)
         cycles_setup.remove_volume(scene)
     return rgba
-
-
-@contextlib.contextmanager
-def _removed_if_interrupted(path):
-    interrupt.register(path)
-    try:
-        yield
-    finally:
-        interrupt.unregister(path)
 
 
 def bake_clip_box(plan: BakePlan) -> tuple[float, float, float, float]:

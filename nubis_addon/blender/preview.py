@@ -7,7 +7,6 @@ import contextlib
 import json
 import math
 import statistics
-import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -17,7 +16,7 @@ import bpy
 import mathutils
 import numpy as np
 
-from ..core import camera, imageio, quality, sequence, staging
+from ..core import camera, imageio, interrupt, quality, sequence, staging
 from ..core.bakeplan import comparison_voxel_size, view_footprint
 from ..core.errors import NubisError
 from ..core.fsutil import check_output_dir
@@ -221,8 +220,7 @@ def render_eevee(scene, width: int, height: int, vdb_path: str, samples: int = 1
     engines = {e.identifier for e in bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items}
     eevee = "BLENDER_EEVEE_NEXT" if "BLENDER_EEVEE_NEXT" in engines else "BLENDER_EEVEE"
     with (
-        tempfile.TemporaryDirectory(prefix="nubis-eevee-") as tmp,
-        pipeline._removed_if_interrupted(tmp),
+        interrupt.temporary_dir("nubis-eevee-") as tmp,
         preserved(scene),
     ):
         cycles_setup.import_volume(scene, vdb_path)
@@ -309,7 +307,7 @@ def benchmark(
     display_converged = pipeline.display_image(scene, converged)
     result["converged_psnr_db"] = psnr(display_converged, display_naive)
     if eevee:
-        with tempfile.TemporaryDirectory(prefix="nubis-bench-") as tmp, pipeline._removed_if_interrupted(tmp):
+        with interrupt.temporary_dir("nubis-bench-") as tmp:
             st = scene_io.state_from_scene(scene)
             region = view_footprint(st, np.array(view.inv_view_proj))
             voxel = comparison_voxel_size(st, s.bake_voxel_size, region)

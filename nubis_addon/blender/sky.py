@@ -9,7 +9,6 @@ SINGLE_SCATTERING and MULTIPLE_SCATTERING and calls them `aerosol_density`. Both
 from __future__ import annotations
 
 import math
-import tempfile
 import threading
 from pathlib import Path
 
@@ -259,15 +258,11 @@ def _render_world(world, width: int, height: int, samples: int) -> np.ndarray:
         r.image_settings.color_mode = "RGB"
         # A private folder: an interrupt ends the process at once and removes it (renamed away first,
         # so the render cannot write anything under its name afterwards: core/interrupt.py).
-        with tempfile.TemporaryDirectory(prefix="nubis-world-") as tmp:
-            interrupt.register(tmp)
-            try:
-                path = Path(tmp) / "world.exr"
-                r.filepath = str(path)
-                _without_nubis_handlers(lambda: bpy.ops.render.render(write_still=True, scene=tmp_scene.name))
-                rgba = imageio.read_image(path)
-            finally:
-                interrupt.unregister(tmp)
+        with interrupt.temporary_dir("nubis-world-") as tmp:
+            path = Path(tmp) / "world.exr"
+            r.filepath = str(path)
+            _without_nubis_handlers(lambda: bpy.ops.render.render(write_still=True, scene=tmp_scene.name))
+            rgba = imageio.read_image(path)
     finally:
         bpy.data.scenes.remove(tmp_scene)
         bpy.data.objects.remove(cam)

@@ -18,6 +18,7 @@ import os
 import shutil
 import signal
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Iterator
@@ -27,6 +28,10 @@ MESSAGE = "nubis: interrupted\n"
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 _lock = threading.Lock()  # held while dying and while committing outputs
+# Held while a temporary path is made and registered, and by the dying watcher from its snapshot of the
+# registered paths on: a path is either made and registered before the snapshot, or never made. (The main
+# thread runs on between bytecodes while the watcher cleans up, and os._exit stops it anywhere.)
+_making = threading.Lock()
 _pending: list[int] = []  # signals received and not yet acted on
 _paths: dict[str, None] = {}  # registered temporary files and folders, in registration order
 _installed: dict = {}
@@ -35,6 +40,26 @@ _installed: dict = {}
 def register(path: str | os.PathLike) -> None:
     """Remove ``path`` (a file or a whole folder) if the run is interrupted."""
     _paths[os.fspath(path)] = None
+
+
+@contextlib.contextmanager
+def making() -> Iterator[None]:
+    """Around making a temporary file or folder and registering it (a race-free pair with an interrupt)."""
+    with _making:
+        yield
+
+
+@contextlib.contextmanager
+def temporary_dir(prefix: str) -> Iterator[str]:
+    """A private temporary folder, registered from the moment it exists and removed at the end."""
+    with _making:
+        path = tempfile.mkdtemp(prefix=prefix)
+        register(path)
+    try:
+        yield path
+    finally:
+        unregister(path)
+        shutil.rmtree(path, ignore_errors=True)
 
 
 def unregister(path: str | os.PathLike) -> None:
@@ -92,6 +117,7 @@ def stop() -> None:
 
 def _die(signum: int) -> None:
     _lock.acquire()  # never released: the process ends here
+    _making.acquire()  # nor this: no temporary path is made after the snapshot below
     remove_registered()
     fd = _installed.get("message_fd")
     if fd is not None:

@@ -894,9 +894,10 @@ def _savez_fast(f, **arrays: np.ndarray) -> None:
 
 def _write_cache(path: Path, ns: NoiseSet) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}-", suffix=".tmp")
-    tmp = Path(tmp_name)
-    interrupt.register(tmp)  # an interrupted run leaves no partial cache file
+    with interrupt.making():  # an interrupted run leaves no partial cache file
+        fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}-", suffix=".tmp")
+        tmp = Path(tmp_name)
+        interrupt.register(tmp)
     try:
         arrays = ns.arrays()
         with os.fdopen(fd, "wb") as f:
