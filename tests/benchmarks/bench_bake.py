@@ -2,7 +2,7 @@
 memory (maximum resident set), voxels per second of the active bounding box, and whether OpenVDB 10's
 `vdb_print` (Debian's libopenvdb-tools) reads the file.
 
-Run from the repository root:  .venv/bin/python tests/benchmarks/bench_bake.py [--quick]
+Run from the repository root:  .venv-5.3/bin/python tests/benchmarks/bench_bake.py [--quick]
 Each bake is a fresh `python -m nubis_addon bake` process, timed and measured with os.wait4 (its own
 peak RSS, start-up included). Ratios are measured in the same run. --quick skips the 20 m bakes.
 """

@@ -1,6 +1,6 @@
 """Benchmark of the GPU path: noise generation, GPU texture memory, frame times, bake time.
 
-Run from the repository root:  .venv/bin/python tests/benchmarks/bench_render.py
+Run from the repository root:  .venv-5.3/bin/python tests/benchmarks/bench_render.py
 Prints one table; ratios are measured in the same run. Times on a software rasterizer (llvmpipe)
 are for comparing changes, not a promise for a real GPU.
 """

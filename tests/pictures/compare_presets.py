@@ -1,6 +1,6 @@
 """Full-mode comparison of every preset with Cycles, for the README's parity table.
 
-Run from the repository root:  .venv/bin/python tests/pictures/compare_presets.py OUT_DIR [W H SAMPLES]
+Run from the repository root:  .venv-5.3/bin/python tests/pictures/compare_presets.py OUT_DIR [W H SAMPLES]
 Writes OUT_DIR/<preset>/ (compare's outputs) and prints a markdown table of the metrics.
 """
 

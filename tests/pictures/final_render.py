@@ -2,7 +2,7 @@
 plane and an 800 m cube, rendered with bpy.ops.render.render() in EEVEE and in Cycles at frames 1 and 240
 (the clouds behind the cube, their shadows on the ground, moved by the wind; blender/scene_render.py).
 
-Run from the repository root:  .venv/bin/python tests/pictures/final_render.py OUT.png [WIDTH HEIGHT]
+Run from the repository root:  .venv-5.3/bin/python tests/pictures/final_render.py OUT.png [WIDTH HEIGHT]
 """
 
 from __future__ import annotations

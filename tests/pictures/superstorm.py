@@ -1,7 +1,7 @@
 """Make the superstorm pictures of the README: from 30 km, from the ground beneath it, and a strip of
 frames looking up into the mesocyclone while it turns, the last one lit by a lightning flash.
 
-Run from the repository root:  .venv/bin/python tests/pictures/superstorm.py OUT_DIR
+Run from the repository root:  .venv-5.3/bin/python tests/pictures/superstorm.py OUT_DIR
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@ sky), then only the Sun lamp is turned: sunrise, noon and sunset looking towards
 behind the camera. The sky, the lamp's colour (the atmosphere's transmittance) and the clouds' sky
 light follow the lamp by themselves (blender/sky.py); the camera turns to frame each shot.
 
-Run from the repository root:  .venv/bin/python tests/pictures/time_of_day.py OUT.png
+Run from the repository root:  .venv-5.3/bin/python tests/pictures/time_of_day.py OUT.png
 """
 
 from __future__ import annotations

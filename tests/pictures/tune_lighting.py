@@ -1,7 +1,7 @@
 """Tune the viewport's lighting defaults against Cycles (compare --mode full) over every preset.
 
 Run from the repository root:
-    .venv/bin/python tests/pictures/tune_lighting.py OUT_DIR [W H SAMPLES [ROUNDS]]
+    .venv-5.3/bin/python tests/pictures/tune_lighting.py OUT_DIR [W H SAMPLES [ROUNDS]]
 
 Cycles' reference of each preset (its own volume bounces, the camera's bake) does not depend on the
 viewport's lighting terms, so it is rendered once; then a coordinate search re-renders only the

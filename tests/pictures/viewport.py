@@ -2,7 +2,7 @@
 redraw next to the one after 16 and 64 redraws (480x270), and an orbit strip (320x180, 1.5 degrees and
 one redraw per frame, the wind blowing).
 
-Run from the repository root:  .venv/bin/python tests/pictures/viewport.py OUT_DIR
+Run from the repository root:  .venv-5.3/bin/python tests/pictures/viewport.py OUT_DIR
 It runs `python -m nubis_addon preview` three times and writes viewport_convergence.png and
 viewport_orbit.png into OUT_DIR.
 """
