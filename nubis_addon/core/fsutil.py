@@ -32,6 +32,19 @@ def not_a_file(path: Path) -> str:
     return ""
 
 
+def sync_to_disk(staged: Path, final: Path) -> None:
+    """fsync a staged file before it replaces `final`: a full disk that shows only when the data reaches it
+    fails here, while the old file is still in place."""
+    try:
+        fd = os.open(staged, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+    except OSError as err:
+        raise NubisError(f"writing '{final}' failed ({err.strerror}): check the free disk space") from None
+
+
 def check_output_path(path: str | os.PathLike, suffixes: tuple[str, ...] | None = None) -> Path:
     """Fail early, before minutes of rendering, when ``path`` cannot be written."""
     out = Path(path).expanduser()

@@ -18,7 +18,7 @@ import numpy as np
 
 from . import bundled
 from .errors import NubisError
-from .fsutil import atomic_path
+from .fsutil import atomic_path, sync_to_disk
 
 IMAGE_SUFFIXES = (".png", ".exr")
 
@@ -96,14 +96,7 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray) -> Path:
 def _check_written(tmp: Path, path: Path, shape: tuple[int, int, int]) -> None:
     """The staged file on disk (fsync), then read back whole: a writer that ran out of disk space without
     saying so leaves a file that does not read, and it must not replace a good one."""
-    try:
-        fd = os.open(tmp, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-    except OSError as err:
-        raise NubisError(f"writing '{path}' failed ({err.strerror}): check the free disk space") from None
+    sync_to_disk(tmp, path)
     try:
         back = read_image(tmp)
     except NubisError:

@@ -10,7 +10,7 @@ import numpy as np
 
 from . import bundled
 from .errors import NubisError
-from .fsutil import atomic_path
+from .fsutil import atomic_path, sync_to_disk
 
 # Values below this are dropped from the sparse tree: at sigma 0.04/m and 100 m voxels this is an optical
 # depth of 4e-5 per voxel, far below what a render can show.
@@ -148,14 +148,7 @@ def _check_written(tmp: Path, path: Path, grids: list) -> None:
     grid is the one that would be missing. (One grid read back, not all: the memory stays bounded.)"""
     vdb = bundled.openvdb()
     failed = NubisError(f"writing '{path}' failed (the file came out incomplete): check the free disk space")
-    try:
-        fd = os.open(tmp, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-    except OSError as err:
-        raise NubisError(f"writing '{path}' failed ({err.strerror}): check the free disk space") from None
+    sync_to_disk(tmp, path)
     if not grids:
         return
     try:
