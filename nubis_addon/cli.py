@@ -85,7 +85,12 @@ def build_parser() -> argparse.ArgumentParser:
         size(p)
         p.add_argument("--samples", type=int, help="Cycles samples per pixel (default: the preset's)")
         p.add_argument("--voxel-size", type=float, help="voxel edge of the bake in metres")
-        p.add_argument("--bounces", type=int, help="Cycles volume bounces (default: the scene's)")
+        p.add_argument(
+            "--bounces",
+            type=int,
+            help="Cycles volume bounces (default: the scene's for cycles; for compare's full mode, enough to "
+            "converge, 256: docs/convergence.md)",
+        )
         if name == "compare":
             p.add_argument(
                 "--mode",

@@ -91,8 +91,13 @@ def resolution(scene, width: int | None, height: int | None) -> tuple[int, int]:
 # The two comparison modes of `compare` (issue: measured parity with Cycles).
 # single: one scattering event on both sides, the viewport's reference light march, no powder and no
 #         multiple-scattering octaves, against Cycles with one volume bounce.
-# full:   every viewport term against Cycles with the scene's volume bounces.
+# full:   every viewport term against Cycles with REFERENCE_BOUNCES volume bounces (or the caller's).
 COMPARE_MODES = ("single", "full")
+
+# Cycles' volume bounces for a full comparison: enough that doubling them changes the picture by less
+# than Cycles' own noise on every preset (docs/convergence.md). The scene's own setting (8 by default,
+# what an artist renders with) is not a reference: thick decks are up to 80 % darker at 8 bounces.
+REFERENCE_BOUNCES = 256
 
 
 @dataclass
@@ -414,6 +419,7 @@ def compare(
     mode: str = "full",
     voxel_size: float | None = None,
     noise_estimate: bool = False,
+    bounces: int | None = None,
 ) -> dict:
     """Viewport and Cycles renders of the same shot, their side-by-side, a difference image and
     metrics.json (computed on the scene-linear EXR values); the bake Cycles rendered is kept as
@@ -424,7 +430,7 @@ def compare(
         raise NubisError(f"unknown comparison mode '{mode}': use single or full")
     out = check_output_dir(out_dir)
     with output_set() as outputs:
-        return _compare(scene, out, outputs.stage, width, height, samples, mode, voxel_size, noise_estimate)
+        return _compare(scene, out, outputs.stage, width, height, samples, mode, voxel_size, noise_estimate, bounces)
 
 
 # The comparison bakes the cirrus as a slab two voxels thin: the viewport samples the 2D layer at one
@@ -440,7 +446,7 @@ THIN_CIRRUS = True
 COMPARE_PASSES = 4
 
 
-def _compare(scene, out: Path, stage, width, height, samples, mode, voxel_size, noise_estimate) -> dict:
+def _compare(scene, out: Path, stage, width, height, samples, mode, voxel_size, noise_estimate, bounces) -> dict:
     timings = {}
     t = time.perf_counter()
     if voxel_size is None:
@@ -468,7 +474,10 @@ def _compare(scene, out: Path, stage, width, height, samples, mode, voxel_size, 
     viewport = (halves[0] + halves[1]) / 2
     timings["viewport_s"] = time.perf_counter() - t
     # Cycles counts bounces after the first scattering: 0 volume bounces is single scattering.
-    bounces = 0 if mode == "single" else None
+    if mode == "single":
+        bounces = 0
+    elif bounces is None:
+        bounces = REFERENCE_BOUNCES
     t = time.perf_counter()
     # With a noise estimate, Cycles renders half the samples twice with different seeds: their mean is
     # the reference, noisier than either by 1/sqrt(2), and their difference is sqrt(2) x either's

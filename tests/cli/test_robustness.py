@@ -4,7 +4,6 @@ Each test runs the command line as a child process (`python -m nubis_addon`), wi
 that anything left in the temporary folder is seen.
 """
 
-import contextlib
 import os
 import signal
 import subprocess
@@ -443,17 +442,16 @@ def full_disk(tmp_path):
 
 
 def _fill(folder):
-    with open(folder / "filler", "wb") as f:
+    """Write until the file system refuses a single byte (unbuffered: a buffered file's close would raise)."""
+    for name, chunk in (("filler", 65536), ("filler2", 1)):
+        fd = os.open(folder / name, os.O_WRONLY | os.O_CREAT)
         try:
             while True:
-                f.write(b"\0" * 65536)
-                f.flush()
+                os.write(fd, b"\0" * chunk)
         except OSError:
             pass
-    with contextlib.suppress(OSError), open(folder / "filler2", "wb") as f:
-        while True:
-            f.write(b"\0")
-            f.flush()
+        finally:
+            os.close(fd)
 
 
 @pytest.mark.parametrize("suffix", [".png", ".exr"])
