@@ -150,7 +150,7 @@ def run(argv: Sequence[str], in_blender: bool = False) -> int:
         print(f"{PROG}: error: {printable(err)}", file=sys.stderr)
         return 2
     # One log file for Blender's chatter, kept only when an internal fault needs it.
-    with interrupt.making():
+    with interrupt.deferred():  # made and registered together
         fd, log_name = tempfile.mkstemp(prefix="nubis-", suffix=".log")
         os.close(fd)
         log = Path(log_name)

@@ -11,13 +11,11 @@ into the .blend when it is saved, and undo or redo re-composites from the restor
 
 from __future__ import annotations
 
-import threading
-
 import bpy
 
 from ..core import schema
 from ..core.errors import NubisError
-from . import handlers, scene_io, status, viewport
+from . import handlers, mainthread, scene_io, status, viewport
 
 # Seconds of quiet after the last edit before the field is composited again.
 DEBOUNCE_S = 0.15
@@ -105,7 +103,7 @@ def on_frame_change(scene, _depsgraph=None) -> None:
     """Keyed layers, rules, storms and field settings change the field: composite for the new frame. (An
     animation rendered from the interface changes frames on its render thread; the frame's render handler
     sets the frame again on the main thread, which composites then: blender/scene_render.py.)"""
-    if threading.current_thread() is not threading.main_thread():
+    if not mainthread.on_main_thread():
         return
     if not scene_io.has_cloudscape(scene) or not scene_io.field_animated(scene.nubis):
         return

@@ -18,7 +18,6 @@ from __future__ import annotations
 import queue
 import sys
 import threading
-import time
 from collections.abc import Callable
 from typing import Any
 
@@ -32,7 +31,6 @@ PICKUP_TIMEOUT_S = 60.0  # how long a render thread waits for the main thread to
 
 _work: queue.Queue = queue.Queue()
 _reports: queue.Queue = queue.Queue()
-_last_pump = [0.0]
 
 
 class _Item:
@@ -69,7 +67,6 @@ def call(fn: Callable[[], Any], timeout: float = 1800.0) -> Any:
 
 def _pump():
     """Timer on the main thread: runs the queued work and shows queued reports."""
-    _last_pump[0] = time.monotonic()
     while True:
         try:
             item = _work.get_nowait()

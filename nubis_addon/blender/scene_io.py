@@ -581,8 +581,10 @@ def _load_layer_image(ref: str, preset_path: Path | None) -> str:
 def _image_header_size(path: Path) -> tuple[int, int] | None:
     """An image's width and height from its header alone (OpenImageIO reads no pixels), or None when
     OpenImageIO cannot open it (Blender's loader then says what is wrong)."""
-    inp = bundled.oiio().ImageInput.open(str(path))
+    oiio = bundled.oiio()
+    inp = oiio.ImageInput.open(str(path))
     if inp is None:
+        oiio.geterror()  # retrieved, so OpenImageIO does not print it at exit
         return None
     try:
         spec = inp.spec()

@@ -9,7 +9,6 @@ SINGLE_SCATTERING and MULTIPLE_SCATTERING and calls them `aerosol_density`. Both
 from __future__ import annotations
 
 import math
-import threading
 from pathlib import Path
 
 import bpy
@@ -17,7 +16,7 @@ import numpy as np
 
 from ..core import imageio, interrupt, metrics
 from ..core import sky as skymath
-from . import handlers
+from . import handlers, mainthread
 
 WORLD_NAME = "Nubis Sky"
 SKY_NODE = "Nubis Sky Texture"
@@ -277,7 +276,7 @@ _busy = [False]
 def capturing() -> bool:
     """True on the main thread while a capture renders there: the handlers it runs must leave that render
     alone. A render job of the interface may end on its own thread meanwhile; its handlers see False."""
-    return _busy[0] and threading.current_thread() is threading.main_thread()
+    return _busy[0] and mainthread.on_main_thread()
 
 
 def _without_nubis_handlers(fn):
@@ -370,11 +369,7 @@ def on_update(scene, _depsgraph=None) -> None:
     """Turning the Sun lamp (by hand, by animation) moves the Nubis sky's sun and recolours the lamp. An
     animation rendered from the interface changes frames on its render thread: the frame's render handler
     syncs the sun on the main thread then (blender/scene_render.py)."""
-    if (
-        capturing()
-        or getattr(scene, "nubis", None) is None
-        or threading.current_thread() is not threading.main_thread()
-    ):
+    if capturing() or getattr(scene, "nubis", None) is None or not mainthread.on_main_thread():
         return
     sync_sun(scene)
 

@@ -27,11 +27,10 @@ from pathlib import Path
 MESSAGE = "nubis: interrupted\n"
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
-_lock = threading.Lock()  # held while dying and while committing outputs
-# Held while a temporary path is made and registered, and by the dying watcher from its snapshot of the
-# registered paths on: a path is either made and registered before the snapshot, or never made. (The main
-# thread runs on between bytecodes while the watcher cleans up, and os._exit stops it anywhere.)
-_making = threading.Lock()
+# Held while dying (from before the snapshot of the registered paths until os._exit), while committing
+# outputs and while a temporary path is made and registered: a path is either registered before the
+# snapshot or never made. (The main thread runs on between bytecodes while the watcher cleans up.)
+_lock = threading.Lock()
 _pending: list[int] = []  # signals received and not yet acted on
 _paths: dict[str, None] = {}  # registered temporary files and folders, in registration order
 _installed: dict = {}
@@ -43,16 +42,9 @@ def register(path: str | os.PathLike) -> None:
 
 
 @contextlib.contextmanager
-def making() -> Iterator[None]:
-    """Around making a temporary file or folder and registering it (a race-free pair with an interrupt)."""
-    with _making:
-        yield
-
-
-@contextlib.contextmanager
 def temporary_dir(prefix: str) -> Iterator[str]:
     """A private temporary folder, registered from the moment it exists and removed at the end."""
-    with _making:
+    with deferred():
         path = tempfile.mkdtemp(prefix=prefix)
         register(path)
     try:
@@ -103,7 +95,8 @@ def pending() -> bool:
 
 @contextlib.contextmanager
 def deferred() -> Iterator[None]:
-    """Run a short block (moving outputs into place) that an interrupt must not cut in half."""
+    """Run a short block that an interrupt must not cut in half: moving outputs into place, making a
+    temporary path and registering it. Not reentrant: never nest two."""
     with _lock:
         yield
 
@@ -117,7 +110,6 @@ def stop() -> None:
 
 def _die(signum: int) -> None:
     _lock.acquire()  # never released: the process ends here
-    _making.acquire()  # nor this: no temporary path is made after the snapshot below
     remove_registered()
     fd = _installed.get("message_fd")
     if fd is not None:

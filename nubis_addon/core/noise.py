@@ -894,7 +894,7 @@ def _savez_fast(f, **arrays: np.ndarray) -> None:
 
 def _write_cache(path: Path, ns: NoiseSet) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    with interrupt.making():  # an interrupted run leaves no partial cache file
+    with interrupt.deferred():  # made and registered together: an interrupted run leaves no partial file
         fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}-", suffix=".tmp")
         tmp = Path(tmp_name)
         interrupt.register(tmp)

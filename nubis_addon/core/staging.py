@@ -88,9 +88,8 @@ class OutputSet:
             # Made and registered under the interrupt lock: a signal between the two would leave the
             # folder behind (the watcher removes only what is registered).
             with interrupt.deferred():
-                with interrupt.making():
-                    staging = Path(tempfile.mkdtemp(prefix=_prefix(), dir=folder))
-                    interrupt.register(staging)
+                staging = Path(tempfile.mkdtemp(prefix=_prefix(), dir=folder))
+                interrupt.register(staging)
             self._dirs[folder] = staging
         staged = self._dirs[folder] / final.name
         self._files[final] = staged

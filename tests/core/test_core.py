@@ -246,13 +246,13 @@ def test_no_temporary_folder_is_made_once_an_interrupt_cleans_up(tmp_path, monke
         with interrupt.temporary_dir("nubis-race-") as tmp:
             made.append(tmp)
 
-    interrupt._making.acquire()  # what _die holds from its snapshot until os._exit
+    interrupt._lock.acquire()  # what _die holds from before its snapshot until os._exit
     try:
         worker = threading.Thread(target=main_thread_work, daemon=True)
         worker.start()
         time.sleep(0.3)
         assert worker.is_alive() and not made and not list(tmp_path.iterdir())
     finally:
-        interrupt._making.release()
+        interrupt._lock.release()
     worker.join(5)
     assert made and not list(tmp_path.iterdir())  # made, registered, used and removed once allowed
