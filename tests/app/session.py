@@ -313,7 +313,10 @@ def close_render_window():
         if "Blender" in name and w > 50 and (w, h) != (main.width, main.height):
             mouse_to(max(x, 0) + min(w, 200) // 2, max(y, 0) + min(h, 150) // 2)
             key("Escape")
-    yield 2.0
+    t = time.monotonic()  # a key pressed before the render window is gone goes to that window
+    while len(bpy.context.window_manager.windows) > 1 and time.monotonic() - t < 20:
+        yield 0.5
+    yield 1.0
     mouse_over_view()
 
 
@@ -332,10 +335,11 @@ def render_ui(step: Step, name: str, how: str, animation: bool = False):
                 f"render.render(INVOKE_DEFAULT, animation={animation}) -> "
                 f"{bpy.ops.render.render('INVOKE_DEFAULT', animation=animation)}"
             )
-    yield from wait_render(step, since)
+    events = yield from wait_render(step, since)
     yield 2.0
     shot(step, name + "_window")
-    path = "" if animation else save_result(name)
+    # Only this render's result: without one, "Render Result" still holds the previous render's.
+    path = "" if animation or "render_complete" not in events else save_result(name)
     after = scene.world.name if scene.world else None
     step.note(
         f"{name}: World {after!r}; worlds {[w.name for w in bpy.data.worlds]}; "
