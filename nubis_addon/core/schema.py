@@ -860,6 +860,20 @@ SCENE: tuple[Setting, ...] = (
     ),
     S(
         "sky",
+        "ground",
+        "color",
+        (0.2, 0.19, 0.16),
+        "Ground",
+        "Albedo of the ground a Nubis sky shows below the horizon, lit by the sun and the sky; it also lights "
+        "the clouds from below",
+        min=0.0,
+        max=1.0,
+        size=3,
+        panel="sky",
+        trigger="redraw",
+    ),
+    S(
+        "sky",
         "render_clouds",
         "bool",
         True,
@@ -1546,8 +1560,8 @@ QUALITY_COLUMNS: dict[str, str] = {s.quality: s.key for s in SCENE if s.quality}
 
 
 def defaults() -> dict[str, Any]:
-    """The scene settings a preset holds, at their defaults, by key."""
-    return {s.key: s.default for s in PRESET_SCENE}
+    """The scene settings a preset holds, at their defaults, by key (vectors as lists, as TOML reads them)."""
+    return {s.key: list(s.default) if isinstance(s.default, tuple) else s.default for s in PRESET_SCENE}
 
 
 def table_defaults(settings) -> dict[str, Any]:

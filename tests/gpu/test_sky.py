@@ -73,6 +73,39 @@ def test_new_cloudscape_builds_a_sky_tied_to_the_sun(make_scene, blender):
     assert sum(a_high) > 2 * sum(a_low)
 
 
+def test_the_ground_below_the_horizon_is_lit_by_the_sun_and_the_sky(make_scene, blender):
+    """No black band: the World shows a Lambertian ground, albedo x (E_sun sin(elevation) + E_sky) / pi,
+    E_sky the sky's own irradiance (a quadrature of the Sky Texture in the World's nodes, checked here
+    against the exact integral of the capture), in step with the lamp and the Ground setting."""
+    from nubis_addon.blender import sky
+
+    scene = make_scene("default")
+    sun = sky.find_sun(scene)
+    h, w = sky.ENV_WIDTH // 2, sky.ENV_WIDTH
+    dirs, solid = skymath.directions(w, h), skymath.solid_angles(w, h)
+    cosine = (np.clip(dirs[..., 2], 0.0, None) * solid)[..., None]
+    nadir = dirs[..., 2] < -0.3  # well below the soft horizon
+
+    def ground_and_expected():
+        blender.context.view_layer.update()
+        env = sky.environment(scene)
+        sky_irradiance = (env * cosine).sum(axis=(0, 1))  # exact, from the capture
+        sine = max(0.0, sun.matrix_world.to_3x3().col[2].normalized().z)
+        sun_irradiance = np.array(sun.data.color) * sun.data.energy * sine
+        albedo = np.array(scene.nubis.sky_ground)
+        return env[nadir].mean(axis=0), albedo * (sun_irradiance + sky_irradiance) / math.pi
+
+    ground, expected = ground_and_expected()
+    assert np.all(ground > 0.05), ground  # not black
+    assert np.allclose(ground, expected, rtol=0.08), (ground, expected)
+    sun.rotation_euler = (math.radians(82.0), 0.0, 0.3)  # 8 degrees up: the ground darkens
+    low, expected_low = ground_and_expected()
+    assert np.allclose(low, expected_low, rtol=0.08) and low.sum() < 0.5 * ground.sum(), (low, expected_low)
+    scene.nubis.sky_ground = (0.4, 0.2, 0.1)
+    tinted, expected_tinted = ground_and_expected()
+    assert np.allclose(tinted, expected_tinted, rtol=0.08) and tinted[0] > 2.5 * tinted[2], tinted
+
+
 def test_the_sky_behind_the_clouds_is_not_one_colour(tmp_path):
     from nubis_addon.core import imageio
 
