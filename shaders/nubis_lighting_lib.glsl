@@ -388,6 +388,38 @@ NubisRayLight nubis_ray_light(vec3 view_dir)
   return l;
 }
 
+/* A point's unit coordinates in an optical-depth volume (core/lightvolume.py) and the volume's value
+ * there, between texel centres: the first and last texels sit on the box's faces. */
+float nubis_volume_fetch(sampler3D volume, vec3 unit)
+{
+  vec3 n = vec3(textureSize(volume, 0));
+  return texture(volume, (clamp(unit, 0.0, 1.0) * (n - 1.0) + 0.5) / n).r;
+}
+
+vec3 nubis_sun_volume_unit(vec3 p)
+{
+  return vec3(dot(P.sun_volume_x.xyz, p) + P.sun_volume_x.w,
+              dot(P.sun_volume_y.xyz, p) + P.sun_volume_y.w,
+              dot(P.sun_volume_z.xyz, p) + P.sun_volume_z.w);
+}
+
+/* The optical depth from p towards the sun until the cloud domain ends (sigma included). */
+float nubis_sun_volume_depth(vec3 p)
+{
+  return nubis_volume_fetch(sun_volume, nubis_sun_volume_unit(p));
+}
+
+/* The optical depth of cloud above p and below it, to the domain's top and floor (sigma included). */
+vec2 nubis_sky_volume_depths(vec3 p)
+{
+  vec3 unit = vec3(dot(P.sky_volume_x.xyz, p) + P.sky_volume_x.w,
+                   dot(P.sky_volume_y.xyz, p) + P.sky_volume_y.w,
+                   dot(P.sky_volume_z.xyz, p) + P.sky_volume_z.w);
+  float above = nubis_volume_fetch(sky_volume, unit);
+  float column = nubis_volume_fetch(sky_volume, vec3(unit.xy, 1.0));
+  return vec2(above, max(column - above, 0.0));
+}
+
 /* Optical depth towards the sun (docs/sources.md#light-march). Real time: the march of GPU Pro 7 / S15, samples in a widening cone
  * plus one long-distance sample (GPU Pro 7 fig 4.36) at the coarse density. The taps (offset from the
  * point, and the length each stands for) are the same for every sample of a frame, so Python computes
@@ -420,12 +452,21 @@ float nubis_light_optical_depth(vec3 p, float view_alpha, float lod, vec2 pixel,
     powder_depth += w;
     tau += w * nubis_extinction_factor(q, s.precipitation);
   }
+#  if NUBIS_LIGHT_VOLUME
+  /* Beyond the cone, the sun's optical-depth volume: the whole layer towards the sun
+   * (docs/viewport.md#light-volumes). It is already scaled by sigma. */
+  float far_depth = nubis_sun_volume_depth(p + P.sun_dir.xyz * P.light_cone_reach);
+  powder_depth += far_depth / P.density_sigma;
+  tau += far_depth / P.density_sigma;
+#  else
+  /* GPU Pro 7's long-distance sample at three times the cone's reach. */
   vec4 long_tap = P.light_taps[taps - 1];
   vec3 far_point = p + long_tap.xyz;
   NubisDensity far_sample = nubis_density(far_point, true, light_lod);
   float w = far_sample.coarse * long_tap.w;
   powder_depth += w;
   tau += w * nubis_extinction_factor(far_point, far_sample.precipitation);
+#  endif
 #endif
   powder_depth *= P.density_sigma;
   return tau * P.density_sigma;
@@ -472,11 +513,22 @@ vec3 nubis_in_scattering(
   vec3 sky_light = nubis_reference_sky_light(p, view_dir, pixel);
 #else
   float ambient_probability = sqrt(1.0 - clamp01(d.coarse));
+  float overhead = 1.0;
 #  if NUBIS_CIRRUS
-  /* ... and the sky light by its transmittance overhead. */
-  ambient_probability *= exp(-nubis_cirrus_optical_depth(p, normalize(p + vec3(0.0, 0.0, P.layer_planet_radius)), 0.0));
+  /* ... and the sky light from above by its transmittance overhead. */
+  overhead = exp(-nubis_cirrus_optical_depth(p, normalize(p + vec3(0.0, 0.0, P.layer_planet_radius)), 0.0));
 #  endif
-  vec3 sky_light = nubis_ambient_light(d.h) * ambient_probability;
+#  if NUBIS_LIGHT_VOLUME
+  /* The sky from above through the cloud above the point, the ground's light through the cloud below
+   * it, each over its hemisphere (an isotropic share of one half); the optical depths come from the
+   * sky's volume (docs/viewport.md#light-volumes), scaled by the occlusion setting. S15's height
+   * gradient stays as art direction. */
+  vec2 depths = nubis_sky_volume_depths(p) * P.lighting_sky_occlusion;
+  vec3 sky_light = 0.5 * (P.ambient.rgb * (overhead * exp(-depths.x)) + P.ambient_below.rgb * exp(-depths.y));
+  sky_light *= mix(P.lighting_ambient_bottom, 1.0, d.h);
+#  else
+  vec3 sky_light = nubis_ambient_light(d.h) * (ambient_probability * overhead);
+#  endif
 #endif
   sky_light *= nubis_storm_ambient(p, d.h);
   return direct + sky_light + nubis_storm_steady_glow(p, d.fine);

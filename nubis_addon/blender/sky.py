@@ -162,14 +162,14 @@ def sync_sun(scene, sun=None, force: bool = False) -> bool:
 
 # ---- the ground below the horizon -----------------------------------------------------------------------
 #
-# (docs/sky.md#ground) The Sky Texture is black below the horizon, so without a ground every picture had a
-# black band and the clouds' light from below was black. The Nubis sky's World shows a diffuse ground instead, lit by the
-# sun and the sky: its radiance is albedo x (E_sun sin(elevation) + E_sky) / pi (Lambert), E_sky the sky's
-# irradiance on a horizontal plane. The sky term is evaluated by the World itself (the Sky Texture at
-# fixed directions), so Cycles, EEVEE and the capture that lights the viewport see the same ground; the
-# sun term is set here whenever the lamp changes. Between the horizon and HORIZON_BAND below it the sky's
-# horizon (the texture mirrored at the horizon) fades into the ground: a soft haze, not an edge. The
-# ground is not shadowed by the clouds: it stands for the land around the scene, not under a cloud.
+# (docs/sky.md#ground) The Sky Texture is black below the horizon, so without a ground every picture had a black
+# band and the clouds' light from below was black. The Nubis sky's World shows a diffuse ground instead, lit by
+# the sun and the sky: its radiance is albedo x (E_sun sin(elevation) + E_sky) / pi (Lambert), E_sky the sky's
+# irradiance on a horizontal plane. The sky term is evaluated by the World itself (the Sky Texture at fixed
+# directions), so Cycles, EEVEE and the capture that lights the viewport see the same ground; the sun term is
+# set here whenever the lamp changes. Between the horizon and HORIZON_BAND below it the sky's horizon (the
+# texture mirrored at the horizon) fades into the ground: a soft haze, not an edge. The ground is not shadowed
+# by the clouds: it stands for the land around the scene, not under a cloud.
 GROUND_ALBEDO_NODE = "Nubis Ground Albedo"
 GROUND_SUN_NODE = "Nubis Ground Sun"
 GROUND_SKY_NODE = "Nubis Ground Sky"

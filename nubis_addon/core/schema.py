@@ -490,6 +490,19 @@ SCENE: tuple[Setting, ...] = (
     ),
     S(
         "lighting",
+        "sky_occlusion",
+        "float",
+        1.0,
+        "Sky Occlusion",
+        "How much the cloud above and below a point dims its sky light: a scale on that cloud's optical "
+        "depth (docs/viewport.md#light-volumes)",
+        min=0.0,
+        max=4.0,
+        panel="lighting",
+        gpu=True,
+    ),
+    S(
+        "lighting",
         "cycles_mie",
         "bool",
         False,

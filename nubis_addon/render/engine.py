@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import gpu
 import numpy as np
 from gpu.types import GPUShaderCreateInfo, GPUStageInterfaceInfo
 from gpu_extras.batch import batch_for_shader
 
-from ..core import noise, sky
+from ..core import lightvolume, noise, sky
 from ..core.state import CloudState
 from . import uniforms
 from .sources import CLOUD_LIBS, assemble, read_shader
@@ -28,9 +28,14 @@ CLOUD_SAMPLERS = (
     ("FLOAT_2D", "noise_curl"),
     ("FLOAT_2D", "noise_cirrus"),
     ("FLOAT_2D", "sky_env"),
+    ("FLOAT_3D", "sun_volume"),
+    ("FLOAT_3D", "sky_volume"),
 )
+VOLUMES = ("sun_volume", "sky_volume")
+# The libraries the optical-depth volumes are filled with (the density and the absorption).
+VOLUME_LIBS = CLOUD_LIBS[:3]
 # The permutation switches every stage is compiled with (0 or 1); see shaders/nubis_common_lib.glsl.
-SWITCHES = ("NUBIS_STORMS", "NUBIS_REFERENCE", "NUBIS_NAIVE", "NUBIS_CIRRUS", "NUBIS_FETCH_STATS")
+SWITCHES = ("NUBIS_STORMS", "NUBIS_REFERENCE", "NUBIS_NAIVE", "NUBIS_CIRRUS", "NUBIS_FETCH_STATS", "NUBIS_LIGHT_VOLUME")
 
 
 @dataclass(frozen=True)
@@ -117,6 +122,27 @@ def _create_info(name: str, defines: dict[str, object]) -> GPUShaderCreateInfo:
     return info
 
 
+def _volume_create_info(defines: dict[str, object]) -> GPUShaderCreateInfo:
+    """The compute stage that fills an optical-depth volume (shaders/nubis_light_volume_comp.glsl)."""
+    info = GPUShaderCreateInfo()
+    for key, value in defines.items():
+        info.define(key, str(value))
+    info.define("NUBIS_VOLUME_STEPS", str(lightvolume.STEPS_PER_SLICE))
+    info.typedef_source(uniforms.struct_source() + read_shader("nubis_params.glsl"))
+    info.uniform_buf(0, "NubisParams", "P")
+    for slot, (kind, sampler) in enumerate(CLOUD_SAMPLERS):
+        info.sampler(slot, kind, sampler)
+    info.image(0, "R32F", "FLOAT_3D", "volume_out", qualifiers={"WRITE"})
+    for name in ("volume_origin", "volume_u", "volume_v", "volume_w"):
+        info.push_constant("VEC4", name)
+    info.local_group_size(VOLUME_GROUP, VOLUME_GROUP, 1)
+    info.compute_source(assemble(*VOLUME_LIBS, "nubis_light_volume_comp.glsl"))
+    return info
+
+
+VOLUME_GROUP = 8
+
+
 def _key(name: str, defines: dict[str, object]) -> tuple:
     return (name, *sorted(defines.items()))
 
@@ -124,7 +150,8 @@ def _key(name: str, defines: dict[str, object]) -> tuple:
 def shader(name: str, defines: dict[str, object]) -> gpu.types.GPUShader:
     key = _key(name, defines)
     if key not in _shaders:
-        _shaders[key] = gpu.shader.create_from_info(_create_info(name, defines))
+        info = _volume_create_info(defines) if name == "light_volume" else _create_info(name, defines)
+        _shaders[key] = gpu.shader.create_from_info(info)
     return _shaders[key]
 
 
@@ -146,8 +173,13 @@ class CloudGPU:
         self._sky_array = None
         self.sky_env = None
         self.switches = dict.fromkeys(SWITCHES, 0)
+        # The optical-depth volumes light the real-time march; 0 measures GPU Pro 7's long tap instead.
+        self.switches["NUBIS_LIGHT_VOLUME"] = 1
         self.ubo = None
         self.ubo_bytes = b""
+        self.volumes = {name: None for name in VOLUMES}
+        self._volume_key = None
+        self._no_volume = None
 
     @property
     def storms(self) -> bool:
@@ -172,17 +204,57 @@ class CloudGPU:
             NUBIS_REFERENCE=int(state.light_mode == 1),
             NUBIS_CIRRUS=int(state.has_cirrus()),
         )
+        self._update_volumes(state)
+
+    def _update_volumes(self, state: CloudState) -> None:
+        """Refill the optical-depth volumes when what they hold changed: the field, the density and
+        lighting settings, the sun, the time, the storms or the box (core/lightvolume.py). The jitter of
+        an accumulation pass and small camera moves do not refill them."""
+        still = replace(
+            state,
+            jitter=True,
+            jitter_pass=0,
+            pixel_angle=0.0,
+            pixel_size=0.0,
+            light_mode=0,
+            sky_env=None,
+            draw_center=lightvolume.key_centre(state),
+        )
+        key = (tuple(id(a) for a in self._field_arrays), uniforms.pack(still).tobytes(), self.noise.defines.items())
+        key = (key[0], key[1], tuple(sorted(key[2])), tuple(sorted(self.switches.items())))
+        if key == self._volume_key and all(v is not None for v in self.volumes.values()):
+            return
+        if self._no_volume is None:
+            self._no_volume = gpu.types.GPUTexture((1, 1, 1), format="R32F")
+        for name in VOLUMES:
+            if self.volumes[name] is None:
+                self.volumes[name] = gpu.types.GPUTexture(lightvolume.SIZE, format="R32F")
+        defines = self.defines(NUBIS_REFERENCE=0, NUBIS_NAIVE=0, NUBIS_FETCH_STATS=0)
+        sh = shader("light_volume", defines)
+        for name, box in (("sun_volume", lightvolume.sun_volume(state)), ("sky_volume", lightvolume.sky_volume(state))):
+            self.bind(sh, volumes=False)
+            sh.image("volume_out", self.volumes[name])
+            sh.uniform_float("volume_origin", (*box.origin, 0.0))
+            for axis, edge in zip(("volume_u", "volume_v", "volume_w"), box.axes, strict=True):
+                sh.uniform_float(axis, (*edge, 0.0))
+            groups = [-(-n // VOLUME_GROUP) for n in lightvolume.SIZE[:2]]
+            gpu.compute.dispatch(sh, groups[0], groups[1], 1)
+        self._volume_key = key
 
     def defines(self, **switches: int) -> dict[str, object]:
         """The permutation for this state, with `switches` (e.g. NUBIS_NAIVE=1) on top."""
         return {"NUBIS_COARSE_STRIDE": 2, **self.noise.defines, **self.switches, **switches}
 
-    def bind(self, sh: gpu.types.GPUShader, cloud_inputs: bool = True) -> None:
+    def bind(self, sh: gpu.types.GPUShader, cloud_inputs: bool = True, volumes: bool = True) -> None:
+        """Bind the uniform block and the cloud samplers; `volumes` False binds an empty texture for the
+        optical-depth volumes (while they are being filled)."""
         sh.bind()
         sh.uniform_block("P", self.ubo)
         if not cloud_inputs:
             return
         textures = {"field_a": self.field_a, "field_b": self.field_b, "field_c": self.field_c, "sky_env": self.sky_env}
+        for name in VOLUMES:
+            textures[name] = self.volumes[name] if volumes else self._no_volume
         for _kind, name in CLOUD_SAMPLERS:
             tex = textures.get(name) or self.noise.textures[name.removeprefix("noise_")]
             sh.uniform_sampler(name, tex)

@@ -15,9 +15,14 @@ from functools import cache
 
 import numpy as np
 
-from ..core import march, schema, storms
+from ..core import lightvolume, march, schema, storms
 from ..core.errors import NubisError
 from ..core.state import MAX_STORMS, CloudState, wind_vector
+
+
+def _volume_row(volume, row: int):
+    return lambda st: tuple(float(x) for x in volume(st).to_unit()[row])
+
 
 # Derived vec4 members: (name, what it holds, value).
 _VEC4: tuple[tuple[str, str, Callable[[CloudState], tuple]], ...] = (
@@ -32,6 +37,11 @@ _VEC4: tuple[tuple[str, str, Callable[[CloudState], tuple]], ...] = (
         "ambient_below",
         "sky light from below (the ground) x the ambient setting, -",
         lambda st: (*(c * st.params["lighting_ambient"] for c in (st.ambient_below or st.ambient)), 0.0),
+    ),
+    *(
+        (f"{name}_volume_{axis}", f"unit coordinate {axis} in the {name}'s optical-depth volume: dot(xyz, p) + w", fn)
+        for name, volume in (("sun", lightvolume.sun_volume), ("sky", lightvolume.sky_volume))
+        for axis, fn in (("x", _volume_row(volume, 0)), ("y", _volume_row(volume, 1)), ("z", _volume_row(volume, 2)))
     ),
     (
         "clip_box",
@@ -75,6 +85,11 @@ _FLOATS: tuple[tuple[str, str, Callable[[CloudState], float]], ...] = (
     ("jitter_pass", "accumulation pass", lambda st: float(st.jitter_pass)),
     ("pixel_angle", "pixel footprint: meters per meter of distance", lambda st: st.pixel_angle),
     ("pixel_size", "pixel footprint: meters (orthographic)", lambda st: st.pixel_size),
+    (
+        "light_cone_reach",
+        "the light march's cone reach; the sun's volume gives the rest",
+        lambda st: march.CONE_STEPS * st.params["march_light_step"],
+    ),
     ("max_view_steps", "most view steps within the shader loop limit", lambda st: float(state_max_steps(st))),
 )
 

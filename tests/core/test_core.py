@@ -256,3 +256,42 @@ def test_no_temporary_folder_is_made_once_an_interrupt_cleans_up(tmp_path, monke
         interrupt._lock.release()
     worker.join(5)
     assert made and not list(tmp_path.iterdir())  # made, registered, used and removed once allowed
+
+
+# ---- the optical-depth volumes (core/lightvolume.py) ----------------------------------------------------
+
+
+def test_light_volume_boxes_hold_the_cloud_domain_and_face_the_light():
+    from nubis_addon.core import lightvolume
+    from nubis_addon.core.state import CloudState
+
+    state = CloudState(draw_center=(1200.0, -800.0))
+    radius = state.params["layer_draw_radius"]
+    bottom, top = state.shell()
+    for sun in ((0.3, -0.5, 0.81), (0.0, 0.0, 1.0), (0.99, 0.0, 0.05), (-0.2, 0.1, -0.3)):
+        box = lightvolume.volume(sun, state)
+        rows = box.to_unit()
+        # Every corner of the domain (the draw radius' square, between the shell's floor and top) is inside.
+        centre, half, low, high = lightvolume.domain(state)
+        assert low < bottom and high == top and half[0] >= radius
+        for x in (-1, 1):
+            for y in (-1, 1):
+                for z in (low, high):
+                    p = np.array([centre[0] + x * half[0], centre[1] + y * half[1], z])
+                    unit = rows[:, :3] @ p + rows[:, 3]
+                    assert np.all(unit > -1e-6) and np.all(unit < 1 + 1e-6), (sun, unit)
+        # The unit map inverts the box's own parametrisation, and z grows away from the light.
+        for unit in ((0.0, 0.0, 0.0), (0.25, 0.5, 1.0), (1.0, 1.0, 0.5)):
+            p = box.point(unit)
+            assert np.allclose(rows[:, :3] @ p + rows[:, 3], unit, atol=1e-9)
+        s = np.asarray(sun) / np.linalg.norm(sun)
+        assert np.dot(box.point((0.5, 0.5, 1.0)) - box.point((0.5, 0.5, 0.0)), s) < 0
+    # A small camera move keeps the box (the volumes are not refilled), a large one moves it.
+    moved = CloudState(draw_center=(1200.0 + 0.02 * radius, -800.0))
+    far = CloudState(draw_center=(1200.0 + 0.5 * radius, -800.0))
+    assert lightvolume.key_centre(moved) == lightvolume.key_centre(state) != lightvolume.key_centre(far)
+    # A comparison's box replaces the draw radius: finer texels over the baked clouds.
+    state.clip_box = (-500.0, -400.0, 1500.0, 600.0)
+    centre, half, _low, _high = lightvolume.domain(state)
+    assert centre == (500.0, 100.0) and half == (1000.0, 500.0)
+    assert lightvolume.memory_bytes() <= 20 * 2**20 // 4  # a fraction of GPU Pro 7's 20 MB

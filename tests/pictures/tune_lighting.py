@@ -39,21 +39,34 @@ def preset_overrides(name: str) -> set[str]:
 
 
 def prepare(out: Path, width: int, height: int, samples: int) -> dict:
+    """Each preset's converged Cycles reference (compare --mode full with a noise estimate) and its
+    viewport shot. A reference already in OUT_DIR/<preset>/ at this size and sample count is reused: it
+    does not depend on the viewport's lighting, and the thick presets take minutes each."""
+    import bpy
     from compare_presets import compare_preset  # the sibling script (this folder is on sys.path)
 
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender import ensure_registered, pipeline, scene_io
     from nubis_addon.core import imageio
-    from nubis_addon.core.presets import list_presets
+    from nubis_addon.core.presets import list_presets, load_preset
 
     shots = {}
     for name in list_presets():
-        scene, m = compare_preset(name, out, width, height, samples)
+        done = out / name / "metrics.json"
+        m = json.loads(done.read_text(encoding="utf-8")) if done.exists() else {}
+        if (m.get("width"), m.get("height"), m.get("samples")) == (width, height, samples):
+            bpy.ops.wm.read_factory_settings(use_empty=True)
+            ensure_registered()
+            scene = bpy.context.scene
+            scene_io.apply_preset(scene, load_preset(name))
+        else:
+            scene, m = compare_preset(name, out, width, height, samples)
+            done.write_text(json.dumps(m, indent=2) + "\n", encoding="utf-8")  # with its total time
         ss = m["viewport_supersampling"]
         shot = pipeline.viewport_shot(scene, width * ss, height * ss, 0, "full", tuple(m["clip_box"]))
         cycles = imageio.read_image(out / name / "cycles.exr")
         shots[name] = (shot, ss, cycles, preset_overrides(name), m)
         noise = m["cycles_noise"]["luminance_rel_error"]
-        print(f"{name}: reference in {m['total_s']:.0f} s, Cycles noise {noise * 100:.1f} %", flush=True)
+        print(f"{name}: reference in {m.get('total_s', 0):.0f} s, Cycles noise {noise * 100:.1f} %", flush=True)
     return shots
 
 

@@ -1,0 +1,111 @@
+"""The optical-depth volumes of the real-time lighting (docs/viewport.md#light-volumes).
+
+Each volume is a box of texels laid out along a direction: texel (i, j, k) holds the optical depth from
+its point towards the direction until the cloud domain ends. The sun's volume gives every lit sample
+the whole depth of the layer towards the sun beyond the cone of the light march (the Beer shadow maps
+of real-time cloud renderers, here with depth slices instead of a fitted curve); the sky's volume,
+laid out upwards, gives the depth of cloud above and below each point for the sky light.
+
+The box is fitted around the cloud domain: the draw radius' square around its centre (or a
+comparison's baked box) between the cloud shell's floor, lowered by the planet's curvature at the
+radius, and its top, seen along the direction. This module computes the maps between world space and
+the volume's unit cube; the GPU fills and reads it (shaders/nubis_light_volume_comp.glsl,
+shaders/nubis_lighting_lib.glsl).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+# Texels across the box (u, v) and depth slices along the direction. 128 x 128 x 32 single floats: 2 MB
+# a volume, within the 20 MB GPU Pro 7 spent on all of its cloud textures.
+SIZE = (128, 128, 32)
+# Density samples per depth slice when the volume is filled (each slice's depth is the midpoint sum).
+STEPS_PER_SLICE = 4
+# The box's centre moves in steps of this share of the draw radius.
+SNAP = 0.125
+# A direction this close to vertical builds its frame on the x axis.
+NEAR_VERTICAL = 0.999
+
+
+@dataclass(frozen=True)
+class Volume:
+    """A box along a direction: point = origin + x * axes[0] + y * axes[1] + z * axes[2] for x, y, z in
+    [0, 1]; z runs from the side the direction points to (the sun) away from it."""
+
+    origin: np.ndarray  # (3,)
+    axes: np.ndarray  # (3, 3): the box's edges, rows
+
+    def to_unit(self) -> np.ndarray:
+        """(3, 4): rows (a, b) with unit coordinate i = a . p + b, for the shaders."""
+        inv = np.linalg.inv(self.axes.T)
+        return np.concatenate([inv, (-inv @ self.origin)[:, None]], axis=1)
+
+    def point(self, unit) -> np.ndarray:
+        return self.origin + np.asarray(unit, np.float64) @ self.axes
+
+
+def _domain_corners(centre, half: tuple[float, float], bottom: float, top: float) -> np.ndarray:
+    cx, cy = centre
+    hx, hy = half
+    return np.array([(cx + sx * hx, cy + sy * hy, z) for sx in (-1, 1) for sy in (-1, 1) for z in (bottom, top)])
+
+
+def domain(state) -> tuple[tuple[float, float], tuple[float, float], float, float]:
+    """The clouds' box: centre (x, y), half extents (x, y), lowest and highest z."""
+    p = state.params
+    radius = float(p["layer_draw_radius"])
+    bottom, top = state.shell()
+    planet = float(p["layer_planet_radius"])
+    if state.clip_box is not None and state.clip_box[2] >= state.clip_box[0]:
+        x0, y0, x1, y1 = state.clip_box
+        centre = ((x0 + x1) / 2.0, (y0 + y1) / 2.0)
+        half = ((x1 - x0) / 2.0, (y1 - y0) / 2.0)
+    else:
+        # The draw radius follows the camera; the volume's box follows it in steps of SNAP radii (with
+        # that much margin), so a moving camera does not refill the volumes at every redraw.
+        grid = SNAP * radius
+        centre = tuple(float(round(c / grid) * grid) for c in state.draw_center[:2])
+        half = (radius * (1.0 + SNAP), radius * (1.0 + SNAP))
+    # z = altitude - r^2 / (2 R) near the surface: the shell's floor is lower at the box's corners.
+    reach = float(np.hypot(*half)) + float(np.hypot(centre[0] - state.draw_center[0], centre[1] - state.draw_center[1]))
+    sag = reach * reach / (2.0 * planet) if planet > 0.0 else 0.0
+    return centre, half, float(bottom) - sag, float(top)
+
+
+def volume(direction, state) -> Volume:
+    """The box around the cloud domain laid out along `direction` (towards the light)."""
+    s = np.asarray(direction, np.float64)
+    s = s / np.linalg.norm(s)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(s[2]) > NEAR_VERTICAL else np.array([0.0, 0.0, 1.0])
+    u = np.cross(helper, s)
+    u /= np.linalg.norm(u)
+    v = np.cross(s, u)
+    centre, half, bottom, top = domain(state)
+    corners = _domain_corners(centre, half, bottom, top)
+    cu, cv, cs = corners @ u, corners @ v, corners @ s
+    # z = 0 on the side towards the light (the largest s), 1 on the far side; at least a metre deep.
+    extent = [max(float(c.max() - c.min()), 1.0) for c in (cu, cv, cs)]
+    origin = u * cu.min() + v * cv.min() + s * cs.max()
+    axes = np.array([u * extent[0], v * extent[1], -s * extent[2]])
+    return Volume(origin, axes)
+
+
+def sun_volume(state) -> Volume:
+    return volume(state.sun_direction, state)
+
+
+def sky_volume(state) -> Volume:
+    return volume((0.0, 0.0, 1.0), state)
+
+
+def key_centre(state) -> tuple[float, float]:
+    """The draw centre as the volumes see it (snapped), for deciding when to refill them."""
+    return domain(state)[0]
+
+
+def memory_bytes() -> int:
+    """GPU memory of the two volumes (single floats)."""
+    return 2 * 4 * SIZE[0] * SIZE[1] * SIZE[2]
