@@ -388,25 +388,24 @@ NubisRayLight nubis_ray_light(vec3 view_dir)
   return l;
 }
 
-/* A point's unit coordinates in an optical-depth volume (core/lightvolume.py) and the volume's value
- * there, between texel centres: the first and last texels sit on the box's faces. */
-float nubis_volume_fetch(sampler3D volume, vec3 unit)
+/* Where a point's unit coordinates in an optical-depth volume (core/lightvolume.py) are read: between
+ * texel centres, the first and last texels sitting on the box's faces. The volumes are read by name,
+ * not passed as sampler arguments, which not every shading language Blender translates to accepts. */
+vec3 nubis_volume_coord(vec3 unit, vec3 size)
 {
-  vec3 n = vec3(textureSize(volume, 0));
-  return texture(volume, (clamp(unit, 0.0, 1.0) * (n - 1.0) + 0.5) / n).r;
-}
-
-vec3 nubis_sun_volume_unit(vec3 p)
-{
-  return vec3(dot(P.sun_volume_x.xyz, p) + P.sun_volume_x.w,
-              dot(P.sun_volume_y.xyz, p) + P.sun_volume_y.w,
-              dot(P.sun_volume_z.xyz, p) + P.sun_volume_z.w);
+#if NUBIS_FETCH_STATS
+  nubis_fetches_3d++;
+#endif
+  return (clamp(unit, 0.0, 1.0) * (size - 1.0) + 0.5) / size;
 }
 
 /* The optical depth from p towards the sun until the cloud domain ends (sigma included). */
 float nubis_sun_volume_depth(vec3 p)
 {
-  return nubis_volume_fetch(sun_volume, nubis_sun_volume_unit(p));
+  vec3 unit = vec3(dot(P.sun_volume_x.xyz, p) + P.sun_volume_x.w,
+                   dot(P.sun_volume_y.xyz, p) + P.sun_volume_y.w,
+                   dot(P.sun_volume_z.xyz, p) + P.sun_volume_z.w);
+  return texture(sun_volume, nubis_volume_coord(unit, vec3(textureSize(sun_volume, 0)))).r;
 }
 
 /* The optical depth of cloud above p and below it, to the domain's top and floor (sigma included). */
@@ -415,8 +414,9 @@ vec2 nubis_sky_volume_depths(vec3 p)
   vec3 unit = vec3(dot(P.sky_volume_x.xyz, p) + P.sky_volume_x.w,
                    dot(P.sky_volume_y.xyz, p) + P.sky_volume_y.w,
                    dot(P.sky_volume_z.xyz, p) + P.sky_volume_z.w);
-  float above = nubis_volume_fetch(sky_volume, unit);
-  float column = nubis_volume_fetch(sky_volume, vec3(unit.xy, 1.0));
+  vec3 size = vec3(textureSize(sky_volume, 0));
+  float above = texture(sky_volume, nubis_volume_coord(unit, size)).r;
+  float column = texture(sky_volume, nubis_volume_coord(vec3(unit.xy, 1.0), size)).r;
   return vec2(above, max(column - above, 0.0));
 }
 

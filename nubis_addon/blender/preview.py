@@ -9,7 +9,7 @@ import math
 import statistics
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import bpy
@@ -258,36 +258,57 @@ def benchmark(
     state = _with_footprint(scene_io.state_from_scene(scene), view)
     clouds.update(state)
     stats = {}
-    for label, switches in (("coarse_to_fine", {}), ("naive", {"NUBIS_NAIVE": 1})):
-        px = engine.render_offscreen(
-            clouds, mathutils.Matrix(view.inv_view_proj), view.eye, width, height, NUBIS_FETCH_STATS=1, **switches
-        )
-        stats[label] = {
-            "fetches_3d_per_pixel": float(px[..., 0].mean()),
-            "view_samples_per_pixel": float(px[..., 1].mean()),
-            "density_samples_per_pixel": float(px[..., 2].mean()),
-        }
-    # Rounds of one naive march and one convergence (16 redraws from a restart) alternate, so a load
-    # that comes and goes on the machine weighs on both alike; each reports its median.
-    _naive(clouds, view)  # compiles the permutation
+    variants = (("volumes", 1), ("long_tap", 0))  # the light march's far part (docs/viewport.md#light-volumes)
+    for variant, volume in variants:
+        clouds.switches["NUBIS_LIGHT_VOLUME"] = volume
+        for label, switches in (("coarse_to_fine", {}), ("naive", {"NUBIS_NAIVE": 1})):
+            px = engine.render_offscreen(
+                clouds, mathutils.Matrix(view.inv_view_proj), view.eye, width, height, NUBIS_FETCH_STATS=1, **switches
+            )
+            key = label if variant == "volumes" else f"{label}_{variant}"
+            stats[key] = {
+                "fetches_3d_per_pixel": float(px[..., 0].mean()),
+                "view_samples_per_pixel": float(px[..., 1].mean()),
+                "density_samples_per_pixel": float(px[..., 2].mean()),
+            }
+    # Rounds of one naive march and one convergence (16 redraws from a restart) per variant alternate,
+    # so a load that comes and goes on the machine weighs on all alike; each reports its median.
     tv = temporal.TemporalViewport()
+    times: dict[str, list[float]] = {}
     try:
-        tv.redraw(clouds, state, view, s.viewport_resolution, 64)  # allocates and compiles
-        naive_runs, redraws = [], []
+        for _variant, volume in variants:
+            clouds.switches["NUBIS_LIGHT_VOLUME"] = volume
+            _naive(clouds, view)  # compiles the permutation
+            tv.redraw(clouds, state, view, s.viewport_resolution, 64)  # allocates and compiles
         for _ in range(rounds):
-            clouds.update(state)  # the redraws leave their own block behind (the history's footprint)
-            t = time.perf_counter()
-            naive_img = _naive(clouds, view)
-            naive_runs.append((time.perf_counter() - t) * 1000.0)
-            tv.restart()
-            for _ in range(temporal.REDRAWS_PER_SAMPLE):
+            for variant, volume in variants:
+                clouds.switches["NUBIS_LIGHT_VOLUME"] = volume
+                clouds.update(state)  # the redraws leave their own block behind (the history's footprint)
                 t = time.perf_counter()
-                tv.redraw(clouds, state, view, s.viewport_resolution, 64)
-                tv.sync()
-                redraws.append((time.perf_counter() - t) * 1000.0)
-        converged = temporal.render_view(tv, clouds, view, s.viewport_blur)
+                naive_img = _naive(clouds, view)
+                times.setdefault(f"naive_{variant}", []).append((time.perf_counter() - t) * 1000.0)
+                tv.restart()
+                for _ in range(temporal.REDRAWS_PER_SAMPLE):
+                    t = time.perf_counter()
+                    tv.redraw(clouds, state, view, s.viewport_resolution, 64)
+                    tv.sync()
+                    times.setdefault(f"redraw_{variant}", []).append((time.perf_counter() - t) * 1000.0)
+                if volume:
+                    converged = temporal.render_view(tv, clouds, view, s.viewport_blur)
+                    volume_naive = naive_img
+        # Filling the two volumes once (a change of the field, the sun or the time).
+        fills = []
+        for i in range(rounds):
+            t = time.perf_counter()
+            clouds.update(replace(state, time=state.time + 1e-3 * (i + 1)))
+            clouds.volumes["sky_volume"].read()  # waits for both fills (the sky's is dispatched last)
+            fills.append((time.perf_counter() - t) * 1000.0)
     finally:
+        clouds.switches["NUBIS_LIGHT_VOLUME"] = 1
+        clouds.update(state)
         tv.free()
+    naive_img = volume_naive
+    naive_runs, redraws = times["naive_volumes"], times["redraw_volumes"]
     result = {
         "preset": s.preset,
         "quality": q,
@@ -296,6 +317,9 @@ def benchmark(
         "renderer": renderer_name(),
         "naive_ms": statistics.median(naive_runs),
         "redraw_ms": statistics.median(redraws),
+        "naive_ms_long_tap": statistics.median(times["naive_long_tap"]),
+        "redraw_ms_long_tap": statistics.median(times["redraw_long_tap"]),
+        "volume_fill_ms": statistics.median(fills),
         "naive_ms_all": [round(x, 3) for x in naive_runs],
         "redraw_ms_all": [round(x, 3) for x in redraws],
         "fetches": stats,
@@ -345,6 +369,21 @@ def table(result: dict) -> str:
             ("  EEVEE / redraw", f"{result['eevee_over_redraw']:.0f}x"),
         ]
     f = result["fetches"]
+    if "redraw_ms_long_tap" in result:
+        rows += [
+            ("naive march, GPU Pro 7's long tap instead of the volumes", f"{result['naive_ms_long_tap']:.1f} ms"),
+            ("temporal redraw, long tap (median)", f"{result['redraw_ms_long_tap']:.1f} ms"),
+            (
+                "  volumes / long tap: naive, redraw",
+                f"{result['naive_ms'] / result['naive_ms_long_tap']:.2f}x, "
+                f"{result['redraw_ms'] / result['redraw_ms_long_tap']:.2f}x",
+            ),
+            ("filling the two light volumes (a change)", f"{result['volume_fill_ms']:.0f} ms"),
+            (
+                "3D fetches per pixel, coarse to fine, long tap",
+                f"{f['coarse_to_fine_long_tap']['fetches_3d_per_pixel']:.1f}",
+            ),
+        ]
     rows += [
         ("3D fetches per pixel, naive", f"{f['naive']['fetches_3d_per_pixel']:.1f}"),
         ("3D fetches per pixel, coarse to fine", f"{f['coarse_to_fine']['fetches_3d_per_pixel']:.1f}"),

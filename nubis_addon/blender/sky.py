@@ -110,8 +110,12 @@ def build_world(scene, cfg: dict, sun) -> bpy.types.World:
     have = float(metrics.luminance(np.array(above, np.float32)))
     strength = float(target / have) if have > 1e-9 else cfg["strength"]
     bg.inputs["Strength"].default_value = strength
-    # The ground's sun term does not scale with the sky's strength: the next capture renders again.
+    # The sky's light is linear in its strength; the ground's sun term is not (sync_ground).
+    _sky_irradiance[world.name] = np.array(above, np.float64) * strength
     sync_ground(scene, sun)
+    _captures[(fingerprint(world), ENV_WIDTH, ENV_SAMPLES)] = skymath.with_ground(
+        (env * np.float32(strength)).astype(np.float32), ground_radiance(scene, sun), HORIZON_BAND
+    )
     return world
 
 
@@ -165,45 +169,19 @@ def sync_sun(scene, sun=None, force: bool = False) -> bool:
 # (docs/sky.md#ground) The Sky Texture is black below the horizon, so without a ground every picture had a black
 # band and the clouds' light from below was black. The Nubis sky's World shows a diffuse ground instead, lit by
 # the sun and the sky: its radiance is albedo x (E_sun sin(elevation) + E_sky) / pi (Lambert), E_sky the sky's
-# irradiance on a horizontal plane. The sky term is evaluated by the World itself (the Sky Texture at fixed
-# directions), so Cycles, EEVEE and the capture that lights the viewport see the same ground; the sun term is
-# set here whenever the lamp changes. Between the horizon and HORIZON_BAND below it the sky's horizon (the
-# texture mirrored at the horizon) fades into the ground: a soft haze, not an edge. The ground is not shadowed
-# by the clouds: it stands for the land around the scene, not under a cloud.
-GROUND_ALBEDO_NODE = "Nubis Ground Albedo"
-GROUND_SUN_NODE = "Nubis Ground Sun"
-GROUND_SKY_NODE = "Nubis Ground Sky"
-GROUND_SAMPLE_PREFIX = "Nubis Ground Sky Sample"
+# irradiance on a horizontal plane, integrated exactly over the upper half of each capture of the World. One RGB
+# node holds the radiance, so Cycles and EEVEE pay one colour for it. Between the horizon and HORIZON_BAND below
+# it the sky's horizon (the texture mirrored at the horizon) fades into the ground: a soft haze, not an edge. The
+# ground is not shadowed by the clouds: it stands for the land around the scene, not under a cloud.
+GROUND_NODE = "Nubis Ground"
 HORIZON_BAND = 0.04  # the sine of the elevation below the horizon where the ground is fully shown
-# The sky's irradiance as a quadrature of its cosine-weighted radiance: rings of eight directions at these
-# zenith angles (successive rings turned by half a step) with these weights. Chosen against the exact
-# integral of 128 x 64 captures at 15 sun positions (elevation 1-60 degrees): within 7.6 % in every
-# channel, where the two rings that halve the cosine-weighted hemisphere (30 and 60 degrees) missed the
-# bright horizon by up to 27 % (docs/sky.md#the-skys-irradiance-in-nodes).
-GROUND_RINGS = ((30.0, 0.475), (65.0, 0.475), (75.0, 0.05))
-GROUND_AZIMUTHS = 8
-_SKY_SETTINGS = ("sky_type", "sun_elevation", "sun_rotation", "altitude", "air_density", "ozone_density")
-
-
-def _ground_directions() -> list[list[tuple[float, float, float]]]:
-    """The quadrature's directions, ring by ring."""
-    rings = []
-    for ring, (zenith, _weight) in enumerate(GROUND_RINGS):
-        theta = math.radians(zenith)
-        dirs = []
-        for k in range(GROUND_AZIMUTHS):
-            phi = 2.0 * math.pi * (k + 0.5 * ring) / GROUND_AZIMUTHS
-            dirs.append((math.sin(theta) * math.cos(phi), math.sin(theta) * math.sin(phi), math.cos(theta)))
-        rings.append(dirs)
-    return rings
+_sky_irradiance: dict[str, np.ndarray] = {}  # E_sky / pi of each Nubis sky's latest capture, by World name
 
 
 def _build_ground(nt, tex, bg, out) -> None:
     """The ground's nodes (above): the direction's elevation mirrors the sky at the horizon and blends to
     the ground's Background below it."""
     nodes, links = nt.nodes, nt.links
-    frame = nodes.new("NodeFrame")
-    frame.label = "Nubis Ground"
     coord = nodes.new("ShaderNodeTexCoord")
     unit = nodes.new("ShaderNodeVectorMath")
     unit.operation = "NORMALIZE"
@@ -224,132 +202,61 @@ def _build_ground(nt, tex, bg, out) -> None:
     blend.inputs["From Min"].default_value = 0.0
     blend.inputs["From Max"].default_value = -HORIZON_BAND
     links.new(split.outputs["Z"], blend.inputs["Value"])
-    # The sky's irradiance over pi: each ring's mean times its weight, scaled by the sky's strength
-    # (sync_ground).
-    total = None
-    i = 0
-    for ring, dirs in enumerate(_ground_directions()):
-        ring_sum = None
-        for direction in dirs:
-            sample = nodes.new("ShaderNodeTexSky")
-            sample.name = sample.label = f"{GROUND_SAMPLE_PREFIX} {i}"
-            sample.sun_disc = False
-            at = nodes.new("ShaderNodeCombineXYZ")
-            for axis, value in zip(("X", "Y", "Z"), direction, strict=True):
-                at.inputs[axis].default_value = value
-            links.new(at.outputs["Vector"], sample.inputs["Vector"])
-            ring_sum = _add(nodes, links, ring_sum, sample.outputs["Color"])
-            for n, x in ((at, -1300), (sample, -1100)):
-                n.location, n.hide, n.parent = (x, -300 - 40 * i), True, frame
-            i += 1
-        weight = nodes.new("ShaderNodeVectorMath")
-        weight.operation = "SCALE"
-        weight.inputs["Scale"].default_value = GROUND_RINGS[ring][1] / len(dirs)
-        weight.location, weight.hide, weight.parent = (-700, -300 - 200 * ring), True, frame
-        links.new(ring_sum, weight.inputs[0])
-        total = _add(nodes, links, total, weight.outputs["Vector"])
-    sky_term = nodes.new("ShaderNodeVectorMath")
-    sky_term.operation = "SCALE"
-    sky_term.name = sky_term.label = GROUND_SKY_NODE
-    links.new(total, sky_term.inputs[0])
-    sun_term = nodes.new("ShaderNodeRGB")
-    sun_term.name = sun_term.label = GROUND_SUN_NODE
-    light = nodes.new("ShaderNodeVectorMath")
-    light.operation = "ADD"
-    links.new(sky_term.outputs["Vector"], light.inputs[0])
-    links.new(sun_term.outputs["Color"], light.inputs[1])
-    albedo = nodes.new("ShaderNodeRGB")
-    albedo.name = albedo.label = GROUND_ALBEDO_NODE
-    radiance = nodes.new("ShaderNodeVectorMath")
-    radiance.operation = "MULTIPLY"
-    links.new(light.outputs["Vector"], radiance.inputs[0])
-    links.new(albedo.outputs["Color"], radiance.inputs[1])
+    radiance = nodes.new("ShaderNodeRGB")
+    radiance.name = radiance.label = GROUND_NODE
     ground = nodes.new("ShaderNodeBackground")
     ground.inputs["Strength"].default_value = 1.0
-    links.new(radiance.outputs["Vector"], ground.inputs["Color"])
+    links.new(radiance.outputs["Color"], ground.inputs["Color"])
     mix = nodes.new("ShaderNodeMixShader")
     links.new(blend.outputs["Result"], mix.inputs["Fac"])
     links.new(bg.outputs["Background"], mix.inputs[1])
     links.new(ground.outputs["Background"], mix.inputs[2])
     links.new(mix.outputs["Shader"], out.inputs["Surface"])
     placed = {
-        coord: (-1300, 200),
-        unit: (-1100, 200),
-        split: (-900, 200),
-        up: (-700, 150),
-        mirrored: (-500, 200),
-        blend: (-300, 300),
-        sky_term: (-500, -300),
-        sun_term: (-500, -450),
-        light: (-300, -350),
-        albedo: (-300, -550),
-        radiance: (-100, -400),
-        ground: (50, -300),
-        mix: (250, 0),
-    }
+        coord: (-1300, 200), unit: (-1100, 200), split: (-900, 200), up: (-700, 150), mirrored: (-500, 200),
+        blend: (0, 250), radiance: (-200, -250), ground: (0, -200), mix: (250, 0),
+    }  # fmt: skip
     for node, where in placed.items():
         node.location = where
-        if node not in (mix, blend):
-            node.parent = frame
 
 
-def _add(nodes, links, a, b):
-    """a + b as a Vector Math node's output (b alone when a is None)."""
-    if a is None:
-        return b
-    add = nodes.new("ShaderNodeVectorMath")
-    add.operation = "ADD"
-    add.hide = True
-    add.parent = a.node.parent if a.node.parent is not None else b.node.parent
-    add.location = (b.node.location.x + 200, b.node.location.y)
-    links.new(a, add.inputs[0])
-    links.new(b, add.inputs[1])
-    return add.outputs["Vector"]
+def ground_radiance(scene, sun=None, world=None) -> tuple[float, float, float] | None:
+    """The ground's radiance for the scene's sun and the World's last captured sky (None: no ground)."""
+    world = world if world is not None else scene.world
+    if world is None or world.node_tree is None or world.node_tree.nodes.get(GROUND_NODE) is None:
+        return None
+    sun = sun if sun is not None else find_sun(scene)
+    light = np.array(_sky_irradiance.get(world.name, np.zeros(3)), np.float64)
+    if sun is not None and not sun.hide_render:
+        sine = max(0.0, float(sun.matrix_world.to_3x3().col[2].normalized().z))
+        light = light + np.array(sun.data.color) * sun.data.energy * sine / math.pi
+    return tuple(float(c) for c in np.array(scene.nubis.sky_ground) * light)
 
 
 def sync_ground(scene, sun=None) -> bool:
-    """Keep the ground's light in step with the Sun lamp, the sky and the scene's ground albedo (a World
-    made before the ground existed has none and is left as it is). Returns whether anything changed."""
-    world = scene.world
-    nt = world.node_tree if world is not None else None
-    if nt is None or nt.nodes.get(GROUND_SUN_NODE) is None:
+    """Keep the ground's radiance in step with the Sun lamp and the scene's Ground albedo (with the sky
+    of the World's last capture; the next capture brings its own sky). A World made before the ground
+    existed has none and is left as it is. Returns whether anything changed."""
+    colour = ground_radiance(scene, sun)
+    if colour is None:
         return False
-    tex, bg = sky_node(world), nt.nodes.get(BACKGROUND_NODE)
-    sun = sun if sun is not None else find_sun(scene)
-    wanted: list[tuple] = []
-    for i in range(len(GROUND_RINGS) * GROUND_AZIMUTHS):
-        sample = nt.nodes.get(f"{GROUND_SAMPLE_PREFIX} {i}")
-        if sample is None:
-            continue
-        for attr in (*_SKY_SETTINGS, _aerosol_attr()):
-            wanted.append((sample, attr, getattr(tex, attr)))
-    strength = float(bg.inputs["Strength"].default_value) if bg is not None else 1.0
-    wanted.append((nt.nodes[GROUND_SKY_NODE].inputs["Scale"], "default_value", strength))
-    sun_light = (0.0, 0.0, 0.0)
-    if sun is not None and not sun.hide_render:
-        sine = max(0.0, float(sun.matrix_world.to_3x3().col[2].normalized().z))
-        sun_light = tuple(c * sun.data.energy * sine for c in sun.data.color)
-    # Lambert: the ground's radiance is albedo x irradiance / pi (the sky term's samples are radiances
-    # already: their mean is the irradiance over pi).
-    wanted.append(
-        (nt.nodes[GROUND_SUN_NODE].outputs["Color"], "default_value", (*(c / math.pi for c in sun_light), 1.0))
-    )
-    albedo = tuple(scene.nubis.sky_ground)
-    wanted.append((nt.nodes[GROUND_ALBEDO_NODE].outputs["Color"], "default_value", (*albedo, 1.0)))
-    changed = False
-    for owner, attr, value in wanted:
-        have = getattr(owner, attr)
-        same = have == value if isinstance(value, str) else _close(have, value)
-        if not same:
-            setattr(owner, attr, value)
-            changed = True
-    return changed
+    socket = scene.world.node_tree.nodes[GROUND_NODE].outputs["Color"]
+    if all(abs(a - b) <= 1e-6 * max(1.0, abs(b)) for a, b in zip(socket.default_value[:3], colour, strict=True)):
+        return False
+    socket.default_value = (*colour, 1.0)
+    return True
 
 
-def _close(a, b) -> bool:
-    if hasattr(b, "__len__"):
-        return all(abs(float(x) - float(y)) <= 1e-6 for x, y in zip(a, b, strict=True))
-    return abs(float(a) - float(b)) <= 1e-6
+def _capture_ground(scene, world, env: np.ndarray) -> np.ndarray:
+    """After a capture of a Nubis sky: its sky's irradiance sets the ground (the node, when it changed),
+    and the capture's lower half is made what the World now shows there (no second render)."""
+    if scene is None or world.node_tree is None or world.node_tree.nodes.get(GROUND_NODE) is None:
+        return env
+    _sky_irradiance[world.name] = np.array(skymath.hemisphere_radiance(env)[0])  # E_sky / pi
+    colour = ground_radiance(scene, world=world)
+    if scene.world == world:
+        sync_ground(scene)
+    return skymath.with_ground(env, colour, HORIZON_BAND)
 
 
 def _wrap(a: float) -> float:
@@ -416,10 +323,11 @@ def capture_world(scene, width: int = ENV_WIDTH, samples: int = ENV_SAMPLES, wor
     hit = _captures.get(key)
     if hit is not None:
         return hit
-    env = _render_world(world, width, max(width // 2, 1), samples)
+    env = _capture_ground(scene, world, _render_world(world, width, max(width // 2, 1), samples))
     if len(_captures) > 16:
         _captures.clear()
-    _captures[key] = env
+    # Under the key it was asked by, and under the World as it is now (the ground may have changed).
+    _captures[key] = _captures[(fingerprint(world), width, samples)] = env
     return env
 
 
@@ -444,6 +352,10 @@ def _render_world(world, width: int, height: int, samples: int) -> np.ndarray:
         tmp_scene.cycles.samples = samples
         tmp_scene.cycles.use_adaptive_sampling = False
         tmp_scene.cycles.use_denoising = False
+        # Each texel the mean over its own area (a box of one pixel): the default 1.5-pixel filter blurred
+        # the bright horizon a row into the ground.
+        tmp_scene.cycles.pixel_filter_type = "BOX"
+        tmp_scene.cycles.filter_width = 1.0
         r.resolution_x, r.resolution_y, r.resolution_percentage = width, height, 100
         r.film_transparent = False
         r.use_compositing = False

@@ -152,3 +152,29 @@ def hemisphere_radiance_cached(env: np.ndarray) -> tuple:
 def uniform(colour, width: int = 8, height: int = 4) -> np.ndarray:
     """An environment of one radiance everywhere (a World that is a flat colour)."""
     return np.broadcast_to(np.asarray(colour, np.float32)[:3], (height, width, 3)).copy()
+
+
+def with_ground(env: np.ndarray, ground, band: float) -> np.ndarray:
+    """The environment below its horizon as the Nubis sky's World shows it (blender/sky.py): the sky
+    mirrored at the horizon, fading into the ground's radiance `ground` with a smoothstep over the
+    sines of elevation 0 to -`band`. Each row takes the smoothstep's mean over its own solid angle (a
+    render's texel is the mean over its area, and a row is about as tall as the band); rows are
+    mirrored exactly (their elevations are symmetric), so the sky above stays as it was rendered."""
+    if ground is None:
+        return env
+    h = env.shape[0]
+    edges = np.sin((np.arange(h + 1) / h - 0.5) * math.pi)  # row boundaries, as sines of elevation
+
+    def integral(t):  # of the smoothstep t^2 (3 - 2 t) from 0 to t, then 1 beyond t = 1
+        t = np.clip(t, 0.0, None)
+        inside = np.minimum(t, 1.0)
+        return inside**3 - inside**4 / 2.0 + np.maximum(t - 1.0, 0.0)
+
+    t0, t1 = -edges[1:] / band, -edges[:-1] / band  # t grows downwards: the row's upper and lower edge
+    span = np.maximum(t1 - t0, 1e-12)
+    weight = np.where(t1 > 0.0, (integral(t1) - integral(t0)) / span, 0.0)[:, None, None]
+    mirrored = env[::-1]
+    colour = np.asarray(ground, np.float32)[:3]
+    below = (edges[1:] <= 0.0)[:, None, None]
+    out = np.where(below, mirrored * (1.0 - weight) + colour * weight, env)
+    return out.astype(np.float32)

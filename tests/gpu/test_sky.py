@@ -75,8 +75,9 @@ def test_new_cloudscape_builds_a_sky_tied_to_the_sun(make_scene, blender):
 
 def test_the_ground_below_the_horizon_is_lit_by_the_sun_and_the_sky(make_scene, blender):
     """No black band: the World shows a Lambertian ground, albedo x (E_sun sin(elevation) + E_sky) / pi,
-    E_sky the sky's own irradiance (a quadrature of the Sky Texture in the World's nodes, checked here
-    against the exact integral of the capture), in step with the lamp and the Ground setting."""
+    E_sky the sky's own irradiance (the exact integral over the capture's upper half), in step with the
+    lamp and the Ground setting; the capture's lower half, made without a second render, is what a
+    render of the World shows there."""
     from nubis_addon.blender import sky
 
     scene = make_scene("default")
@@ -97,13 +98,20 @@ def test_the_ground_below_the_horizon_is_lit_by_the_sun_and_the_sky(make_scene, 
 
     ground, expected = ground_and_expected()
     assert np.all(ground > 0.05), ground  # not black
-    assert np.allclose(ground, expected, rtol=0.08), (ground, expected)
+    assert np.allclose(ground, expected, rtol=0.03), (ground, expected)
     sun.rotation_euler = (math.radians(82.0), 0.0, 0.3)  # 8 degrees up: the ground darkens
     low, expected_low = ground_and_expected()
-    assert np.allclose(low, expected_low, rtol=0.08) and low.sum() < 0.5 * ground.sum(), (low, expected_low)
+    assert np.allclose(low, expected_low, rtol=0.03) and low.sum() < 0.5 * ground.sum(), (low, expected_low)
     scene.nubis.sky_ground = (0.4, 0.2, 0.1)
     tinted, expected_tinted = ground_and_expected()
-    assert np.allclose(tinted, expected_tinted, rtol=0.08) and tinted[0] > 2.5 * tinted[2], tinted
+    assert np.allclose(tinted, expected_tinted, rtol=0.03) and tinted[0] > 2.5 * tinted[2], tinted
+    rendered = sky._render_world(scene.world, w, h, sky.ENV_SAMPLES)
+    patched = sky.environment(scene)
+    assert np.allclose(rendered[nadir].mean(axis=0), patched[nadir].mean(axis=0), rtol=0.02)
+    # The hazy horizon with the ground below it (a single row would compare Cycles' pixel filter, which
+    # blurs the bright horizon a row down, with the row's centre).
+    band = (dirs[..., 2] < 0.0) & (dirs[..., 2] > -0.2)
+    assert np.allclose(rendered[band].mean(axis=0), patched[band].mean(axis=0), rtol=0.1)
 
 
 def test_the_sky_behind_the_clouds_is_not_one_colour(tmp_path):
