@@ -2,7 +2,7 @@
 
 Run from the repository root:
     .venv-5.3/bin/python tests/pictures/tune_lighting.py OUT_DIR [W H SAMPLES [ROUNDS]]
-(defaults 160 90 256 3: the size issue 21 measures at; Cycles renders each preset at its converged bounce
+(defaults 160 90 256 3, the README's parity size; Cycles renders each preset at its converged bounce
 count from docs/convergence.json)
 
 Cycles' reference of each preset (its own volume bounces, the camera's bake) does not depend on the
@@ -159,7 +159,7 @@ def evaluate(shots: dict, values: dict) -> dict:
 
 
 def objective(per_preset: dict) -> float:
-    """The mean over the presets of the luminance error plus the size of its bias: issue 21's limits hold
+    """The mean over the presets of the luminance error plus the size of its bias: the parity limits hold
     both per preset."""
     return sum(m["luminance_rel_error"] + abs(m["luminance_bias"]) for m in per_preset.values()) / len(per_preset)
 
