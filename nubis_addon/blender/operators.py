@@ -600,7 +600,7 @@ class NUBIS_OT_benchmark(NeedsCloudscape, NubisOperator, bpy.types.Operator):
             result = preview.benchmark(scene, out, self.width, self.height, eevee=self.eevee)
         finally:
             wm.progress_end()
-        status.last_benchmark[:] = preview.table(result).splitlines()
+        status.last_benchmark[:] = preview.sidebar_rows(result)
         eevee = f", EEVEE {result['eevee_over_redraw']:.0f}x" if "eevee_ms" in result else ""
         return (
             f"Redraw {result['redraw_ms']:.1f} ms, naive {result['naive_ms']:.0f} ms "

@@ -201,11 +201,7 @@ class NUBIS_PT_lighting(NubisPanel, bpy.types.Panel):
     bl_label = "Lighting"
     panel = "lighting"
 
-    def draw_before(self, context):
-        self.layout.label(text="The sun is the scene's first Sun lamp: rotate it to change the time of day")
-
     def draw(self, context):
-        self.draw_before(context)
         s = context.scene.nubis
         layout = self.layout
         layout.use_property_split = True
@@ -217,7 +213,7 @@ class NUBIS_PT_lighting(NubisPanel, bpy.types.Panel):
             elif setting.key == "lighting_droplet_size":
                 row.active = s.lighting_cycles_mie
             row.prop(s, setting.key)
-        col.prop(context.scene.cycles, "volume_bounces", text="Cycles Volume Bounces")
+        col.prop(context.scene.cycles, "volume_bounces", text="Bounces")  # Cycles' own tooltip
 
 
 class NUBIS_PT_sky(NubisPanel, bpy.types.Panel):
@@ -283,8 +279,10 @@ class NUBIS_PT_viewport(NubisPanel, bpy.types.Panel):
         layout.operator("nubis.benchmark", icon="TIME")
         if status.last_benchmark:
             box = layout.box().column(align=True)
-            for line in status.last_benchmark:
-                box.label(text=line)
+            for name, value in status.last_benchmark:
+                row = box.split(factor=0.6)
+                row.label(text=name)
+                row.label(text=value)
 
 
 class NUBIS_PT_bake(NubisPanel, bpy.types.Panel):
@@ -296,7 +294,8 @@ class NUBIS_PT_bake(NubisPanel, bpy.types.Panel):
         try:
             voxels, nbytes = pipeline.bake_estimate(context.scene)
             col = layout.column(align=True)
-            col.label(text=f"About {voxels / 1e6:.1f} M voxels evaluated, {nbytes / 2**20:.0f} MB at most", icon="INFO")
+            # Short enough for the default sidebar width; the Bake VDB button's tooltip says the rest.
+            col.label(text=f"{voxels / 1e6:.1f} M voxels, at most {nbytes / 2**20:.0f} MB", icon="INFO")
         except NubisError as err:  # the bake would be refused: say why before anyone presses the button
             layout.label(text=str(err), icon="ERROR")
         self.layout.operator("nubis.bake_vdb", icon="FILE_VOLUME")

@@ -309,7 +309,7 @@ def bake_estimate(scene, voxel_size: float | None = None) -> tuple[int, int]:
         s.bake_camera_only,
         s.bake_velocity,
         tuple(map(tuple, cam.matrix_world)) if cam else None,
-        tuple(scene_io.params_from_scene(s).items()),
+        tuple((k, tuple(v) if isinstance(v, list) else v) for k, v in scene_io.params_from_scene(s).items()),
     )
     if key not in _estimates:
         _estimates.clear()

@@ -357,6 +357,20 @@ def psnr(a: np.ndarray, b: np.ndarray) -> float:
     return float("inf") if mse == 0 else 10.0 * math.log10(1.0 / mse)
 
 
+def sidebar_rows(result: dict) -> list[tuple[str, str]]:
+    """The benchmark in short (name, value) rows that fit the sidebar's default width (table() has the rest)."""
+    rows = [
+        ("Redraw", f"{result['redraw_ms']:.1f} ms"),
+        ("Naive march", f"{result['naive_ms']:.0f} ms"),
+        ("Naive / redraw", f"{result['naive_over_redraw']:.1f}x"),
+    ]
+    if "eevee_ms" in result:
+        rows.append(("EEVEE / redraw", f"{result['eevee_over_redraw']:.0f}x"))
+    rows.append(("3D fetches/px", f"{result['fetches']['coarse_to_fine']['fetches_3d_per_pixel']:.0f}"))
+    rows.append(("PSNR vs naive", f"{result['converged_psnr_db']:.1f} dB"))
+    return rows
+
+
 def table(result: dict) -> str:
     rows = [
         ("naive march (every pixel, full samples)", f"{result['naive_ms']:.1f} ms"),

@@ -74,11 +74,7 @@ def in_batch_edit() -> bool:
 
 def params_from_scene(settings) -> dict:
     """The scene settings a preset holds, as plain values by key."""
-    out = {}
-    for s in schema.PRESET_SCENE:
-        value = getattr(settings, s.key)
-        out[s.key] = value.lower() if s.kind == "enum" else value
-    return out
+    return {s.key: _from_blender(s, getattr(settings, s.key)) for s in schema.PRESET_SCENE}
 
 
 def _from_blender(s: schema.Setting, value):

@@ -6,7 +6,7 @@ A draw callback cannot report to the user, so it leaves its message here for the
 from __future__ import annotations
 
 _last_error: list[str] = []
-last_benchmark: list[str] = []  # the sidebar's Benchmark button's table, line by line
+last_benchmark: list[tuple[str, str]] = []  # the sidebar's Benchmark button's result: (name, value) rows
 
 
 def set_error(message: str) -> None:

@@ -180,6 +180,7 @@ class CloudGPU:
         self.volumes = {name: None for name in VOLUMES}
         self._volume_key = None
         self._no_volume = None
+        self.volume_fills = 0  # how often the volumes were filled (tests, the benchmark)
 
     @property
     def storms(self) -> bool:
@@ -220,8 +221,13 @@ class CloudGPU:
             sky_env=None,
             draw_center=lightvolume.key_centre(state),
         )
-        key = (tuple(id(a) for a in self._field_arrays), uniforms.pack(still).tobytes(), self.noise.defines.items())
-        key = (key[0], key[1], tuple(sorted(key[2])), tuple(sorted(self.switches.items())))
+        density_switches = {k: self.switches[k] for k in ("NUBIS_STORMS", "NUBIS_CIRRUS")}
+        key = (
+            tuple(id(a) for a in self._field_arrays),
+            uniforms.pack(still).tobytes(),
+            tuple(sorted(self.noise.defines.items())),
+            tuple(sorted(density_switches.items())),
+        )
         if key == self._volume_key and all(v is not None for v in self.volumes.values()):
             return
         if self._no_volume is None:
@@ -240,6 +246,7 @@ class CloudGPU:
             groups = [-(-n // VOLUME_GROUP) for n in lightvolume.SIZE[:2]]
             gpu.compute.dispatch(sh, groups[0], groups[1], 1)
         self._volume_key = key
+        self.volume_fills += 1
 
     def defines(self, **switches: int) -> dict[str, object]:
         """The permutation for this state, with `switches` (e.g. NUBIS_NAIVE=1) on top."""

@@ -1,0 +1,51 @@
+"""The optical-depth volumes of the real-time light (core/lightvolume.py, docs/viewport.md#light-volumes):
+filled only when what they hold changes, and closer to the reference march than GPU Pro 7's long tap
+on a thick deck."""
+
+from dataclasses import replace
+
+import numpy as np
+
+
+def test_volumes_are_refilled_only_when_what_they_hold_changes(make_scene):
+    from nubis_addon.blender import runtime, scene_io
+
+    scene = make_scene("default")
+    clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
+    state = scene_io.state_from_scene(scene)
+    clouds.update(state)
+    fills = clouds.volume_fills
+    # Accumulation passes, a small camera move and the reference switch leave them as they are.
+    clouds.update(replace(state, jitter_pass=5))
+    radius = state.params["layer_draw_radius"]
+    clouds.update(replace(state, draw_center=(state.draw_center[0] + 0.01 * radius, state.draw_center[1])))
+    clouds.update(replace(state, light_mode=1))
+    assert clouds.volume_fills == fills
+    # The wind's time, the sun and a density setting refill them.
+    clouds.update(replace(state, time=state.time + 10.0))
+    clouds.update(replace(state, sun_direction=(0.5, 0.0, 0.866)))
+    clouds.update(replace(state, params={**state.params, "density_sigma": state.params["density_sigma"] * 2}))
+    assert clouds.volume_fills == fills + 3
+
+
+def test_volumes_see_the_whole_deck_that_the_long_tap_misses(make_scene):
+    """A stratus deck: the real-time light with the volumes against the reference march (48 fine samples
+    towards the sun, 12 sky directions), and GPU Pro 7's long tap against the same, in one run."""
+    from nubis_addon.blender import pipeline, runtime
+    from nubis_addon.core import metrics
+
+    scene = make_scene("stratus_overcast")
+    clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
+    images = {}
+    try:
+        for label, light_mode, volume in (("reference", 1, 1), ("long tap", 0, 0), ("volumes", 0, 1)):
+            clouds.switches["NUBIS_LIGHT_VOLUME"] = volume
+            images[label] = pipeline.render_shot(pipeline.viewport_shot(scene, 64, 36, light_mode, "full"), 2)
+    finally:
+        clouds.switches["NUBIS_LIGHT_VOLUME"] = 1
+    assert all(np.all(np.isfinite(i)) for i in images.values())
+    long_tap = metrics.compare(images["long tap"], images["reference"])
+    volumes = metrics.compare(images["volumes"], images["reference"])
+    assert long_tap["luminance_bias"] > 0.4, long_tap  # far too bright: the deck beyond the cone is missed
+    assert volumes["luminance_rel_error"] < 0.5 * long_tap["luminance_rel_error"], (volumes, long_tap)
+    assert abs(volumes["luminance_bias"]) < 0.25, volumes
