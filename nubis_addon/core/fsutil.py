@@ -50,13 +50,31 @@ def check_output_path(path: str | os.PathLike, suffixes: tuple[str, ...] | None 
     out = Path(path).expanduser()
     if suffixes is not None and out.suffix.lower() not in suffixes:
         raise NubisError(f"cannot write '{out}': use one of the extensions {', '.join(suffixes)}")
-    if out.is_dir():
-        raise NubisError(f"cannot write '{out}': it is a folder, give a file name")
     parent = out.parent if str(out.parent) else Path(".")
     check_output_dir(parent, create=True)
+    limit = _name_max(parent)
+    if len(os.fsencode(out.name)) > limit:
+        raise NubisError(
+            f"cannot write '{printable_name(out.name)}': the file name is longer than the {limit} bytes "
+            "the file system allows, choose a shorter name"
+        )
+    if out.is_dir():
+        raise NubisError(f"cannot write '{out}': it is a folder, give a file name")
     if out.exists() and not os.access(out, os.W_OK):
         raise NubisError(f"cannot write '{out}': the file is read-only, choose another path or change its permissions")
     return out
+
+
+def _name_max(folder: Path) -> int:
+    try:
+        return int(os.pathconf(folder, "PC_NAME_MAX"))
+    except (OSError, ValueError, AttributeError):  # not every platform or file system says
+        return 255
+
+
+def printable_name(name: str, keep: int = 40) -> str:
+    """A long file name shortened for a message: its start and its end."""
+    return name if len(name) <= 2 * keep else f"{name[:keep]}...{name[-keep:]}"
 
 
 def check_output_dir(folder: str | os.PathLike, create: bool = True) -> Path:

@@ -205,6 +205,20 @@ def test_ranges_are_refused_before_any_work_with_what_to_do(tmp_path, args, mess
     assert list(Path(env["TMPDIR"]).iterdir()) == []
 
 
+def test_a_file_name_longer_than_the_file_system_allows_is_refused_before_any_work(tmp_path):
+    """Was `nubis: internal error: OSError: [Errno 36] File name too long` with a log."""
+    env = _tmp_env(tmp_path)
+    out = tmp_path / ("a" * 256 + ".png")
+    t0 = time.monotonic()
+    r = run_cli("render", "--out", str(out), env=env)
+    assert r.returncode == 1, r.stderr
+    line = _one_line(r.stderr)
+    assert line.startswith("nubis: error:") and "longer than the 255 bytes" in line and "shorter name" in line, line
+    assert len(line) < 300  # the name is shortened in the message
+    assert time.monotonic() - t0 < 15
+    assert list(Path(env["TMPDIR"]).iterdir()) == []
+
+
 def _layers(n: int) -> str:  # default.toml has four layers of its own
     return "".join(
         f'\n[[field.layers]]\nname = "n{i}"\nkind = "perlin"\nchannel = "none"\noctaves = 10\n' for i in range(n)
