@@ -1,5 +1,5 @@
-"""Interrupts: SIGINT and SIGTERM end a run at once, with one line, the conventional exit code
-(128 + signal: 130 and 143) and no temporary file left behind.
+"""Interrupts: SIGINT, SIGTERM and SIGHUP (a closed terminal) end a run at once, with one line, the
+conventional exit code (128 + signal: 130, 143 and 129) and no temporary file left behind.
 
 Python runs a signal handler only between bytecodes of the main thread, so a Ctrl-C during a long
 Cycles render (C code, minutes) would otherwise wait for the render to finish. Instead the signal's
@@ -25,7 +25,8 @@ from collections.abc import Iterator
 from pathlib import Path
 
 MESSAGE = "nubis: interrupted\n"
-SIGNALS = (signal.SIGINT, signal.SIGTERM)
+# SIGHUP does not exist on Windows.
+SIGNALS = tuple(s for s in (signal.SIGINT, signal.SIGTERM, getattr(signal, "SIGHUP", None)) if s is not None)
 
 # Held while dying (from before the snapshot of the registered paths until os._exit), while committing
 # outputs and while a temporary path is made and registered: a path is either registered before the

@@ -60,7 +60,7 @@ def _preset(tmp_path: Path, text: str, name: str = "p.toml") -> Path:
     return path
 
 
-@pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+@pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143), (signal.SIGHUP, 129)])
 def test_interrupt_ends_with_one_line_its_exit_code_and_no_temp_files(tmp_path, sig, code):
     """Ctrl-C used to print a KeyboardInterrupt traceback and then die with SIGSEGV; SIGTERM while
     writing left a hidden partial file. Both now stop at once, even inside a Cycles render."""
