@@ -326,8 +326,13 @@ def render_motion(gpu_inputs: CloudGPU, inv_view_proj, eye, prev_view_proj, widt
     return out
 
 
+# Pixels per side of the tiles offscreen renders are drawn in: a tile of the default sky takes about half a
+# second on llvmpipe (2 cores), which bounds how long an interrupt waits.
+TILE = 128
+
+
 def render_offscreen(
-    gpu_inputs: CloudGPU, inv_view_proj, eye, width: int, height: int, tile: int = 256, **switches: int
+    gpu_inputs: CloudGPU, inv_view_proj, eye, width: int, height: int, tile: int = TILE, **switches: int
 ) -> np.ndarray:
     """Scene-linear premultiplied RGBA, shape (height, width, 4), top row first.
 
@@ -340,12 +345,20 @@ def render_offscreen(
                 gpu.state.scissor_test_set(True)
                 gpu.state.scissor_set(x, y, min(tile, width - x), min(tile, height - y))
                 draw_clouds(gpu_inputs, inv_view_proj, eye, **switches)
+                _finish_tile(x, y)
         gpu.state.scissor_test_set(False)
 
     return draw_offscreen(width, height, tiles)[::-1].copy()
 
 
-def _tiled(stage: str, gpu_inputs: CloudGPU, values: dict, width: int, height: int, tile: int = 256) -> np.ndarray:
+def _finish_tile(x: int, y: int) -> None:
+    """Wait for a tile's draw (one pixel read back). Blender's read-back holds Python's lock while it waits
+    for the GPU, so a whole large frame waited for at once kept an interrupt's handler (core/interrupt.py)
+    out for minutes on a software rasterizer; tile by tile, it runs within a tile's time."""
+    gpu.state.active_framebuffer_get().read_color(x, y, 1, 1, 4, 0, "FLOAT")
+
+
+def _tiled(stage: str, gpu_inputs: CloudGPU, values: dict, width: int, height: int, tile: int = TILE) -> np.ndarray:
     """A full-screen stage drawn in tiles into a float offscreen; its pixels, bottom row first."""
 
     def tiles() -> None:
@@ -354,6 +367,7 @@ def _tiled(stage: str, gpu_inputs: CloudGPU, values: dict, width: int, height: i
                 gpu.state.scissor_test_set(True)
                 gpu.state.scissor_set(x, y, min(tile, width - x), min(tile, height - y))
                 draw_stage(stage, gpu_inputs, values)
+                _finish_tile(x, y)
         gpu.state.scissor_test_set(False)
 
     return draw_offscreen(width, height, tiles)

@@ -85,6 +85,26 @@ def test_interrupt_ends_with_one_line_its_exit_code_and_no_temp_files(tmp_path, 
     assert list(Path(env["TMPDIR"]).iterdir()) == []
 
 
+def test_an_interrupt_during_a_large_render_is_acted_on_within_seconds(tmp_path):
+    """The render waited for the whole frame at once, holding Python's lock inside Blender's read-back: a
+    Ctrl-C came through 537 s later at 4096x4096. Drawn and waited for tile by tile (render/engine.py),
+    it ends within a tile's time (measured 0.5 s at 2048x2048 and 0.7 s at 4096x4096)."""
+    env = _tmp_env(tmp_path)
+    out = tmp_path / "big.png"
+    # A large frame: about a minute of drawing on llvmpipe after some 15 s of set-up, so the signal lands
+    # while the GPU draws.
+    proc = _start(["render", "--out", str(out), "--width", "2048", "--height", "2048"], env)
+    time.sleep(25.0)
+    assert proc.poll() is None, proc.communicate()
+    t0 = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    _stdout, stderr = proc.communicate(timeout=120)
+    latency = time.monotonic() - t0
+    assert proc.returncode == 130 and stderr.strip() == "nubis: interrupted", stderr
+    assert latency < 5.0, f"the interrupt waited {latency:.1f} s"
+    assert not out.exists() and list(Path(env["TMPDIR"]).iterdir()) == []
+
+
 def test_interrupted_compare_keeps_the_earlier_comparison_whole(tmp_path):
     """A failed compare replaced clouds.vdb and kept the other seven files, so metrics.json described
     a bake that was no longer there. The eight files now move into place together."""
