@@ -24,6 +24,7 @@ import re
 import sys
 import tempfile
 import traceback
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -158,6 +159,8 @@ def run(argv: Sequence[str], in_blender: bool = False) -> int:
     console = Console()
     terminal.push(console)
     keep_log = False
+    default_showwarning = warnings.showwarning
+    warnings.showwarning = _console_warning(console, default_showwarning)
     try:
         with interrupt.handle_signals(console.fd):
             try:
@@ -182,12 +185,29 @@ def run(argv: Sequence[str], in_blender: bool = False) -> int:
             print(summary)
             return 0
     finally:
+        warnings.showwarning = default_showwarning
         interrupt.unregister(log)
         if not keep_log:
             log.unlink(missing_ok=True)
         interrupt.untrack_blender_tempdir()
         terminal.pop(console)
         console.close()
+
+
+_PACKAGE = str(Path(__file__).resolve().parent)
+
+
+def _console_warning(console: Console, fallback):
+    """Warnings of this package go to the user's terminal as one line (Blender's chatter, and with it
+    Python's default warning output, goes to the log that is deleted at exit); others go where they did."""
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if str(filename).startswith(_PACKAGE):
+            console.line(f"{PROG}: warning: {printable(message)}")
+        else:
+            fallback(message, category, filename, lineno, file, line)
+
+    return show
 
 
 def _execute(args, in_blender: bool, log: Path) -> str:

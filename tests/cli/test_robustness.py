@@ -533,3 +533,26 @@ def test_a_full_disk_keeps_a_good_vdb_sequence_whole(full_disk, tmp_path):
     r = run_cli("bake", "--out", str(pattern), "--frames", "1-3", "--voxel-size", "500", env=_tmp_env(tmp_path))
     assert r.returncode == 1, r.stdout + r.stderr
     assert [f.read_bytes() for f in files] == before
+
+
+def test_a_read_only_noise_cache_is_said_once_on_the_console(tmp_path):
+    """The warning went only to the log that is deleted at exit, so every run silently regenerated the
+    noise. A read-only file system (a tmpfs mounted read-only; needs root, as the full disk does)."""
+    import subprocess
+
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    r = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", "ro,size=1m", "tmpfs", str(folder)], capture_output=True, text=True
+    )
+    assert r.returncode == 0, f"a read-only cache needs a tmpfs mount (run the tests as root): {r.stderr.strip()}"
+    try:
+        env = {**_tmp_env(tmp_path), "NUBIS_CACHE_DIR": str(folder)}
+        out = tmp_path / "x.png"
+        r = run_cli("render", "--out", str(out), "--width", "16", "--height", "9", env=env)
+        assert r.returncode == 0, r.stderr
+        warnings = [line for line in r.stderr.splitlines() if line.startswith("nubis: warning:")]
+        assert len(warnings) == 1 and "could not write the noise cache" in warnings[0], r.stderr
+        assert "Read-only file system" in warnings[0] and out.exists()
+    finally:
+        subprocess.run(["umount", "-l", str(folder)], check=False)
