@@ -32,6 +32,13 @@ def not_a_file(path: Path) -> str:
     return ""
 
 
+def shown(path: str | os.PathLike) -> Path:
+    """The path a message should name: a file staged in an output set's hidden folder is named by where it
+    goes (``out/clouds.vdb``, not ``out/.nubis-tmp-.../clouds.vdb``)."""
+    path = Path(path)
+    return path.parent.parent / path.name if path.parent.name.startswith(staging.PREFIX) else path
+
+
 def sync_to_disk(staged: Path, final: Path) -> None:
     """fsync a staged file before it replaces `final`: a full disk that shows only when the data reaches it
     fails here, while the old file is still in place."""
@@ -42,7 +49,7 @@ def sync_to_disk(staged: Path, final: Path) -> None:
         finally:
             os.close(fd)
     except OSError as err:
-        raise NubisError(f"writing '{final}' failed ({err.strerror}): check the free disk space") from None
+        raise NubisError(f"writing '{shown(final)}' failed ({err.strerror}): check the free disk space") from None
 
 
 def check_output_path(path: str | os.PathLike, suffixes: tuple[str, ...] | None = None) -> Path:

@@ -18,7 +18,7 @@ import numpy as np
 
 from . import bundled
 from .errors import NubisError
-from .fsutil import atomic_path, sync_to_disk
+from .fsutil import atomic_path, shown, sync_to_disk
 
 IMAGE_SUFFIXES = (".png", ".exr")
 
@@ -88,7 +88,7 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray) -> Path:
         ok = out.write_image(pixels)
         closed = out.close()  # the PNG writer flushes most of the file only here
         if not (ok and closed):
-            raise NubisError(f"writing '{path}' failed ({out.geterror().strip()}): check the free disk space")
+            raise NubisError(f"writing '{shown(path)}' failed ({out.geterror().strip()}): check the free disk space")
         _check_written(tmp, path, (h, w, c))
     return path
 
@@ -109,4 +109,4 @@ def _check_written(tmp: Path, path: Path, shape: tuple[int, int, int]) -> None:
             whole = inp.read_scanline(shape[0] - 1, 0, oiio.FLOAT) is not None and not inp.has_error
         inp.close()
     if not whole:
-        raise NubisError(f"writing '{path}' failed (the file came out incomplete): check the free disk space")
+        raise NubisError(f"writing '{shown(path)}' failed (the file came out incomplete): check the free disk space")

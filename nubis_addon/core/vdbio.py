@@ -10,7 +10,7 @@ import numpy as np
 
 from . import bundled
 from .errors import NubisError
-from .fsutil import atomic_path, sync_to_disk
+from .fsutil import atomic_path, shown, sync_to_disk
 
 # Values below this are dropped from the sparse tree: at sigma 0.04/m and 100 m voxels this is an optical
 # depth of 4e-5 per voxel, far below what a render can show.
@@ -137,7 +137,9 @@ def _write(path: str | os.PathLike, grids: list, metadata: dict | None) -> Path:
         try:
             vdb.write(str(tmp), grids=grids, metadata=dict(metadata or {}))
         except (OSError, RuntimeError, ValueError) as err:
-            raise NubisError(f"writing '{path}' failed ({err}): check the free disk space and permissions") from None
+            raise NubisError(
+                f"writing '{shown(path)}' failed ({err}): check the free disk space and permissions"
+            ) from None
         _check_written(tmp, path, grids)
     return path
 
@@ -147,7 +149,7 @@ def _check_written(tmp: Path, path: Path, grids: list) -> None:
     the voxels written: OpenVDB does not report a full disk, and a file cut short ends early, so the last
     grid is the one that would be missing. (One grid read back, not all: the memory stays bounded.)"""
     vdb = bundled.openvdb()
-    failed = NubisError(f"writing '{path}' failed (the file came out incomplete): check the free disk space")
+    failed = NubisError(f"writing '{shown(path)}' failed (the file came out incomplete): check the free disk space")
     sync_to_disk(tmp, path)
     if not grids:
         return

@@ -535,6 +535,23 @@ def test_a_full_disk_keeps_a_good_vdb_sequence_whole(full_disk, tmp_path):
     assert [f.read_bytes() for f in files] == before
 
 
+def test_compare_on_a_full_disk_says_so_and_keeps_the_earlier_set(full_disk, tmp_path):
+    """compare kept the old set but blamed the bake ("VDB has no 'density' grid: bake it again"); now it
+    names the disk and the file as the user knows it, not its hidden staging copy."""
+    out = full_disk / "cmp"
+    args = ["compare", "--out", str(out), "--width", "32", "--height", "18", "--samples", "2"]
+    r = run_cli(*args, env=_tmp_env(tmp_path))
+    assert r.returncode == 0, r.stderr
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    _fill(full_disk)
+    r = run_cli(*args, env=_tmp_env(tmp_path))
+    assert r.returncode == 1, r.stdout + r.stderr
+    line = _one_line(r.stderr)
+    assert "check the free disk space" in line and ".nubis-tmp" not in line, line
+    assert f"'{out}{os.sep}" in line, line
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
 def test_a_read_only_noise_cache_is_said_once_on_the_console(tmp_path):
     """The warning went only to the log that is deleted at exit, so every run silently regenerated the
     noise. A read-only file system (a tmpfs mounted read-only; needs root, as the full disk does)."""
