@@ -19,6 +19,7 @@ SIGTERM. A command's outputs appear together or not at all (core/staging.py).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import re
 import sys
@@ -182,8 +183,7 @@ def run(argv: Sequence[str], in_blender: bool = False) -> int:
                 )
                 return 3
             interrupt.stop()
-            print(summary)
-            return 0
+            return _print_summary(summary)
     finally:
         warnings.showwarning = default_showwarning
         interrupt.unregister(log)
@@ -192,6 +192,23 @@ def run(argv: Sequence[str], in_blender: bool = False) -> int:
         interrupt.untrack_blender_tempdir()
         terminal.pop(console)
         console.close()
+
+
+def _print_summary(summary: str) -> int:
+    """The run's one line on stdout. A stdout that cannot be written (a full disk, /dev/full, a closed
+    pipe) is said on stderr; the outputs are already in place, but scripts must not read success."""
+    try:
+        print(summary, flush=True)
+        return 0
+    except OSError as err:
+        # Python would try the same buffered line again at exit and print a traceback there.
+        with contextlib.suppress(OSError):
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+            os.close(devnull)
+        reason = err.strerror or type(err).__name__
+        print(f"{PROG}: error: could not write the summary to standard output ({reason})", file=sys.stderr)
+        return 1
 
 
 _PACKAGE = str(Path(__file__).resolve().parent)

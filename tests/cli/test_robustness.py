@@ -573,3 +573,23 @@ def test_a_read_only_noise_cache_is_said_once_on_the_console(tmp_path):
         assert "Read-only file system" in warnings[0] and out.exists()
     finally:
         subprocess.run(["umount", "-l", str(folder)], check=False)
+
+
+def test_a_stdout_that_cannot_be_written_is_an_error_not_a_traceback(tmp_path):
+    """`render ... > /dev/full` wrote the image, then died in print() with a Python traceback."""
+    import subprocess
+
+    out = tmp_path / "x.png"
+    with open("/dev/full", "w") as full:
+        r = subprocess.run(
+            [sys.executable, "-m", "nubis_addon", "render", "--out", str(out), "--width", "16", "--height", "9"],
+            cwd=ROOT,
+            env={**os.environ, **_tmp_env(tmp_path)},
+            stdout=full,
+            stderr=subprocess.PIPE,
+            text=True,
+            timeout=600,
+        )
+    assert r.returncode == 1, r.stderr
+    assert r.stderr.strip() == "nubis: error: could not write the summary to standard output (No space left on device)"
+    assert out.exists()  # the work itself was done
