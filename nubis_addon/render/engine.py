@@ -11,6 +11,7 @@ from gpu.types import GPUShaderCreateInfo, GPUStageInterfaceInfo
 from gpu_extras.batch import batch_for_shader
 
 from ..core import lightvolume, noise, sky
+from ..core.errors import NubisError
 from ..core.state import CloudState
 from . import uniforms
 from .sources import CLOUD_LIBS, assemble, read_shader
@@ -276,7 +277,14 @@ def draw_clouds(gpu_inputs: CloudGPU, inv_view_proj, eye, **switches: int) -> No
 
 def draw_offscreen(width: int, height: int, draw: Callable[[], None]) -> np.ndarray:
     """Run `draw` into a cleared float offscreen of this size; its pixels, bottom row first."""
-    offscreen = gpu.types.GPUOffScreen(width, height, format="RGBA32F")
+    try:
+        offscreen = gpu.types.GPUOffScreen(width, height, format="RGBA32F")
+    except Exception as err:  # Blender raises a plain error when the GPU refuses the texture
+        mb = width * height * 16 / 2**20
+        raise NubisError(
+            f"the GPU could not hold a {width}x{height} float image ({mb:.0f} MB): render smaller, for example "
+            f"{max(4, width // 2)}x{max(4, height // 2)}, or on a GPU with more memory ({err})"
+        ) from None
     try:
         with offscreen.bind():
             fb = gpu.state.active_framebuffer_get()

@@ -593,3 +593,15 @@ def test_a_stdout_that_cannot_be_written_is_an_error_not_a_traceback(tmp_path):
     assert r.returncode == 1, r.stderr
     assert r.stderr.strip() == "nubis: error: could not write the summary to standard output (No space left on device)"
     assert out.exists()  # the work itself was done
+
+
+def test_a_frame_the_gpu_cannot_hold_is_one_sentence_with_a_size_to_try(tmp_path):
+    """`render --width 16384 --height 16384` (the documented maximum) was an internal error from
+    gpu.offscreen.new on llvmpipe."""
+    out = tmp_path / "x.png"
+    r = run_cli("render", "--out", str(out), "--width", "16384", "--height", "16384", env=_tmp_env(tmp_path))
+    assert r.returncode == 1, r.stderr
+    line = _one_line(r.stderr)
+    assert line.startswith("nubis: error: the GPU could not hold a 16384x16384 float image"), line
+    assert "render smaller, for example 8192x8192" in line and "internal" not in line
+    assert not out.exists()
