@@ -507,12 +507,12 @@ vec3 nubis_in_scattering(
   direct_energy *= exp(-nubis_cirrus_optical_depth(p, P.sun_dir.xyz, 0.0));
 #endif
   vec3 direct = P.sun_radiance.rgb * direct_energy;
-  /* GDC22's ambient probability pow(1 - coarse, 0.5), growing with height (S15;
-   * docs/sources.md#ambient); the reference permutation measures the sky's visibility instead. */
+  /* The sky light: the sky's volume (below), or with the long tap GDC22's ambient probability
+   * pow(1 - coarse, 0.5), growing with height (S15; docs/sources.md#ambient); the reference
+   * permutation measures the sky's visibility direction by direction. */
 #if NUBIS_REFERENCE
   vec3 sky_light = nubis_reference_sky_light(p, view_dir, pixel);
 #else
-  float ambient_probability = sqrt(1.0 - clamp01(d.coarse));
   float overhead = 1.0;
 #  if NUBIS_CIRRUS
   /* ... and the sky light from above by its transmittance overhead. */
@@ -523,10 +523,13 @@ vec3 nubis_in_scattering(
    * it, each over its hemisphere (an isotropic share of one half); the optical depths come from the
    * sky's volume (docs/viewport.md#light-volumes), scaled by the occlusion setting. S15's height
    * gradient stays as art direction. */
+  /* This replaces GDC22's ambient probability pow(1 - coarse, 0.5): a local guess at the same
+   * occlusion, which on top of the measured one darkened the cloud twice (docs/viewport.md#light-volumes). */
   vec2 depths = nubis_sky_volume_depths(p) * P.lighting_sky_occlusion;
   vec3 sky_light = 0.5 * (P.ambient.rgb * (overhead * exp(-depths.x)) + P.ambient_below.rgb * exp(-depths.y));
   sky_light *= mix(P.lighting_ambient_bottom, 1.0, d.h);
 #  else
+  float ambient_probability = sqrt(1.0 - clamp01(d.coarse));
   vec3 sky_light = nubis_ambient_light(d.h) * (ambient_probability * overhead);
 #  endif
 #endif
