@@ -118,10 +118,17 @@ def prepare_frame(scene) -> None:
 # ---- cloud shadows ----------------------------------------------------------------------------------
 
 
-def shadow_frame(scene, sun_dir) -> tuple[Vector, Vector, Vector, float]:
-    """Where the shadow caster goes: a horizontal square just above the scene's tallest object, wide
-    enough that the sunlight reaching every object crosses it. Returns its centre, its two unit edge
-    directions and its width (metres)."""
+# The caster's distance below the clouds' floor when the objects' top would put it higher.
+CASTER_BELOW_CLOUDS = 10.0
+
+
+def shadow_frame(scene, sun_dir, cloud_floor: float | None = None) -> tuple[Vector, Vector, Vector, float]:
+    """Where the shadow caster goes: a horizontal square above the scene's tallest object and below the
+    clouds' floor (`cloud_floor`, the lowest altitude a cloud reaches), wide enough that the sunlight
+    reaching every object crosses it. Returns its centre, its two unit edge directions and its width
+    (metres). The shadow map marches from the caster through the whole layer towards the sun, so a
+    caster above the floor would miss the clouds beneath it: a 200 km ground plane had put it 4.4 km
+    up, above the cumulus, and the renders showed no cloud shadow at all."""
     sun = Vector(sun_dir).normalized()
     corners = []
     for obj in scene.objects:
@@ -134,6 +141,9 @@ def shadow_frame(scene, sun_dir) -> tuple[Vector, Vector, Vector, float]:
     lo = Vector([min(c[i] for c in corners) for i in range(3)])
     hi = Vector([max(c[i] for c in corners) for i in range(3)])
     height = hi.z + max(0.02 * max(hi.x - lo.x, hi.y - lo.y), 5.0)
+    if cloud_floor is not None:
+        # Just under the floor, but never below the objects' top (a mountain into the clouds keeps it there).
+        height = max(min(height, cloud_floor - CASTER_BELOW_CLOUDS), hi.z + 1.0)
     # Sunlight reaching the lowest point crosses the caster this far towards the sun.
     rise = (height - lo.z) / max(sun.z, 0.05)
     shift = Vector((sun.x, sun.y, 0.0)) * rise
@@ -146,7 +156,7 @@ def shadow_frame(scene, sun_dir) -> tuple[Vector, Vector, Vector, float]:
 
 def update_shadow(scene, state, clouds) -> bpy.types.Object:
     """The shadow map of this frame and the caster that carries it."""
-    origin, u, v, size = shadow_frame(scene, state.sun_direction)
+    origin, u, v, size = shadow_frame(scene, state.sun_direction, state.shell()[0])
     n = u.cross(v)
     res = scene.nubis.sky_shadow_resolution
     clouds.update(state)

@@ -374,3 +374,25 @@ def test_panorama_lights_a_sphere_in_a_fresh_scene(blender, tmp_path):
 
     lit, dark = sphere_luminance(pano), sphere_luminance(None)
     assert dark < 1e-4 and lit > 0.05, (lit, dark)
+
+
+def test_cloud_shadows_over_a_large_ground_start_below_the_clouds(make_scene, blender):
+    """A 200 km ground plane put the shadow caster at the objects' top plus 2 % of their extent, 4.4 km
+    up and above the cumulus: the map marched from there saw no cloud and F12 showed no shadow. The
+    caster now sits under the clouds' floor and its map holds the shadows."""
+    from nubis_addon.blender import runtime, scene_io, scene_render
+
+    scene = make_scene("default")
+    blender.ops.mesh.primitive_plane_add(size=200000.0)
+    blender.ops.mesh.primitive_cube_add(size=100.0, location=(0.0, 0.0, 50.0))
+    blender.context.view_layer.update()
+    state = scene_io.state_from_scene(scene)
+    floor = state.shell()[0]
+    centre, _u, _v, size = scene_render.shadow_frame(scene, state.sun_direction, floor)
+    assert 100.0 < centre.z < floor, (centre.z, floor)
+    clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
+    clouds.update(state)
+    caster = scene_render.update_shadow(scene, state, clouds)
+    assert caster.matrix_world.translation.z < floor
+    pixels = np.array(blender.data.images[scene_render.SHADOW_IMAGE].pixels[:]).reshape(-1, 4)[:, 0]
+    assert pixels.min() < 0.5 and pixels.max() > 0.9, (pixels.min(), pixels.max())  # shade and sun

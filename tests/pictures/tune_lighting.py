@@ -30,7 +30,7 @@ TUNED = {
     "lighting_ms_attenuation": (0.02, 1.0, 0.1),
     "lighting_ms_contribution": (0.1, 1.0, 0.15),
     "lighting_ms_eccentricity": (0.0, 1.0, 0.2),
-    "lighting_ambient": (0.2, 2.0, 0.3),
+    "lighting_ambient": (0.2, 3.0, 0.3),
     "lighting_ambient_bottom": (0.0, 1.0, 0.2),
     "lighting_powder": (0.0, 1.0, 0.25),
     "lighting_sky_occlusion": (0.0, 3.0, 0.3),
