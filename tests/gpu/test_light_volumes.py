@@ -46,6 +46,8 @@ def test_volumes_see_the_whole_deck_that_the_long_tap_misses(make_scene):
     assert all(np.all(np.isfinite(i)) for i in images.values())
     long_tap = metrics.compare(images["long tap"], images["reference"])
     volumes = metrics.compare(images["volumes"], images["reference"])
-    assert long_tap["luminance_bias"] > 0.4, long_tap  # far too bright: the deck beyond the cone is missed
-    assert volumes["luminance_rel_error"] < 0.5 * long_tap["luminance_rel_error"], (volumes, long_tap)
-    assert abs(volumes["luminance_bias"]) < 0.25, volumes
+    # Measured 2026-12-02 (5.3, llvmpipe): the long tap 41.5 % error, bias +41.1 % (the deck beyond the
+    # cone is missed, so its inside is far too bright); the volumes 11.4 %, bias -9.8 %.
+    assert long_tap["luminance_bias"] > 0.3, long_tap
+    assert volumes["luminance_rel_error"] < 0.4 * long_tap["luminance_rel_error"], (volumes, long_tap)
+    assert abs(volumes["luminance_bias"]) < 0.15, volumes

@@ -27,7 +27,7 @@ sys.path.insert(0, str(ROOT))
 
 # name: (lower bound, upper bound, first step)
 TUNED = {
-    "lighting_ms_attenuation": (0.02, 1.0, 0.1),
+    "lighting_ms_attenuation": (0.0, 1.0, 0.02),
     "lighting_ms_contribution": (0.1, 1.0, 0.15),
     "lighting_ms_eccentricity": (0.0, 1.0, 0.2),
     "lighting_ambient": (0.2, 3.0, 0.3),
