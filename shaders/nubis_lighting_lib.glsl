@@ -455,8 +455,9 @@ float nubis_light_optical_depth(vec3 p, float view_alpha, float lod, vec2 pixel,
 #  if NUBIS_LIGHT_VOLUME
   /* Beyond the cone, the sun's optical-depth volume: the whole layer towards the sun
    * (docs/viewport.md#light-volumes). It is already scaled by sigma. */
+  /* The powder term keeps the cone's depth alone: it is the in-scattering probability near the
+   * sample, and cloud kilometres further towards the sun must not lighten a sun-facing edge. */
   float far_depth = nubis_sun_volume_depth(p + P.sun_dir.xyz * P.light_cone_reach);
-  powder_depth += far_depth / P.density_sigma;
   tau += far_depth / P.density_sigma;
 #  else
   /* GPU Pro 7's long-distance sample at three times the cone's reach. */

@@ -62,7 +62,9 @@ def test_cirrus_dims_the_clouds_but_keeps_their_powder_edges(make_scene):
         return float(np.maximum(0.0, 1.0 - lum(with_powder) / lum(without)).mean())
 
     edges, veiled_edges = darkening(plain_powder, plain), darkening(veiled_powder, veiled)
-    assert edges > 0.02, "the test needs visible powder edges"
+    # 1.7 % with the light volumes' defaults (2026-12-02; the sky light is a larger share of the lit edges
+    # than with the height-gradient ambient, which measured above 2 %).
+    assert edges > 0.01, "the test needs visible powder edges"
     assert abs(veiled_edges - edges) <= 0.1 * edges
     assert lum(veiled).mean() < 0.95 * lum(plain).mean()  # the cirrus still dims the clouds
 
