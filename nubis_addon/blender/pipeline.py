@@ -233,7 +233,7 @@ def _bake_evaluator(scene, state: CloudState, plan: BakePlan):
     fps = scene_io.scene_fps(scene)
     state.motion_dt = scene.nubis.wind_time_scale / fps  # one frame of wind time
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
-    clouds.update(state)
+    clouds.update(state, light=False)  # densities only: no light volumes to fill
     grids = vdbio.SparseGrids(plan.voxel_size, plan.origin)
     grids.grid("density")
     # Skies whose field can hold no glow or absorption read back the density alone.

@@ -187,7 +187,9 @@ class CloudGPU:
     def storms(self) -> bool:
         return bool(self.switches["NUBIS_STORMS"])
 
-    def update(self, state: CloudState) -> None:
+    def update(self, state: CloudState, light: bool = True) -> None:
+        """Upload what the shaders read for `state`; `light` False skips the light volumes (the bake reads
+        densities only), which keep their last contents and are refilled by the next lit update."""
         # Fields are replaced, never edited in place, by everything that changes them: holding the
         # arrays and comparing identity is exact, and costs nothing per redraw.
         arrays = (state.field_a, state.field_b, state.field_c)
@@ -206,7 +208,10 @@ class CloudGPU:
             NUBIS_REFERENCE=int(state.light_mode == 1),
             NUBIS_CIRRUS=int(state.has_cirrus()),
         )
-        self._update_volumes(state)
+        if light:
+            self._update_volumes(state)
+        elif self._no_volume is None:
+            self._no_volume = gpu.types.GPUTexture((1, 1, 1), format="R32F")
 
     def _update_volumes(self, state: CloudState) -> None:
         """Refill the optical-depth volumes when what they hold changed: the field, the density and
@@ -262,7 +267,7 @@ class CloudGPU:
             return
         textures = {"field_a": self.field_a, "field_b": self.field_b, "field_c": self.field_c, "sky_env": self.sky_env}
         for name in VOLUMES:
-            textures[name] = self.volumes[name] if volumes else self._no_volume
+            textures[name] = self.volumes[name] if volumes and self.volumes[name] is not None else self._no_volume
         for _kind, name in CLOUD_SAMPLERS:
             tex = textures.get(name) or self.noise.textures[name.removeprefix("noise_")]
             sh.uniform_sampler(name, tex)

@@ -20,7 +20,10 @@ def test_volumes_are_refilled_only_when_what_they_hold_changes(make_scene):
     radius = state.params["layer_draw_radius"]
     clouds.update(replace(state, draw_center=(state.draw_center[0] + 0.01 * radius, state.draw_center[1])))
     clouds.update(replace(state, light_mode=1))
+    # A bake reads densities only: a new time without light fills nothing.
+    clouds.update(replace(state, time=state.time + 99.0), light=False)
     assert clouds.volume_fills == fills
+    clouds.update(state)
     # The wind's time, the sun and a density setting refill them.
     clouds.update(replace(state, time=state.time + 10.0))
     clouds.update(replace(state, sun_direction=(0.5, 0.0, 0.866)))
