@@ -539,9 +539,12 @@ def test_compare_on_a_full_disk_says_so_and_keeps_the_earlier_set(full_disk, tmp
     """compare kept the old set but blamed the bake ("VDB has no 'density' grid: bake it again"); now it
     names the disk and the file as the user knows it, not its hidden staging copy."""
     out = full_disk / "cmp"
+    out.mkdir()
+    # An earlier comparison's eight files (their content does not matter, only that it stays).
+    names = ("clouds.vdb", "viewport.exr", "cycles.exr", "viewport.png", "cycles.png", "difference.png")
+    for name in (*names, "side_by_side.png", "metrics.json"):
+        (out / name).write_bytes(f"earlier {name}".encode())
     args = ["compare", "--out", str(out), "--width", "32", "--height", "18", "--samples", "2"]
-    r = run_cli(*args, env=_tmp_env(tmp_path))
-    assert r.returncode == 0, r.stderr
     before = {p.name: p.read_bytes() for p in out.iterdir()}
     _fill(full_disk)
     r = run_cli(*args, env=_tmp_env(tmp_path))
