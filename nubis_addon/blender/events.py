@@ -15,7 +15,7 @@ import bpy
 
 from ..core import schema
 from ..core.errors import NubisError
-from . import handlers, mainthread, scene_io, sky, status, viewport
+from . import handlers, mainthread, scene_io, status, viewport
 
 # Seconds of quiet after the last edit before the field is composited again.
 DEBOUNCE_S = 0.15
@@ -30,8 +30,6 @@ def changed(scene, trigger: str, key: str = "") -> None:
         enforce_limits(scene.nubis, key)
     if trigger == "field" and scene_io.has_cloudscape(scene):
         request_composite(scene)
-    if key == "sky_ground":  # the ground is drawn by the World's nodes (blender/sky.py)
-        sky.sync_ground(scene)
     viewport.invalidate()
     scene_io.redraw_views()
 

@@ -69,8 +69,10 @@ def domain(state) -> tuple[tuple[float, float], tuple[float, float], float, floa
         grid = SNAP * radius
         centre = tuple(float(round(c / grid) * grid) for c in state.draw_center[:2])
         half = (radius * (1.0 + SNAP), radius * (1.0 + SNAP))
-    # z = altitude - r^2 / (2 R) near the surface: the shell's floor is lower at the box's corners.
-    reach = float(np.hypot(*half)) + float(np.hypot(centre[0] - state.draw_center[0], centre[1] - state.draw_center[1]))
+    # z = altitude - r^2 / (2 R) near the surface, r from the world's origin (nubis_altitude): the shell's
+    # floor is lower at the box's far corner. The box then depends on the snapped centre alone, so the
+    # map the shaders read stays the one the volumes were filled with while the camera moves.
+    reach = float(np.hypot(abs(centre[0]) + half[0], abs(centre[1]) + half[1]))
     sag = reach * reach / (2.0 * planet) if planet > 0.0 else 0.0
     return centre, half, float(bottom) - sag, float(top)
 

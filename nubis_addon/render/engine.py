@@ -208,10 +208,10 @@ class CloudGPU:
             NUBIS_REFERENCE=int(state.light_mode == 1),
             NUBIS_CIRRUS=int(state.has_cirrus()),
         )
+        if self._no_volume is None:  # bound in place of the volumes while they are filled or skipped
+            self._no_volume = gpu.types.GPUTexture((1, 1, 1), format="R32F")
         if light:
             self._update_volumes(state)
-        elif self._no_volume is None:
-            self._no_volume = gpu.types.GPUTexture((1, 1, 1), format="R32F")
 
     def _update_volumes(self, state: CloudState) -> None:
         """Refill the optical-depth volumes when what they hold changed: the field, the density and
@@ -236,8 +236,6 @@ class CloudGPU:
         )
         if key == self._volume_key and all(v is not None for v in self.volumes.values()):
             return
-        if self._no_volume is None:
-            self._no_volume = gpu.types.GPUTexture((1, 1, 1), format="R32F")
         for name in VOLUMES:
             if self.volumes[name] is None:
                 self.volumes[name] = gpu.types.GPUTexture(lightvolume.SIZE, format="R32F")

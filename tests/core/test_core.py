@@ -290,6 +290,9 @@ def test_light_volume_boxes_hold_the_cloud_domain_and_face_the_light():
     moved = CloudState(draw_center=(1200.0 + 0.02 * radius, -800.0))
     far = CloudState(draw_center=(1200.0 + 0.5 * radius, -800.0))
     assert lightvolume.key_centre(moved) == lightvolume.key_centre(state) != lightvolume.key_centre(far)
+    # ... and the map the shaders read is the one the volumes were filled with.
+    sun = (0.3, -0.5, 0.81)
+    assert np.array_equal(lightvolume.volume(sun, moved).to_unit(), lightvolume.volume(sun, state).to_unit())
     # A comparison's box replaces the draw radius: finer texels over the baked clouds.
     state.clip_box = (-500.0, -400.0, 1500.0, 600.0)
     centre, half, _low, _high = lightvolume.domain(state)
