@@ -101,6 +101,12 @@ def build_parser() -> argparse.ArgumentParser:
                 help="single: single scattering on both sides; full: every term (default)",
             )
             p.add_argument(
+                "--draft",
+                action="store_true",
+                help="a first look in about a minute: half the scene's width and height (unless given) and no "
+                "reference-march diagnostic",
+            )
+            p.add_argument(
                 "--noise-estimate",
                 action="store_true",
                 help="split the samples over two seeds to measure Cycles' own noise",

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import bpy
 
-from ..core import console, distributed, fields, imageio, interrupt, sequence, staging
+from ..core import console, distributed, fields, imageio, interrupt, limits, sequence, staging
 from ..core.errors import NubisError
 from ..core.fsutil import not_a_file
 from ..core.presets import load_preset
@@ -111,8 +111,23 @@ def execute(args, in_blender: bool, log: Path, out: Path) -> str:
             rgba = pipeline.render_cycles(scene, w, h, args.samples, voxel_size=voxel, bounces=args.bounces)
             pipeline.save_render(scene, out, rgba)
         return f"rendered {label} with Cycles at {w}x{h} in {time.perf_counter() - start:.1f} s -> {out}"
+    if args.draft:
+        w = args.width or max(w // 2, limits.SIZE_RANGE[0])
+        h = args.height or max(h // 2, limits.SIZE_RANGE[0])
     with console.quiet(log):
-        m = pipeline.compare(scene, out, w, h, args.samples, args.mode, voxel, args.noise_estimate, args.bounces)
+        m = pipeline.compare(
+            scene,
+            out,
+            w,
+            h,
+            args.samples,
+            args.mode,
+            voxel,
+            args.noise_estimate,
+            args.bounces,
+            reference=not args.draft,
+            step=lambda text: console.current().line(f"{PROG}: {text}"),
+        )
     capped = (
         f" (reference march in {m['reference_view_steps']} of {scene.nubis.march_steps_max} view steps: "
         "the shader loop limit)"

@@ -420,17 +420,22 @@ def compare(
     voxel_size: float | None = None,
     noise_estimate: bool = False,
     bounces: int | None = None,
+    reference: bool = True,
+    step: Callable[[str], None] | None = None,
 ) -> dict:
     """Viewport and Cycles renders of the same shot, their side-by-side, a difference image and
     metrics.json (computed on the scene-linear EXR values); the bake Cycles rendered is kept as
     clouds.vdb. Only the part of the sky the camera sees is baked, with voxels of one pixel's footprint
     at the nearest cloud (down to 20 m) unless `voxel_size` is given, and the cirrus as a slab two
-    voxels thin. The eight files replace an earlier comparison together or not at all."""
+    voxels thin. The eight files replace an earlier comparison together or not at all. `reference` adds
+    the real-time light march against the reference march (the slowest part after Cycles); `step` is
+    told what each stage is about to do."""
     if mode not in COMPARE_MODES:
         raise NubisError(f"unknown comparison mode '{mode}': use single or full")
     out = check_output_dir(out_dir)
     with output_set() as outputs:
-        return _compare(scene, out, outputs.stage, width, height, samples, mode, voxel_size, noise_estimate, bounces)
+        settings = _CompareSettings(samples, mode, voxel_size, noise_estimate, bounces, reference, step or _silent)
+        return _compare(scene, out, outputs.stage, width, height, settings)
 
 
 # The comparison bakes the cirrus as a slab two voxels thin: the viewport samples the 2D layer at one
@@ -446,7 +451,30 @@ THIN_CIRRUS = True
 COMPARE_PASSES = 4
 
 
-def _compare(scene, out: Path, stage, width, height, samples, mode, voxel_size, noise_estimate, bounces) -> dict:
+def _silent(_text: str) -> None:
+    pass
+
+
+@dataclass(frozen=True)
+class _CompareSettings:
+    samples: int | None
+    mode: str
+    voxel_size: float | None
+    noise_estimate: bool
+    bounces: int | None
+    reference: bool
+    step: Callable[[str], None]
+
+
+def _compare(scene, out: Path, stage, width, height, settings: _CompareSettings) -> dict:
+    samples, mode, voxel_size, noise_estimate, bounces = (
+        settings.samples,
+        settings.mode,
+        settings.voxel_size,
+        settings.noise_estimate,
+        settings.bounces,
+    )
+    stages = 4 if mode == "full" and settings.reference else 3
     timings = {}
     t = time.perf_counter()
     if voxel_size is None:
@@ -454,6 +482,7 @@ def _compare(scene, out: Path, stage, width, height, samples, mode, voxel_size, 
         state = scene_io.state_from_scene(scene)
         inv = np.array(scene_io.camera_inv_view_proj(scene, width, height))
         voxel_size = camera_voxel_size(state, inv, width, height, scene.nubis.bake_voxel_size)
+    settings.step(f"1/{stages} baking what the camera sees, {voxel_size:g} m voxels")
     baked = bake(
         scene, stage(out / "clouds.vdb"), voxel_size, camera_only=True, size=(width, height), thin_cirrus=THIN_CIRRUS
     )
@@ -465,6 +494,7 @@ def _compare(scene, out: Path, stage, width, height, samples, mode, voxel_size, 
     # Cycles integrates each pixel's area (box filter below); the viewport samples the pixel centre.
     # Supersampling the viewport makes both estimate the same pixel value.
     ss = max(1, min(4, 1024 // max(width, height)))
+    settings.step(f"2/{stages} the viewport's march, {width * ss}x{height * ss} pixels, {COMPARE_PASSES} passes")
     # The viewport converged as its accumulation converges when the view stands still: two halves of
     # COMPARE_PASSES jittered passes, whose difference measures what grain is left.
     halves = [
@@ -484,6 +514,7 @@ def _compare(scene, out: Path, stage, width, height, samples, mode, voxel_size, 
     # noise, so the mean's noise is half their difference. No extra cost.
     total = samples or scene.cycles.samples
     runs = 2 if noise_estimate else 1
+    settings.step(f"3/{stages} Cycles, {width}x{height} pixels, {total} samples, {bounces} volume bounces")
     renders = []
     for seed_offset in range(runs):
         scene.cycles.seed += seed_offset
@@ -504,13 +535,16 @@ def _compare(scene, out: Path, stage, width, height, samples, mode, voxel_size, 
         result["cycles_noise"] = {k: own[k] / 2 for k in ("alpha_rmse", "luminance_rel_error")}
     grain = metrics.compare(halves[0], halves[1])
     result["viewport_noise"] = {k: grain[k] / 2 for k in ("alpha_rmse", "luminance_rel_error")}
-    if mode == "full":
+    if stages == 4:
         # The real-time cone march against the reference march, everything else equal.
+        settings.step(f"4/{stages} the reference light march, {width * ss}x{height * ss} pixels")
+        t = time.perf_counter()
         reference = downsample(render_viewport(scene, width * ss, height * ss, 1, mode, clip, COMPARE_PASSES), ss)
         cone = metrics.compare(viewport, reference)
         result["cone_march_vs_reference"] = {
             k: cone[k] for k in ("alpha_rmse", "luminance_rel_error", "luminance_bias")
         }
+        timings["reference_s"] = time.perf_counter() - t
     # The reference march keeps within the shader loop limit by taking longer steps (core/march.py).
     steps_max = scene.nubis.march_steps_max
     storms = len(scene_io.storm_lights(scene.nubis))

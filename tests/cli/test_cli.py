@@ -55,6 +55,21 @@ def test_compare_writes_every_output(tmp_path):
 
     assert m["volume_bounces"] == REFERENCE_BOUNCES > 8
     assert f"against Cycles at {REFERENCE_BOUNCES} volume bounces" in r.stdout
+    # Progress while it works: one line per stage, the reference march last in full mode.
+    steps = [ln for ln in r.stderr.splitlines() if ln.startswith("nubis: ")]
+    assert [ln.split()[1] for ln in steps] == ["1/4", "2/4", "3/4", "4/4"], r.stderr
+    assert 0.0 <= m["cone_march_vs_reference"]["luminance_rel_error"] < 1.0
+
+
+def test_compare_draft_is_half_the_scene_size_without_the_reference_march(tmp_path):
+    """README command 1: `--draft` halves the scene's 640x360 and skips the slowest diagnostic."""
+    out = tmp_path / "cmp"
+    r = run_cli("compare", "--out", str(out), "--draft", "--samples", "1", "--voxel-size", "600")
+    assert r.returncode == 0, r.stderr
+    assert _one_line(r.stdout).startswith("compared default (full) at 320x180")
+    assert [ln.split()[1] for ln in r.stderr.splitlines() if ln.startswith("nubis: ")] == ["1/3", "2/3", "3/3"]
+    m = json.loads((out / "metrics.json").read_text())
+    assert (m["width"], m["height"]) == (320, 180) and "cone_march_vs_reference" not in m
 
 
 def test_bake_and_cycles_commands(tmp_path):

@@ -95,7 +95,7 @@ def test_ci_runs_readme_command_2_on_every_blender_line():
     run = (root / ".ci" / "run").read_text()
     assert command_2[0] in run.splitlines()
     assert blocks[0].strip().splitlines() == [
-        "./.ci/setup 5.3 && .venv-5.3/bin/python -m nubis_addon compare --out out/default"
+        "./.ci/setup 5.3 && .venv-5.3/bin/python -m nubis_addon compare --out out/default --draft"
     ]
     pins = {
         line: (root / ".ci" / f"requirements-{line}.txt").read_text().splitlines() for line in ("5.3", "5.2", "4.5")
