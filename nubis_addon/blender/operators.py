@@ -365,34 +365,18 @@ class NUBIS_OT_lightning_sequence(NeedsCloudscape, NubisOperator, bpy.types.Oper
         return f"{self.flashes} flashes and {self.discharges} discharges keyed from frame {int(keys[0]['frame'])}"
 
 
-class NUBIS_OT_render_image(NeedsCloudscape, NubisOperator, bpy.types.Operator):
-    """Render the clouds from the scene camera into the image 'Nubis Render'"""
-
-    bl_idname = "nubis.render_image"
-    bl_label = "Render Clouds"
-
-    def run(self, context):
-        scene = context.scene
-        w, h = pipeline.resolution(scene, None, None)
-        rgba = pipeline.render_viewport(scene, w, h)
-        img = bpy.data.images.get("Nubis Render") or bpy.data.images.new("Nubis Render", w, h, float_buffer=True)
-        if tuple(img.size) != (w, h):
-            img.scale(w, h)
-        img.pixels.foreach_set(rgba[::-1].ravel())
-        img.update()
-        return f"Rendered {w}x{h} into the image 'Nubis Render'"
-
-
 def _default_bake_path(name: str) -> str:
     """Beside the .blend when it is saved, else in the home folder: never a `//` path nothing resolves."""
     return f"//{name}" if bpy.data.filepath else os.path.join(os.path.expanduser("~"), name)
 
 
-class ModalBake:
-    """A bake the artist can cancel: the work runs a group of tiles per timer tick (pipeline.bake_steps),
-    the status bar shows its progress, Esc stops it and nothing is written. In background mode (scripts,
-    the tests) it runs to its end at once."""
+class ModalSteps:
+    """Long work the artist can cancel: it runs a group of tiles per timer tick (pipeline.bake_steps,
+    pipeline.render_shot_steps), the status bar shows its progress, Esc stops it and nothing is written.
+    In background mode (scripts, the tests) it runs to its end at once."""
 
+    doing = "baking"
+    cancelled = "Bake cancelled: no file was written, earlier bakes are untouched"
     _timer = None
     _jobs = None
 
@@ -439,7 +423,7 @@ class ModalBake:
     def modal(self, context, event):
         if event.type == "ESC":
             self._end(context)
-            self.report({"WARNING"}, "Bake cancelled: no file was written, earlier bakes are untouched")
+            self.report({"WARNING"}, self.cancelled)
             return {"CANCELLED"}
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
@@ -457,7 +441,7 @@ class ModalBake:
         total = len(self._results) + len(self._jobs)
         overall = (len(self._results) + (0.0 if fraction >= 1.0 else fraction)) / max(total, 1)
         context.window_manager.progress_update(int(overall * 100))
-        context.workspace.status_text_set(f"Nubis: baking {label}, {overall * 100:.0f}% (Esc cancels)")
+        context.workspace.status_text_set(f"Nubis: {self.doing} {label}, {overall * 100:.0f}% (Esc cancels)")
         if self._jobs:
             return {"RUNNING_MODAL"}
         self._end(context)
@@ -469,7 +453,32 @@ class ModalBake:
         return {"FINISHED"}
 
 
-class NUBIS_OT_bake_vdb(NeedsCloudscape, ModalBake, bpy.types.Operator):
+class NUBIS_OT_render_image(NeedsCloudscape, ModalSteps, bpy.types.Operator):
+    """Render the clouds from the scene camera into the image 'Nubis Render' (Esc cancels)"""
+
+    bl_idname = "nubis.render_image"
+    bl_label = "Render Clouds"
+
+    doing = "rendering"
+    cancelled = "Render cancelled: the image 'Nubis Render' is untouched"
+
+    def jobs(self, context):
+        scene = context.scene
+        w, h = pipeline.resolution(scene, None, None)
+        return [(f"{w}x{h}", pipeline.render_shot_steps(pipeline.viewport_shot(scene, w, h)))]
+
+    def finished(self, context, results) -> str:
+        rgba = results[0]
+        h, w = rgba.shape[:2]
+        img = bpy.data.images.get("Nubis Render") or bpy.data.images.new("Nubis Render", w, h, float_buffer=True)
+        if tuple(img.size) != (w, h):
+            img.scale(w, h)
+        img.pixels.foreach_set(rgba[::-1].ravel())
+        img.update()
+        return f"Rendered {w}x{h} into the image 'Nubis Render'"
+
+
+class NUBIS_OT_bake_vdb(NeedsCloudscape, ModalSteps, bpy.types.Operator):
     """Bake the viewport's cloud density to an OpenVDB file for Cycles and other renderers (Esc cancels)"""
 
     bl_idname = "nubis.bake_vdb"
@@ -507,7 +516,7 @@ class NUBIS_OT_bake_vdb(NeedsCloudscape, ModalBake, bpy.types.Operator):
         return f"Baked {result.active_voxels} voxels to {result.path} and added them as a Cycles volume"
 
 
-class NUBIS_OT_bake_frames(NeedsCloudscape, ModalBake, bpy.types.Operator):
+class NUBIS_OT_bake_frames(NeedsCloudscape, ModalSteps, bpy.types.Operator):
     """Bake one VDB per frame of the scene's range into a folder, and load them as a Volume sequence
     (Esc cancels; frames already baked stay)"""
 

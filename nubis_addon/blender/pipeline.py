@@ -139,13 +139,30 @@ def render_shot(shot: ViewportShot, passes: int = 1, first_pass: int = 0) -> np.
     """Premultiplied scene-linear RGBA, top row first. Offline, several passes with shifted jitter
     replace the viewport's grain with a converged image; `first_pass` starts later in the jitter
     sequence, so renders of disjoint passes are independent estimates of the same image."""
+    return run_steps(render_shot_steps(shot, passes, first_pass))
+
+
+def render_shot_steps(shot: ViewportShot, passes: int = 1, first_pass: int = 0):
+    """render_shot as a generator yielding the fraction done after each tile, for the interface's modal
+    Render Clouds; it returns the image. Closing it early frees the GPU's image and returns nothing."""
     clouds = runtime.cloud_gpu(shot.noise_seed)
     passes = max(1, passes)
     total = None
-    for i in range(first_pass, first_pass + passes):
+    for k, i in enumerate(range(first_pass, first_pass + passes)):
         shot.state.jitter_pass = i
-        clouds.update(shot.state)
-        frame = engine.render_offscreen(clouds, shot.inv_view_proj, shot.eye, shot.width, shot.height)
+        tiles = engine.render_offscreen_steps(clouds, shot.inv_view_proj, shot.eye, shot.width, shot.height)
+        try:
+            while True:
+                # The 3D viewport shares these GPU inputs and may have drawn its own view since the last tile.
+                clouds.update(shot.state)
+                try:
+                    fraction = next(tiles)
+                except StopIteration as done:
+                    frame = done.value
+                    break
+                yield (k + fraction) / passes
+        finally:
+            tiles.close()
         total = frame if total is None else total + frame
     return total / passes
 
@@ -283,15 +300,7 @@ def bake_steps(
     return BakeResult(path, plan, active, time.perf_counter() - start, names, scene.frame_current)
 
 
-def run_steps(steps, progress: Progress | None = None):
-    """Run a stepped bake to its end; its BakeResult."""
-    while True:
-        try:
-            fraction = next(steps)
-        except StopIteration as done:
-            return done.value
-        if progress:
-            progress(fraction)
+run_steps = engine.run_steps  # a stepped bake or render to its end: its BakeResult or image
 
 
 _estimates: dict = {}

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import functools
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 
 import gpu
@@ -278,25 +279,52 @@ def draw_clouds(gpu_inputs: CloudGPU, inv_view_proj, eye, **switches: int) -> No
     draw_stage("raymarch", gpu_inputs, {"inv_view_proj": inv_view_proj, "eye": tuple(eye)}, switches=switches)
 
 
-def draw_offscreen(width: int, height: int, draw: Callable[[], None]) -> np.ndarray:
-    """Run `draw` into a cleared float offscreen of this size; its pixels, bottom row first."""
+def _new_offscreen(width: int, height: int):
     try:
-        offscreen = gpu.types.GPUOffScreen(width, height, format="RGBA32F")
+        return gpu.types.GPUOffScreen(width, height, format="RGBA32F")
     except Exception as err:  # Blender raises a plain error when the GPU refuses the texture
         mb = width * height * 16 / 2**20
         raise NubisError(
             f"the GPU could not hold a {width}x{height} float image ({mb:.0f} MB): render smaller, for example "
             f"{max(4, width // 2)}x{max(4, height // 2)}, or on a GPU with more memory ({err})"
         ) from None
+
+
+def draw_offscreen(width: int, height: int, draw: Callable[[], None]) -> np.ndarray:
+    """Run `draw` into a cleared float offscreen of this size; its pixels, bottom row first."""
+    return run_steps(draw_offscreen_steps(width, height, [draw]))
+
+
+def draw_offscreen_steps(width: int, height: int, draws: Iterable[Callable[[], None]]):
+    """`draws` one after another into a cleared float offscreen of this size, as a generator that yields
+    the fraction done after each and returns the pixels, bottom row first. The interface's modal operators
+    run one draw per timer tick, with the offscreen unbound in between so Blender can redraw its windows.
+    Closing the generator frees the offscreen."""
+    offscreen = _new_offscreen(width, height)
     try:
         with offscreen.bind():
-            fb = gpu.state.active_framebuffer_get()
-            fb.clear(color=(0.0, 0.0, 0.0, 0.0))
-            gpu.state.blend_set("NONE")
-            draw()
-            return read_pixels(fb, width, height)
+            gpu.state.active_framebuffer_get().clear(color=(0.0, 0.0, 0.0, 0.0))
+        draws = list(draws)
+        for i, draw in enumerate(draws):
+            with offscreen.bind():
+                gpu.state.blend_set("NONE")
+                draw()
+            yield (i + 1) / len(draws)
+        with offscreen.bind():
+            return read_pixels(gpu.state.active_framebuffer_get(), width, height)
     finally:
         offscreen.free()
+
+
+def run_steps(steps, progress: Callable[[float], None] | None = None):
+    """Run a stepped piece of work (a generator yielding the fraction done) to its end; its return value."""
+    while True:
+        try:
+            fraction = next(steps)
+        except StopIteration as done:
+            return done.value
+        if progress:
+            progress(fraction)
 
 
 def draw_stage(
@@ -349,17 +377,30 @@ def render_offscreen(
 
     The frame is drawn in tiles so that one huge draw call never stalls a software rasterizer.
     """
+    return run_steps(render_offscreen_steps(gpu_inputs, inv_view_proj, eye, width, height, tile, **switches))
 
-    def tiles() -> None:
-        for y in range(0, height, tile):
-            for x in range(0, width, tile):
-                gpu.state.scissor_test_set(True)
-                gpu.state.scissor_set(x, y, min(tile, width - x), min(tile, height - y))
-                draw_clouds(gpu_inputs, inv_view_proj, eye, **switches)
-                _finish_tile(x, y)
+
+def render_offscreen_steps(
+    gpu_inputs: CloudGPU, inv_view_proj, eye, width: int, height: int, tile: int = TILE, **switches: int
+):
+    """render_offscreen as a generator yielding the fraction done after each tile (for modal operators);
+    returns the image."""
+    draws = _tile_draws(width, height, tile, lambda: draw_clouds(gpu_inputs, inv_view_proj, eye, **switches))
+    px = yield from draw_offscreen_steps(width, height, draws)
+    return px[::-1].copy()
+
+
+def _tile_draws(width: int, height: int, tile: int, draw: Callable[[], None]) -> list[Callable[[], None]]:
+    """`draw` once per tile, each clipped to its tile and waited for."""
+
+    def draw_tile(x: int, y: int) -> None:
+        gpu.state.scissor_test_set(True)
+        gpu.state.scissor_set(x, y, min(tile, width - x), min(tile, height - y))
+        draw()
+        _finish_tile(x, y)
         gpu.state.scissor_test_set(False)
 
-    return draw_offscreen(width, height, tiles)[::-1].copy()
+    return [functools.partial(draw_tile, x, y) for y in range(0, height, tile) for x in range(0, width, tile)]
 
 
 def _finish_tile(x: int, y: int) -> None:
@@ -371,17 +412,8 @@ def _finish_tile(x: int, y: int) -> None:
 
 def _tiled(stage: str, gpu_inputs: CloudGPU, values: dict, width: int, height: int, tile: int = TILE) -> np.ndarray:
     """A full-screen stage drawn in tiles into a float offscreen; its pixels, bottom row first."""
-
-    def tiles() -> None:
-        for y in range(0, height, tile):
-            for x in range(0, width, tile):
-                gpu.state.scissor_test_set(True)
-                gpu.state.scissor_set(x, y, min(tile, width - x), min(tile, height - y))
-                draw_stage(stage, gpu_inputs, values)
-                _finish_tile(x, y)
-        gpu.state.scissor_test_set(False)
-
-    return draw_offscreen(width, height, tiles)
+    draws = _tile_draws(width, height, tile, lambda: draw_stage(stage, gpu_inputs, values))
+    return run_steps(draw_offscreen_steps(width, height, draws))
 
 
 def render_panorama(gpu_inputs: CloudGPU, eye, width: int, height: int) -> np.ndarray:

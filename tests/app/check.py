@@ -21,6 +21,7 @@ EXPECTED = {
         "render_cycles",
         "animation",
         "bake",
+        "render_clouds",
         "save",
     ],
     "reopen": ["startup", "reopen"],

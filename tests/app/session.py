@@ -671,6 +671,49 @@ def s_bake(step: Step):
         bpy.data.objects.remove(vol)  # the reopened file renders its clouds through F12, not the VDB
 
 
+def _modal_running(idname: str) -> bool:
+    ops = getattr(window(), "modal_operators", None)  # Window.modal_operators: Blender 4.2 and later
+    return ops is not None and any(op.bl_idname == idname.replace(".", "_OT_").upper() for op in ops)
+
+
+def s_render_clouds(step: Step):
+    """Render Clouds from the sidebar is modal: it runs in the background of the session, Esc cancels it
+    with the image untouched, and run to its end it fills the image 'Nubis Render'."""
+    scene = bpy.context.scene
+    keep = scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage
+    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 1280, 720, 100
+    old = bpy.data.images.get("Nubis Render")
+    if old is not None:
+        bpy.data.images.remove(old)
+    mouse_over_view()
+    with override():
+        started = bpy.ops.nubis.render_image("INVOKE_DEFAULT")
+    step.check(started == {"RUNNING_MODAL"}, f"Render Clouds returned {started} (modal)")
+    yield 2.0
+    shot(step, "05_render_clouds_running")
+    running = _modal_running("nubis.render_image")
+    step.check(running or getattr(window(), "modal_operators", None) is None, "Render Clouds runs as a modal")
+    mouse_over_view()
+    key("Escape")
+    t = time.monotonic()
+    while _modal_running("nubis.render_image") and time.monotonic() - t < 10:
+        yield 0.2
+    step.check(not _modal_running("nubis.render_image"), f"Esc ended it in {time.monotonic() - t:.1f} s")
+    step.check(bpy.data.images.get("Nubis Render") is None, "a cancelled render leaves no image")
+    scene.render.resolution_x, scene.render.resolution_y = 320, 180
+    with override():
+        bpy.ops.nubis.render_image("INVOKE_DEFAULT")
+    t = time.monotonic()
+    while bpy.data.images.get("Nubis Render") is None and time.monotonic() - t < 120:
+        yield 0.5
+    img = bpy.data.images.get("Nubis Render")
+    step.check(
+        img is not None and tuple(img.size) == (320, 180),
+        f"run to its end it filled 'Nubis Render' in {time.monotonic() - t:.1f} s",
+    )
+    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = keep
+
+
 def s_save(step: Step):
     path = os.path.join(OUT, "scene.blend")
     with override():
@@ -704,6 +747,7 @@ MAIN = [
     s_render_cycles,
     s_animation,
     s_bake,
+    s_render_clouds,
     s_save,
 ]
 REOPEN = [s_startup, s_reopen]

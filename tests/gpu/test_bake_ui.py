@@ -46,3 +46,29 @@ def test_bake_sequence_writes_numbered_files_and_loads_them_as_a_sequence(blende
     vol = scene.objects[cycles_setup.VOLUME_NAME].data
     assert vol.is_sequence and vol.frame_start == 3 and vol.frame_duration == 3 and vol.frame_offset == 2
     assert Path(blender.path.abspath(vol.filepath)).name == "clouds_0003.vdb"
+
+
+def test_render_clouds_runs_in_steps_and_a_cancel_leaves_the_image_untouched(make_scene):
+    """Render Clouds is modal like the bakes: tile by tile, one timer tick each, Esc closes the steps
+    before the image 'Nubis Render' is touched; run to its end it is the headless render."""
+    import bpy
+    import numpy as np
+
+    from nubis_addon.blender import operators, pipeline
+
+    scene = make_scene("default")
+    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 300, 140, 100
+    assert issubclass(operators.NUBIS_OT_render_image, operators.ModalSteps)
+    steps = pipeline.render_shot_steps(pipeline.viewport_shot(scene, 300, 140))
+    fractions = [next(steps), next(steps)]  # 3x2 tiles of 128 pixels: two of six
+    assert fractions == [1 / 6, 2 / 6]
+    steps.close()  # what Esc does
+    assert bpy.data.images.get("Nubis Render") is None
+    assert bpy.ops.nubis.render_image() == {"FINISHED"}  # background mode: to its end at once
+    img = bpy.data.images["Nubis Render"]
+    assert tuple(img.size) == (300, 140)
+    got = np.empty(300 * 140 * 4, np.float32)
+    img.pixels.foreach_get(got)
+    want = pipeline.render_viewport(scene, 300, 140)[::-1]
+    assert want[..., 3].max() > 0.5
+    np.testing.assert_allclose(got.reshape(140, 300, 4), want, atol=1e-5)
