@@ -11,7 +11,7 @@ import bpy
 import numpy as np
 from mathutils import Euler, Matrix, Vector
 
-from ..core import bundled, camera, limits, schema, userpresets
+from ..core import bundled, camera, coverage, limits, schema, userpresets
 from ..core import fields as fieldgen
 from ..core import sky as skymath
 from ..core import storms as stormgen
@@ -447,6 +447,9 @@ def apply_preset(scene, preset: Preset, progress=None, keep: Keep = Keep()) -> N
         for data in preset.storms:
             add_storm(scene, data)
     generate_fields(scene, progress)  # after the camera and storms: the rules and stencils are placed by them
+    if preset.legacy_coverage is not None:
+        hist = coverage.field_histogram(read_fields(settings)[0][..., 0])
+        settings.density_cover = coverage.covered_fraction(preset.legacy_coverage, hist)
     # The sky after the (possibly long) composite: its capture renders with Cycles for a second.
     if not keep.world or scene.world is None:
         build_sky = preset.extra["world"]["sky"] if keep.sky is None else keep.sky
@@ -679,6 +682,10 @@ def state_from_scene(scene, camera_location=None, fields: tuple | None = None, w
         fields = read_fields(settings)
     env = sky.environment(scene, wait)
     above, below = skymath.hemisphere_radiance_cached(env)
+    # Coverage is the fraction of the sky covered; the shaders take the multiplier on this field that gives it.
+    params["density_coverage"] = coverage.multiplier_for(
+        params["density_cover"], coverage.field_histogram(fields[0][..., 0])
+    )
     return CloudState(
         params=params,
         field_a=fields[0],

@@ -15,6 +15,7 @@ from typing import Any
 
 from . import limits, schema
 from .errors import NubisError
+from .fsutil import not_a_file
 from .state import MAX_STORMS
 from .tomlfmt import toml_value
 
@@ -36,6 +37,9 @@ class Preset:
     layers: list[dict[str, Any]] = field(default_factory=list)
     description: str = ""
     storms: list[dict[str, Any]] = field(default_factory=list)
+    # A preset written before Coverage was a fraction of the sky sets only the multiplier on the field;
+    # applying it sets the fraction that multiplier covers on its own field (core/coverage.py).
+    legacy_coverage: float | None = None
 
 
 def preset_dir() -> Path:
@@ -50,13 +54,18 @@ def list_presets(folder: Path | None = None) -> list[str]:
 def find_preset(name: str, folder: Path | None = None) -> Path:
     """Presets are found by name in presets/, or by an explicit path to a .toml file."""
     folder = folder or preset_dir()
+    # not_a_file, not Path.is_file: is_file raises for a name longer than the file system allows and
+    # calls a folder or a device "not found".
     if name.endswith(".toml") or os.sep in name:
         path = Path(name).expanduser()
-        if not path.is_file():
+        why = not_a_file(path)
+        if why == "does not exist":
             raise NubisError(f"preset file '{path}' not found: check the path")
+        if why:
+            raise NubisError(f"the preset file '{path}' {why}: give the path of a .toml preset")
         return path
     path = folder / f"{name}.toml"
-    if not path.is_file():
+    if not_a_file(path):
         known = ", ".join(list_presets(folder)) or "none"
         raise NubisError(f"no preset named '{name}': choose one of {known}")
     return path
@@ -120,7 +129,9 @@ def parse_preset(data: dict[str, Any], path: Path | None = None) -> Preset:
     _check_span(extra["camera"]["location"], f"{where}: camera.location")
     _check_masks(layers, where)
     meta = extra.pop("preset")
-    return Preset(meta["name"], path, params, extra, layers, meta["description"], storms)
+    density = data.get("density", {})
+    legacy = params["density_coverage"] if "coverage" in density and "cover" not in density else None
+    return Preset(meta["name"], path, params, extra, layers, meta["description"], storms, legacy)
 
 
 def _parse_storms(value: Any, where: str) -> list[dict[str, Any]]:

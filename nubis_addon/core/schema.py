@@ -301,14 +301,27 @@ SCENE: tuple[Setting, ...] = (
     ),
     S(
         "density",
+        "cover",
+        "float",
+        0.2834,
+        "Coverage",
+        "Fraction of the sky the low clouds cover, seen from above: 0 clear, 1 overcast (the multiplier on the "
+        "coverage field that gives it is found for the scene's field)",
+        min=0.0,
+        max=1.0,
+        panel="shape",
+    ),
+    S(
+        "density",
         "coverage",
         "float",
         1.0,
-        "Coverage",
-        "Multiplier on the coverage field",
+        "Coverage Multiplier",
+        "Multiplier on the coverage field: found from Coverage for the scene's field; a preset that sets it "
+        "without `cover` (written before Coverage was a fraction) is read as the fraction it covered",
         min=0.0,
         max=2.0,
-        panel="shape",
+        internal="derived from density.cover for the scene's field (core/coverage.py)",
         gpu=True,
     ),
     S(

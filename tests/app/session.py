@@ -579,12 +579,12 @@ def s_edit(step: Step):
     step.check(d >= 0.005, f"the viewport changed after Extinction {old:.3g} -> 0.03 (MAE {d:.4f})")
     scene.nubis.density_sigma = old
     yield 10.0
-    # Shape > Coverage 0.45 once left no cloud at all in the real application (headless: 8 % cover).
-    coverage = scene.nubis.density_coverage
-    scene.nubis.density_coverage = 0.45
+    # Shape > Coverage is the fraction of the sky covered; an edit reaches the viewport's clouds.
+    coverage = scene.nubis.density_cover
+    scene.nubis.density_cover = 0.45
     yield 15.0
     yield from view_has_clouds(step, "04_coverage_045", min_mae=0.002)
-    scene.nubis.density_coverage = coverage
+    scene.nubis.density_cover = coverage
     yield 10.0
 
 

@@ -181,7 +181,7 @@ def test_blender_command_is_registered_and_runs(blender, tmp_path):
 def test_blend_file_round_trip_through_the_cli(blender, make_scene, tmp_path):
     """--blend renders the saved file's own cloudscape, not the default preset."""
     scene = make_scene("default")
-    scene.nubis.density_coverage = 0.0  # this file's sky is empty; the default preset's is not
+    scene.nubis.density_cover = 0.0  # this file's sky is empty; the default preset's is not
     scene.nubis.cirrus_coverage = 0.0
     path = tmp_path / "sky.blend"
     blender.ops.wm.save_as_mainfile(filepath=str(path))

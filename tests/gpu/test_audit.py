@@ -23,7 +23,7 @@ def test_cirrus_covers_the_clouds_seen_from_above(make_scene):
 
     full = render()
     clouds = render(cirrus_coverage=0.0)
-    cirrus = render(density_coverage=0.0)
+    cirrus = render(density_cover=0.0)
     both = (cirrus[..., 3] > 0.8) & (clouds[..., 3] > 0.5)
     assert both.sum() > 30, "the test needs thick cirrus over thick cloud"
     front = np.abs(full - _over(cirrus, clouds))[both].mean()
@@ -187,7 +187,7 @@ def test_reference_marches_reach_the_end_of_the_ray(make_scene):
     march's. It now takes longer steps within the limit, and sees the same clouds."""
     from nubis_addon.blender import pipeline
 
-    scene = make_scene("default", density_sigma=0.002, density_coverage=1.0, march_steps_min=400, march_steps_max=400)
+    scene = make_scene("default", density_sigma=0.002, march_steps_min=400, march_steps_max=400)
     realtime = pipeline.render_viewport(scene, 32, 18, light_mode=0)
     reference = pipeline.render_viewport(scene, 32, 18, light_mode=1)
     assert realtime[..., 3].mean() > 0.03
