@@ -9,7 +9,9 @@ so the merged grids equal the serial bake's voxel for voxel."""
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
 import tempfile
 import time
 from collections.abc import Callable
@@ -21,7 +23,7 @@ import bpy
 from ..core import bundled, distributed, interrupt, sequence, vdbio
 from ..core.distributed import BakeOptions, SceneSource
 from ..core.errors import NubisError
-from ..core.fsutil import check_output_path
+from ..core.fsutil import check_output_path, sync_to_disk
 from ..core.presets import load_preset
 from ..core.staging import output_set
 from ..render.gpu_context import ensure_gpu_context
@@ -92,12 +94,12 @@ def bake_sequence(
             with distributed.client(engine) as client:
                 if len(frames) == 1:
                     scene.frame_set(frames[0])
-                    r = _bake_tiles_distributed(client, scene, source, frames[0], options, staged[0], progress)
+                    r = _bake_tiles_distributed(client, engine, scene, source, frames[0], options, staged[0], progress)
                     r.path = paths[0]
                     result.results.append(r)
                 else:
                     result.results.extend(
-                        _bake_frames_distributed(client, source, frames, options, staged, paths, progress)
+                        _bake_frames_distributed(client, engine, source, frames, options, staged, paths, progress)
                     )
     result.seconds = time.perf_counter() - start
     return result
@@ -109,18 +111,26 @@ def _sub_progress(progress: Progress | None, n: int, total: int) -> Progress | N
     return lambda f: progress((n + f) / total)
 
 
-def _bake_frames_distributed(client, source, frames, options, staged, paths, progress):
+def _bake_frames_distributed(client, engine, source, frames, options, staged, paths, progress):
     futures = [
-        client.submit(distributed.run_task, _TASK_FRAME, source, f, options, pure=False, retries=distributed.RETRIES)
+        client.submit(
+            distributed.run_task,
+            _TASK_FRAME,
+            distributed.plain(source),
+            int(f),
+            distributed.plain(options),
+            pure=False,
+            retries=distributed.RETRIES,
+        )
         for f in frames
     ]
     index = {fut.key: n for n, fut in enumerate(futures)}
+    names = {fut.key: f"frame {frames[n]}" for n, fut in enumerate(futures)}
     results = [None] * len(frames)
     done = 0
-    for fut in distributed.distributed.as_completed(futures):
+    for fut, out in distributed.completed(client, futures, engine, names):
         n = index[fut.key]
-        out = fut.result()
-        staged[n].write_bytes(out["data"])
+        _write(staged[n], paths[n], out["data"])
         results[n] = pipeline.BakeResult(
             paths[n], out["plan"], out["active"], out["seconds"], tuple(out["grids"]), frames[n]
         )
@@ -130,7 +140,16 @@ def _bake_frames_distributed(client, source, frames, options, staged, paths, pro
     return results
 
 
-def _bake_tiles_distributed(client, scene, source, frame, options, staged, progress):
+def _write(path: Path, final: Path, data: bytes) -> None:
+    """A worker's file written here, and on the disk before it may replace `final` (a full disk says so)."""
+    try:
+        path.write_bytes(data)
+    except OSError as err:
+        raise NubisError(f"writing '{final}' failed ({err.strerror}): check the free disk space") from None
+    sync_to_disk(path, final)
+
+
+def _bake_tiles_distributed(client, engine, scene, source, frame, options, staged, progress):
     start = time.perf_counter()
     state, plan = pipeline.bake_plan(scene, options.voxel_size, options.camera_only, options.size, options.velocity)
     busy = [n for n, t in enumerate(plan.tiles) if t.spans]
@@ -141,11 +160,11 @@ def _bake_tiles_distributed(client, scene, source, frame, options, staged, progr
         client.submit(
             distributed.run_task,
             _TASK_TILES,
-            source,
-            frame,
-            options,
-            ids,
-            plan.dims,
+            distributed.plain(source),
+            int(frame),
+            distributed.plain(options),
+            [int(i) for i in ids],
+            tuple(int(d) for d in plan.dims),
             pure=False,
             retries=distributed.RETRIES,
         )
@@ -156,10 +175,17 @@ def _bake_tiles_distributed(client, scene, source, frame, options, staged, progr
     merged.grid("density")
     done = 0
     ids_of = {fut.key: ids for fut, ids in zip(futures, groups, strict=True)}
+    what = {key: f"tiles {_spans(ids)} of frame {frame}" for key, ids in ids_of.items()}
     with interrupt.temporary_dir("nubis-merge-") as tmp:
-        for n, fut in enumerate(distributed.distributed.as_completed(futures)):
+        for n, (fut, data) in enumerate(distributed.completed(client, futures, engine, what)):
             part = Path(tmp) / f"part{n}.vdb"
-            part.write_bytes(fut.result())
+            try:
+                part.write_bytes(data)
+            except OSError as err:
+                raise NubisError(
+                    f"writing a part of the bake to the temporary folder '{tmp}' failed ({err.strerror}): "
+                    "check the free disk space there (TMPDIR)"
+                ) from None
             grids, _meta = vdb.readAll(str(part))
             part.unlink()
             for g in grids:
@@ -175,6 +201,17 @@ def _bake_tiles_distributed(client, scene, source, frame, options, staged, progr
     )
     merged.write(staged, pipeline.bake_metadata(scene, state, plan, names), half=options.half)
     return pipeline.BakeResult(staged, plan, merged.active_voxels("density"), time.perf_counter() - start, names, frame)
+
+
+def _spans(ids: list[int]) -> str:
+    """Tile numbers for a message: "3-5, 9"."""
+    runs: list[list[int]] = []
+    for i in ids:
+        if runs and i == runs[-1][1] + 1:
+            runs[-1][1] = i
+        else:
+            runs.append([i, i])
+    return ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in runs)
 
 
 def _balanced(items: list[int], weights: list[int], groups: int) -> list[list[int]]:
@@ -194,8 +231,13 @@ def _balanced(items: list[int], weights: list[int], groups: int) -> list[list[in
 _loaded: dict[str, object] = {}
 
 
-def _worker_scene(source: SceneSource, frame: int):
+def _worker_scene(source: SceneSource | dict, frame: int):
     """This worker's copy of the scene at `frame` (loaded once per process and source)."""
+    if isinstance(source, dict):  # tasks carry plain data (core/distributed.py)
+        source = SceneSource(**source)
+    if "cleanup" not in _loaded:
+        # A worker ends without Blender's teardown, which alone removes Blender's session folder.
+        _loaded["cleanup"] = atexit.register(_remove_blender_tempdir)
     key = repr(source)
     if _loaded.get("key") != key:
         if source.blend:
@@ -213,8 +255,22 @@ def _worker_scene(source: SceneSource, frame: int):
     return scene
 
 
-def worker_bake_frame(source: SceneSource, frame: int, options: BakeOptions) -> dict:
+def _remove_blender_tempdir() -> None:
+    tmp = interrupt.blender_tempdir()
+    if tmp is not None:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _options(options: BakeOptions | dict) -> BakeOptions:
+    if isinstance(options, dict):
+        size = options.get("size")
+        return BakeOptions(**{**options, "size": tuple(size) if size else None})
+    return options
+
+
+def worker_bake_frame(source: SceneSource | dict, frame: int, options: BakeOptions | dict) -> dict:
     """One whole frame, baked on this worker: the file's bytes and its summary."""
+    options = _options(options)
     scene = _worker_scene(source, frame)
     with tempfile.TemporaryDirectory(prefix="nubis-worker-") as tmp:
         r = pipeline.bake(
@@ -231,8 +287,11 @@ def worker_bake_frame(source: SceneSource, frame: int, options: BakeOptions) -> 
     return {"data": data, "plan": r.plan, "active": r.active_voxels, "seconds": r.seconds, "grids": list(r.grids)}
 
 
-def worker_bake_tiles(source: SceneSource, frame: int, options: BakeOptions, ids: list[int], dims) -> bytes:
+def worker_bake_tiles(
+    source: SceneSource | dict, frame: int, options: BakeOptions | dict, ids: list[int], dims
+) -> bytes:
     """Some tiles of one frame, baked on this worker: a partial VDB (no metadata) of their voxels."""
+    options = _options(options)
     scene = _worker_scene(source, frame)
     state, plan = pipeline.bake_plan(scene, options.voxel_size, options.camera_only, options.size, options.velocity)
     if tuple(plan.dims) != tuple(dims):
