@@ -33,7 +33,7 @@ from .core import console as terminal
 from .core import distributed, interrupt, limits, sequence
 from .core.console import Console
 from .core.errors import NubisError
-from .core.fsutil import check_output_dir, check_output_path
+from .core.fsutil import check_output_dir, check_output_path, check_utf8_name
 from .core.imageio import IMAGE_SUFFIXES
 from .core.quality import qualities
 
@@ -150,6 +150,7 @@ def printable(text: str) -> str:
 
 def run(argv: Sequence[str], in_blender: bool = False) -> int:
     """Run one command; returns the exit code. Never raises for user errors."""
+    closed = terminal.reserve_standard_fds()
     try:
         args = build_parser().parse_args(list(argv))
     except SystemExit as exc:  # --help
@@ -157,9 +158,11 @@ def run(argv: Sequence[str], in_blender: bool = False) -> int:
     except NubisError as err:
         print(f"{PROG}: error: {printable(err)}", file=sys.stderr)
         return 2
-    # One log file for Blender's chatter, kept only when an internal fault needs it.
+    interrupt.sweep_temp()  # what killed runs left in the temporary folder
+    # One log file for Blender's chatter, kept only when an internal fault needs it (under a name of
+    # its own then: the name it has while the run goes on is one that sweep_temp removes after a kill).
     with interrupt.deferred():  # made and registered together
-        fd, log_name = tempfile.mkstemp(prefix="nubis-", suffix=".log")
+        fd, log_name = tempfile.mkstemp(prefix=interrupt.owned_prefix("log"), suffix=".log")
         os.close(fd)
         log = Path(log_name)
         interrupt.register(log)
@@ -181,6 +184,7 @@ def run(argv: Sequence[str], in_blender: bool = False) -> int:
                 keep_log = True
                 with open(log, "a") as f:
                     traceback.print_exc(file=f)
+                log = _kept(log)
                 if os.environ.get("NUBIS_DEBUG"):
                     traceback.print_exc()
                 print(
@@ -189,7 +193,7 @@ def run(argv: Sequence[str], in_blender: bool = False) -> int:
                 )
                 return 3
             interrupt.stop()
-            return _print_summary(summary)
+            return _print_summary(summary, stdout_closed=1 in closed)
     finally:
         warnings.showwarning = default_showwarning
         interrupt.unregister(log)
@@ -200,9 +204,28 @@ def run(argv: Sequence[str], in_blender: bool = False) -> int:
         console.close()
 
 
-def _print_summary(summary: str) -> int:
+def _kept(log: Path) -> Path:
+    """The log of an internal fault, moved to a name that sweep_temp leaves alone (the message names it)."""
+    with interrupt.deferred():
+        fd, name = tempfile.mkstemp(prefix="nubis-", suffix=".log")
+        os.close(fd)
+        try:
+            os.replace(log, name)
+        except OSError:
+            os.unlink(name)
+            return log
+        interrupt.unregister(log)
+        interrupt.register(name)
+    return Path(name)
+
+
+def _print_summary(summary: str, stdout_closed: bool = False) -> int:
     """The run's one line on stdout. A stdout that cannot be written (a full disk, /dev/full, a closed
-    pipe) is said on stderr; the outputs are already in place, but scripts must not read success."""
+    pipe, a closed descriptor) is said on stderr; the outputs are already in place, but scripts must not
+    read success."""
+    if stdout_closed:
+        print(f"{PROG}: error: could not write the summary to standard output (it is closed)", file=sys.stderr)
+        return 1
     try:
         print(summary, flush=True)
         return 0
@@ -280,7 +303,11 @@ def _check_bake_arguments(args, out: Path) -> None:
 
 
 def check_arguments(args) -> None:
-    """Every numeric option within what the program can serve (core/limits.py), before any work."""
+    """Every numeric option within what the program can serve (core/limits.py), and output names the
+    writers can take, before any work."""
+    for flag in ("out", "motion"):
+        if getattr(args, flag, None):
+            check_utf8_name(f"--{flag}", getattr(args, flag))
     for name, (lo, hi) in (
         ("width", limits.SIZE_RANGE),
         ("height", limits.SIZE_RANGE),

@@ -145,6 +145,12 @@ def execute(args, in_blender: bool, log: Path, out: Path) -> str:
 def _bake_sequence(args, scene, out: Path, voxel, log: Path, label: str) -> str:
     """`bake --frames A-B` (files named with # padding) and `bake --distributed` (core/distributed.py)."""
     frames = sequence.parse_frames(args.frames) if args.frames else [scene.frame_current]
+    if len(frames) > 1:  # the disk the whole set takes, before any frame is baked
+        with console.quiet(log):
+            _state, plan = pipeline.bake_plan(scene, voxel, args.camera_only, None, args.velocity, wait=False)
+        note = sequence.check_disk_space(out, frames, plan.file_bytes_estimate(args.half), args.half)
+        if note:
+            console.current().line(note)
     engine = distributed.parse_engine(args.distributed) if args.distributed else None
     options = farm.BakeOptions(voxel, args.camera_only, None, args.half, args.velocity)
     progress = console.progress("baking")

@@ -225,7 +225,8 @@ def bake_plan(
     state = scene_io.state_from_scene(scene, wait=wait)
     region = None
     if camera_only:
-        w, h = size or resolution(scene, None, None)
+        # The camera's aspect only: a camera-only bake renders no image, so the image size limit does not apply.
+        w, h = size or (scene.render.resolution_x, scene.render.resolution_y)
         inv = np.array(scene_io.camera_inv_view_proj(scene, w, h))
         region = view_footprint(state, inv)
     plan = plan_bake(
@@ -491,7 +492,7 @@ def _compare(scene, out: Path, stage, width, height, settings: _CompareSettings)
         state = scene_io.state_from_scene(scene)
         inv = np.array(scene_io.camera_inv_view_proj(scene, width, height))
         voxel_size = camera_voxel_size(state, inv, width, height, scene.nubis.bake_voxel_size)
-    settings.step(f"1/{stages} baking what the camera sees, {voxel_size:g} m voxels")
+    settings.step(f"1/{stages} baking what the camera sees, {voxel_size:.3g} m voxels")
     baked = bake(
         scene, stage(out / "clouds.vdb"), voxel_size, camera_only=True, size=(width, height), thin_cirrus=THIN_CIRRUS
     )

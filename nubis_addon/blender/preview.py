@@ -109,6 +109,7 @@ def preview(
     if not math.isfinite(orbit) or abs(orbit) > 360:
         raise NubisError(f"--orbit must be a number of degrees between -360 and 360, not {orbit}")
     out = check_output_dir(out_dir)
+    engine.check_offscreen(width, height)  # the full-size image read at the end, refused before the minutes of drawing
     q = apply_quality(scene, quality_name)
     s = scene.nubis
     result = PreviewResult(frames, quality=q, size=(width, height))

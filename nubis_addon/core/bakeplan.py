@@ -22,6 +22,14 @@ TILE = 128  # voxels per side of one tile
 MAX_TILES = 200_000  # beyond this the box alone is absurd: refuse before planning every tile
 # What the process holds besides the trees: Blender, the noise textures, one block's read-back.
 BASE_BYTES = 600 * 1024**2
+# The file on disk, per voxel the GPU evaluates (most of them hold no cloud, and OpenVDB stores only the
+# active ones, compressed): measured at most 1.49 bytes in float and 1.19 in half on the bundled presets
+# (stratus_overcast at 500 m, the densest; 0.1 to 0.8 elsewhere and at finer voxels), with some margin.
+# A velocity grid holds three floats where the density holds one. Each file adds its header, metadata
+# and tree (about 14 KB for a near-empty bake).
+FILE_BYTES_PER_EVALUATED_VOXEL = {False: 1.6, True: 1.25}  # by `half`
+FILE_BYTES_VELOCITY_FACTOR = 4
+FILE_OVERHEAD_BYTES = 16 * 1024
 
 
 @dataclass(frozen=True)
@@ -63,6 +71,11 @@ class BakePlan:
     def bytes_estimate(self) -> int:
         per = BYTES_PER_ACTIVE_VOXEL * (1 + self.extra_grids) + (BYTES_PER_VELOCITY_VOXEL if self.velocity else 0)
         return int(BASE_BYTES + self.evaluated_voxels * per)
+
+    def file_bytes_estimate(self, half: bool = False) -> int:
+        """About the most bytes the baked file takes on disk (bytes_estimate is memory, not the file)."""
+        per = FILE_BYTES_PER_EVALUATED_VOXEL[bool(half)] * (FILE_BYTES_VELOCITY_FACTOR if self.velocity else 1)
+        return int(FILE_OVERHEAD_BYTES + self.evaluated_voxels * per)
 
 
 def _camera_rays(inv_view_proj: np.ndarray, samples: int) -> tuple[np.ndarray, np.ndarray]:
@@ -133,6 +146,35 @@ def plan_bake(
     the estimated memory exceeds `memory_limit`."""
     if not (math.isfinite(voxel_size) and voxel_size > 0):
         raise NubisError(f"the voxel size must be a positive number of metres, not {voxel_size!r}")
+    plan, need = _plan(state, voxel_size, memory_limit, region, velocity, tile, thin_cirrus)
+    if need is None:
+        return plan
+
+    def fits(v: float) -> bool:
+        return _plan(state, v, memory_limit, region, velocity, tile, thin_cirrus)[1] is None
+
+    # A first guess from the estimate alone (memory as the cube of the voxel size, tiles as its square).
+    tiles_over = math.ceil(plan.dims[0] / tile) * math.ceil(plan.dims[1] / tile) / MAX_TILES
+    scale = max(((need - BASE_BYTES) / max(memory_limit - BASE_BYTES, 1.0)) ** (1 / 3), tiles_over**0.5)
+    suggested = smallest_fitting_voxel(fits, voxel_size, voxel_size * scale)
+    raise BakeTooLarge(
+        f"a bake at {voxel_size:g} m voxels needs {plan.dims[0]}x{plan.dims[1]}x{plan.dims[2]} voxels "
+        f"(about {need / 1024**3:.1f} GB): use a voxel size of at least {suggested:g} m",
+        suggested,
+    )
+
+
+class BakeTooLarge(NubisError):
+    """A bake that would not fit in memory; `suggested` is the smallest voxel size that does."""
+
+    def __init__(self, message: str, suggested: float) -> None:
+        super().__init__(message)
+        self.suggested = suggested
+
+
+def _plan(state, voxel_size, memory_limit, region, velocity, tile, thin_cirrus) -> tuple[BakePlan, float | None]:
+    """The plan at this voxel size and None, or a plan without tiles and the bytes it would need (a
+    coarse bound when the box alone has too many tiles) when it does not fit in `memory_limit`."""
     p = state.params
     half = p["field_size"] / 2
     radius = p["layer_draw_radius"]
@@ -164,27 +206,53 @@ def plan_bake(
     v = voxel_size
     dims = tuple(max(1, math.ceil((b - a) / v)) for a, b in ((x0, x1), (y0, y1), (z0, z1)))
     plan = BakePlan((x0 + v / 2, y0 + v / 2, z0 + v / 2), v, dims, slab, velocity=velocity)
-    extra = _extra_grids(state)
     n_tiles = math.ceil(dims[0] / tile) * math.ceil(dims[1] / tile)
     if n_tiles > MAX_TILES:
-        # The box alone: a coarse bound (a tenth of it in cloud) is enough to name a size that fits.
-        need = plan.voxels * 0.1 * BYTES_PER_ACTIVE_VOXEL
-        _refuse(plan, need, memory_limit, n_tiles / MAX_TILES)
-    plan = BakePlan(
-        plan.origin, v, dims, slab, tuple(plan_tiles(state, plan, tile)), velocity=velocity, extra_grids=extra
-    )
-    if plan.bytes_estimate > memory_limit:
-        _refuse(plan, plan.bytes_estimate - BASE_BYTES, memory_limit - BASE_BYTES)
-    return plan
+        # The box alone is absurd: refused before planning every tile, with a coarse bound (a tenth of
+        # the box in cloud) for the message.
+        return plan, BASE_BYTES + plan.voxels * 0.1 * BYTES_PER_ACTIVE_VOXEL
+    tiles = tuple(plan_tiles(state, plan, tile))
+    plan = BakePlan(plan.origin, v, dims, slab, tiles, velocity=velocity, extra_grids=_extra_grids(state))
+    return plan, (plan.bytes_estimate if plan.bytes_estimate > memory_limit else None)
 
 
-def _refuse(plan: BakePlan, need: float, limit: float, tiles_over: float = 1.0):
-    v = plan.voxel_size
-    suggested = v * max((need / max(limit, 1.0)) ** (1 / 3), tiles_over**0.5) * 1.05
-    raise NubisError(
-        f"a bake at {v:g} m voxels needs {plan.dims[0]}x{plan.dims[1]}x{plan.dims[2]} voxels "
-        f"(about {(need + BASE_BYTES) / 1024**3:.1f} GB): use a voxel size of at least {math.ceil(suggested)} m"
-    )
+# The largest size the search tries: a whole sky at 10 km voxels holds a few thousand of them.
+_SEARCH_MAX = 10_000.0
+
+
+def smallest_fitting_voxel(fits, refused: float, guess: float) -> float:
+    """The smallest voxel size above `refused` (which `fits` refuses) that `fits` accepts, to three
+    significant figures (whole metres from 100 m on), starting from `guess`.
+
+    A size scaled from the estimate alone (memory as the cube of the voxel size) undershoots: the tiles'
+    slices keep margins of whole voxels and their field windows a texel more, so the estimate falls
+    slower than the cube, and the size so named was refused in turn. This asks the very check the bake
+    makes: up by quarters from the guess until a size fits, then halving the gap to the last refused
+    size (the estimate falls as the voxels grow, so the boundary found is the smallest size that fits)."""
+    lo, hi = refused, max(guess, refused * 1.01)
+    while not fits(hi):
+        if hi >= _SEARCH_MAX:
+            return hi
+        lo, hi = hi, min(hi * 1.25, _SEARCH_MAX)
+    step = 10.0 ** (math.floor(math.log10(hi)) - 2)
+
+    def at(k: int) -> float:
+        return round(k * step, 12)
+
+    a, b = math.floor(lo / step), math.ceil(hi / step)
+    for _ in range(20):  # hi rounded up to the step: the estimate need not fall at every size
+        if fits(at(b)):
+            break
+        b += 1
+    else:
+        return hi
+    while b - a > 1:
+        mid = (a + b) // 2
+        if fits(at(mid)):
+            b = mid
+        else:
+            a = mid
+    return at(b)
 
 
 def _extra_grids(state: CloudState) -> int:
@@ -376,22 +444,19 @@ def camera_voxel_size(
     finest: float = CAMERA_FINEST_VOXEL,
 ) -> float:
     """The voxel size a camera needs: a pixel's footprint at the nearest cloud it sees over
-    CAMERA_VOXELS_PER_FOOTPRINT (no finer than `finest`, no coarser than `start`), then grown by a
-    quarter at a time while the camera-only bake would not fit in memory (doubling would overshoot:
-    15 m that does not fit would become 30 m where 20 m fits)."""
+    CAMERA_VOXELS_PER_FOOTPRINT (no finer than `finest`, no coarser than `start`), or, when the
+    camera-only bake would not fit in memory at that size, the smallest size where it does (doubling
+    would overshoot: 15 m that does not fit would become 30 m where 20 m fits)."""
     angle, size = pixel_footprint(inv_view_proj, width, height)
     near = nearest_cloud_distance(state, inv_view_proj)
     footprint = (near * angle + size) / CAMERA_VOXELS_PER_FOOTPRINT if math.isfinite(near) else start
     voxel = min(max(finest, footprint), max(start, finest))
     region = view_footprint(state, inv_view_proj)
-    while True:
-        try:
-            plan_bake(state, voxel, region=region)
-            return voxel
-        except NubisError as err:
-            if "voxel size of at least" not in str(err) or voxel >= 10_000:
-                raise
-            voxel *= 1.25
+    try:
+        plan_bake(state, voxel, region=region)
+    except BakeTooLarge as err:
+        return err.suggested  # the smallest size that fits (smallest_fitting_voxel)
+    return voxel
 
 
 def comparison_voxel_size(
@@ -401,11 +466,11 @@ def comparison_voxel_size(
     `budget` voxels (about 1.3 GB while baking)."""
     size = start
     while size / 2 >= COMPARE_FINEST_VOXEL:
-        try:
-            finer = plan_bake(state, size / 2, region=region)
+        try:  # _plan, not plan_bake: a size that does not fit ends the halving, no suggestion is needed
+            finer, too_large = _plan(state, size / 2, DEFAULT_MEMORY_LIMIT, region, False, TILE, False)
         except NubisError:
             break
-        if finer.voxels > budget:
+        if too_large is not None or finer.voxels > budget:
             break
         size /= 2
     return size

@@ -40,6 +40,27 @@ class Console:
             os.close(self.fd)
 
 
+def reserve_standard_fds() -> set[int]:
+    """Open /dev/null on any of descriptors 0, 1 and 2 that is closed (`2>&-`), and return which were.
+    Otherwise the next file opened takes the number: the log, then its copy made for the terminal, and
+    Blender's chatter meant for stderr lands in whatever file holds 2. Python leaves sys.stderr None then,
+    and print(file=None) writes to stdout: the streams get the /dev/null descriptors instead."""
+    closed = set()
+    for fd in (0, 1, 2):
+        try:
+            os.fstat(fd)
+        except OSError:
+            closed.add(fd)
+            null = os.open(os.devnull, os.O_RDWR)
+            if null != fd:
+                os.dup2(null, fd)
+                os.close(null)
+    for fd, name in ((1, "stdout"), (2, "stderr")):
+        if getattr(sys, name) is None:
+            setattr(sys, name, open(fd, "w", buffering=1, closefd=False, errors="backslashreplace"))  # noqa: SIM115
+    return closed
+
+
 _stack: list[Console] = []  # the running command's terminal (its stderr before any redirection)
 
 

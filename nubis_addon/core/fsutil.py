@@ -16,11 +16,14 @@ from .errors import NubisError
 
 def not_a_file(path: Path) -> str:
     """Why `path` cannot be read as a regular file, in a few words ("" when it can): it does not exist, it
-    is a folder, a device or another special file, or its name is longer than the file system allows."""
+    is a folder, a device or another special file, or its name is longer than the file system allows or
+    holds a NUL character (a TOML string can; no file name does)."""
     try:
         st = path.stat()
     except FileNotFoundError:
         return "does not exist"
+    except ValueError:  # os.stat refuses an embedded NUL before asking the system
+        return "has a NUL character (\\x00) in its name, which no file name can hold"
     except OSError as err:
         if err.errno == errno.ENAMETOOLONG:
             return "has a name longer than the file system allows"
@@ -30,6 +33,28 @@ def not_a_file(path: Path) -> str:
     if not stat.S_ISREG(st.st_mode):
         return "is a device or special file, not a regular file"
     return ""
+
+
+def undecodable_name(path: str | os.PathLike) -> str:
+    """The path as a message shows it when its bytes are not UTF-8 ("x\\xff.png"), else "". Python keeps
+    such bytes as lone surrogates; OpenImageIO and OpenVDB take UTF-8 strings only and fail on them with a
+    multi-line TypeError, and only once the work is done."""
+    text = os.fspath(path)
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return os.fsencode(text).decode("utf-8", "backslashreplace")
+    return ""
+
+
+def check_utf8_name(what: str, path: str | os.PathLike) -> None:
+    """Refuse an output path whose name is not UTF-8 text, before any work; `what` names it ("--out")."""
+    name = undecodable_name(path)
+    if name:
+        raise NubisError(
+            f"{what} '{name}' is not valid UTF-8: the image and volume writers take UTF-8 file names only, "
+            "choose a name without those bytes"
+        )
 
 
 def shown(path: str | os.PathLike) -> Path:
@@ -55,6 +80,7 @@ def sync_to_disk(staged: Path, final: Path) -> None:
 def check_output_path(path: str | os.PathLike, suffixes: tuple[str, ...] | None = None) -> Path:
     """Fail early, before minutes of rendering, when ``path`` cannot be written."""
     out = Path(path).expanduser()
+    check_utf8_name("the output", out)
     if suffixes is not None and out.suffix.lower() not in suffixes:
         raise NubisError(f"cannot write '{out}': use one of the extensions {', '.join(suffixes)}")
     parent = out.parent if str(out.parent) else Path(".")
@@ -86,6 +112,7 @@ def printable_name(name: str, keep: int = 40) -> str:
 
 def check_output_dir(folder: str | os.PathLike, create: bool = True) -> Path:
     d = Path(folder).expanduser()
+    check_utf8_name("the output folder", d)
     if create:
         try:
             d.mkdir(parents=True, exist_ok=True)

@@ -15,8 +15,10 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import shutil
 import signal
+import socket
 import sys
 import tempfile
 import threading
@@ -37,6 +39,58 @@ _paths: dict[str, None] = {}  # registered temporary files and folders, in regis
 _installed: dict = {}
 
 
+# Temporary files and folders carry the machine and the process that made them ("nubis-world-HOST-PID-..."),
+# so that a later run can tell the litter of a killed run (SIGKILL, power loss: nothing cleans up) from
+# the files of a run still going, and remove only the former (sweep_temp). The host keeps a temporary
+# folder shared between machines safe: another machine's process ids mean nothing here.
+HOST = re.sub(r"[^A-Za-z0-9.]", "_", socket.gethostname()) or "host"
+_OWNED = re.compile(r"nubis-[a-z]+-" + re.escape(HOST) + r"-(\d+)-")
+# Blender names its session folder itself (blender_XXXXXX): a marker file inside says whose it is.
+_MARKER = re.compile(r"\.nubis-" + re.escape(HOST) + r"-(\d+)")
+
+
+def owned_prefix(kind: str) -> str:
+    """The prefix of a temporary name of this process: ``nubis-KIND-HOST-PID-``."""
+    return f"nubis-{kind}-{HOST}-{os.getpid()}-"
+
+
+def process_alive(pid: int) -> bool:
+    """Whether a process of this machine with this id exists (one of another user's counts as alive)."""
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def sweep_temp(folder: str | os.PathLike | None = None) -> None:
+    """Remove from the temporary folder what runs of this machine left when they were killed: the
+    temporary files and folders named by owned_prefix, and Blender's session folders marked by
+    track_blender_tempdir, of processes that no longer exist. Nothing else is touched (another user's
+    or a running process's files, logs kept for an internal error, Blender's own unmarked folders)."""
+    folder = Path(folder or tempfile.gettempdir())
+    with contextlib.suppress(OSError):
+        for entry in os.scandir(folder):
+            m = _OWNED.match(entry.name)
+            if m is None and entry.name.startswith("blender_") and entry.is_dir(follow_symlinks=False):
+                m = _blender_owner(entry.path)
+            if m is not None and not process_alive(int(m.group(1))):
+                remove_path(entry.path)
+
+
+def _blender_owner(path: str) -> re.Match | None:
+    with contextlib.suppress(OSError):
+        for entry in os.scandir(path):
+            m = _MARKER.fullmatch(entry.name)
+            if m is not None:
+                return m
+    return None
+
+
 def register(path: str | os.PathLike) -> None:
     """Remove ``path`` (a file or a whole folder) if the run is interrupted."""
     _paths[os.fspath(path)] = None
@@ -44,9 +98,11 @@ def register(path: str | os.PathLike) -> None:
 
 @contextlib.contextmanager
 def temporary_dir(prefix: str) -> Iterator[str]:
-    """A private temporary folder, registered from the moment it exists and removed at the end."""
+    """A private temporary folder, registered from the moment it exists and removed at the end; its name
+    is ``prefix`` ("nubis-world-"), the host and the process id, so that sweep_temp finds it after a
+    SIGKILL."""
     with deferred():
-        path = tempfile.mkdtemp(prefix=prefix)
+        path = tempfile.mkdtemp(prefix=f"{prefix}{HOST}-{os.getpid()}-")
         register(path)
     try:
         yield path
@@ -192,6 +248,9 @@ def track_blender_tempdir() -> None:
     if tmp is not None:
         register(tmp)
         _tracked.append(tmp)
+        # Whose folder it is, for sweep_temp after a SIGKILL (Blender picks the name, not Nubis).
+        with contextlib.suppress(OSError):
+            (tmp / f".nubis-{HOST}-{os.getpid()}").touch()
 
 
 def untrack_blender_tempdir() -> None:

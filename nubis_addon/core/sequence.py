@@ -3,7 +3,9 @@ the name its Volume object loads as a sequence, and `--frames A-B`."""
 
 from __future__ import annotations
 
+import os
 import re
+import shutil
 from pathlib import Path
 
 from .errors import NubisError
@@ -59,3 +61,45 @@ def sequence_paths(pattern: str | Path, frames: list[int]) -> list[Path]:
             f"'{name.with_name(name.stem + '_####' + name.suffix)}' to bake frames {frames[0]}-{frames[-1]}"
         )
     return [frame_path(pattern, f) for f in frames]
+
+
+def human_bytes(n: float) -> str:
+    for unit in ("bytes", "KB", "MB", "GB", "TB"):
+        if n < 1000 or unit == "TB":
+            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
+        n /= 1000
+    raise AssertionError("unreachable")
+
+
+def check_disk_space(
+    pattern: str | Path, frames: list[int], frame_bytes: int, half: bool = False, free: int | None = None
+) -> str:
+    """Before a sequence is baked: whether its files (`frame_bytes` each, at most: the bake plan's
+    file_bytes_estimate) fit in the free space of their folder, all of them at once, as the set is
+    staged whole before it replaces an earlier one (staging.py). Returns the estimate as a line to
+    print; refuses, naming how many frames fit, when they do not. `half`: the grids are half floats
+    already; `free` overrides the measured space."""
+    folder = Path(pattern).parent if str(Path(pattern).parent) else Path(".")
+    if free is None:
+        try:
+            free = shutil.disk_usage(folder).free
+        except OSError:  # not there yet or not readable: the writes will say so
+            return ""
+    count = len(frames)
+    total = count * frame_bytes
+    where = os.fspath(folder)
+    if total > free:
+        fit = free // max(frame_bytes, 1)
+        if fit >= 1:
+            todo = f"bake at most {fit} frame{'s' * (fit > 1)} at a time (--frames {frames[0]}-{frames[0] + fit - 1}), "
+        else:
+            todo = "free some space, "
+        raise NubisError(
+            f"--frames {frames[0]}-{frames[-1]} would write {count} files of up to {human_bytes(frame_bytes)} "
+            f"each, up to {human_bytes(total)}, but '{where}' has {human_bytes(free)} free: {todo}or bake "
+            + ("coarser voxels (--voxel-size)" if half else "coarser voxels (--voxel-size) or half floats (--half)")
+        )
+    return (
+        f"nubis: {count} frames of up to {human_bytes(frame_bytes)} each, up to {human_bytes(total)} "
+        f"of the {human_bytes(free)} free in '{where}'"
+    )

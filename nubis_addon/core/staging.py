@@ -14,32 +14,21 @@ from __future__ import annotations
 import contextlib
 import os
 import re
-import socket
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
 from . import interrupt
+from .errors import NubisError
 
 PREFIX = ".nubis-tmp-"
-_HOST = re.sub(r"[^A-Za-z0-9.]", "_", socket.gethostname()) or "host"
+_HOST = interrupt.HOST
 _STALE = re.compile(re.escape(f"{PREFIX}{_HOST}-") + r"(\d+)-")
+_alive = interrupt.process_alive
 
 
 def _prefix() -> str:
     return f"{PREFIX}{_HOST}-{os.getpid()}-"
-
-
-def _alive(pid: int) -> bool:
-    if pid == os.getpid():
-        return True
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
 
 
 def sweep_stale(folder: str | os.PathLike) -> None:
@@ -83,6 +72,7 @@ class OutputSet:
         folder = final.parent if str(final.parent) else Path(".")
         if final in self._files:
             return self._files[final]
+        _check_replaceable(final)  # say so before the file is made, when the folder is already there
         if folder not in self._dirs:
             sweep_stale(folder)
             # Made and registered under the interrupt lock: a signal between the two would leave the
@@ -104,6 +94,9 @@ class OutputSet:
             if missing and not interrupted:
                 raise RuntimeError(f"staged outputs were never written: {', '.join(missing)}")
             if not interrupted:
+                # Every target first: a rename that fails half-way would leave a mixed set.
+                for final in self._files:
+                    _check_replaceable(final)
                 for final, staged in self._files.items():
                     os.chmod(staged, mode)  # mkstemp-style 0600 files get a normal file's permissions
                     os.replace(staged, final)
@@ -120,6 +113,15 @@ class OutputSet:
             interrupt.unregister(staging)
         self._dirs.clear()
         self._files.clear()
+
+
+def _check_replaceable(final: Path) -> None:
+    """A file can replace `final` by a rename: not so when a folder has its name (a link to one is
+    replaced as a link)."""
+    if os.path.isdir(final) and not os.path.islink(final):
+        raise NubisError(
+            f"cannot write '{final}': a folder has that name, move or remove it, or choose another output folder"
+        )
 
 
 @contextlib.contextmanager

@@ -290,6 +290,11 @@ def _new_offscreen(width: int, height: int):
         ) from None
 
 
+def check_offscreen(width: int, height: int) -> None:
+    """Whether the GPU can hold a float image of this size: a NubisError with a size to try if not."""
+    _new_offscreen(width, height).free()
+
+
 def draw_offscreen(width: int, height: int, draw: Callable[[], None]) -> np.ndarray:
     """Run `draw` into a cleared float offscreen of this size; its pixels, bottom row first."""
     return run_steps(draw_offscreen_steps(width, height, [draw]))

@@ -22,6 +22,7 @@ import mathutils
 import numpy as np
 
 from ..core import camera, march
+from ..core.errors import NubisError
 from ..core.state import CloudState
 from . import engine, uniforms
 
@@ -104,6 +105,20 @@ class TemporalViewport:
             with t["fb"].bind():
                 t["fb"].clear(color=(0.0, 0.0, 0.0, 0.0))
 
+    def _allocate_for(self, view: View, history: tuple[int, int], work: tuple[int, int]) -> None:
+        """_allocate, or a NubisError with a size to try when the GPU refuses the buffers (Blender raises a
+        plain RuntimeError, which would read as an internal fault)."""
+        try:
+            self._allocate(history, work)
+        except Exception as err:
+            self.free()
+            mb = self.memory_bytes(history, work) / 2**20
+            raise NubisError(
+                f"the GPU could not hold the viewport's buffers for a {view.width}x{view.height} view "
+                f"({mb:.0f} MB): draw it smaller, for example {max(4, view.width // 2)}x{max(4, view.height // 2)}, "
+                f"or on a GPU with more memory ({err})"
+            ) from None
+
     def free(self) -> None:
         self._history = []
         self._work = {}
@@ -149,7 +164,7 @@ class TemporalViewport:
         self.samples = max(1, int(samples))
         history_size, work_size = self.sizes(view, resolution)
         if self._sizes != (history_size, work_size):
-            self._allocate(history_size, work_size)
+            self._allocate_for(view, history_size, work_size)
         inv = np.array(view.inv_view_proj, dtype=np.float64)
         angle, size = camera.pixel_footprint(inv, history_size[0], history_size[1])
         state = dataclasses.replace(state, pixel_angle=angle, pixel_size=size)

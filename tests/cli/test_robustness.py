@@ -5,6 +5,7 @@ that anything left in the temporary folder is seen.
 """
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -549,7 +550,8 @@ def test_compare_on_a_full_disk_says_so_and_keeps_the_earlier_set(full_disk, tmp
     _fill(full_disk)
     r = run_cli(*args, env=_tmp_env(tmp_path))
     assert r.returncode == 1, r.stdout + r.stderr
-    line = _one_line(r.stderr)
+    # compare's progress ("nubis: 1/4 baking ..."), then the error in one line.
+    line = _one_line("\n".join(ln for ln in r.stderr.splitlines() if not re.match(r"nubis: \d/\d ", ln)))
     assert "check the free disk space" in line and ".nubis-tmp" not in line, line
     assert f"'{out}{os.sep}" in line, line
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
@@ -608,3 +610,66 @@ def test_a_frame_the_gpu_cannot_hold_is_one_sentence_with_a_size_to_try(tmp_path
     assert line.startswith("nubis: error: the GPU could not hold a 16384x16384 float image"), line
     assert "render smaller, for example 8192x8192" in line and "internal" not in line
     assert not out.exists()
+
+
+def test_a_preview_the_gpu_cannot_hold_is_one_sentence_with_a_size_to_try(tmp_path):
+    """`preview --width 16384 --height 16384` was an internal error from gpu.texture.new (the viewport's
+    history buffers, made before any drawing)."""
+    env = _tmp_env(tmp_path)
+    out = tmp_path / "p"
+    t0 = time.monotonic()
+    r = run_cli("preview", "--out", str(out), "--width", "16384", "--height", "16384", env=env)
+    assert r.returncode == 1, r.stderr
+    line = _one_line(r.stderr)
+    assert line.startswith("nubis: error: the GPU could not hold the viewport's buffers for a 16384x16384 view"), line
+    assert "draw it smaller, for example 8192x8192" in line and "internal" not in line
+    assert time.monotonic() - t0 < 30  # refused before the march
+    assert not list(out.iterdir()) and list(Path(env["TMPDIR"]).iterdir()) == []
+
+
+def test_an_output_name_that_is_not_utf8_is_refused_before_any_work(tmp_path, capsys):
+    """`--out $'x\\xff.png'` rendered for 20 s, then OpenImageIO (and OpenVDB for a bake) refused the name
+    with a multi-line TypeError: an internal error."""
+    from nubis_addon import cli
+
+    folder = os.fsencode(str(tmp_path))
+    for args, flag, name in (
+        (["render", "--out", folder + b"/x\xff.png"], "--out", "x\\xff.png"),
+        (["bake", "--out", folder + b"/c\xfe.vdb"], "--out", "c\\xfe.vdb"),
+        (["render", "--out", folder + b"/x.exr", "--motion", folder + b"/m\xff.exr"], "--motion", "m\\xff.exr"),
+    ):
+        t0 = time.monotonic()
+        assert cli.run([os.fsdecode(a) if isinstance(a, bytes) else a for a in args]) == 1
+        assert time.monotonic() - t0 < 5
+        line = _one_line(capsys.readouterr().err)
+        assert line == (
+            f"nubis: error: {flag} '{tmp_path}/{name}' is not valid UTF-8: the image and volume writers take UTF-8 "
+            "file names only, choose a name without those bytes"
+        )
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_closed_stderr_leaves_no_log_and_the_summary_on_stdout(tmp_path):
+    """With `2>&-` the run died on its first dup(2), exit 1, and left an empty nubis-*.log behind."""
+    env = _tmp_env(tmp_path)
+    out = tmp_path / "x.png"
+    r = subprocess.run(
+        [sys.executable, "-m", "nubis_addon", "render", "--out", str(out), "--width", "16", "--height", "9"],
+        cwd=ROOT,
+        env={**os.environ, **env},
+        stdout=subprocess.PIPE,
+        preexec_fn=lambda: os.close(2),  # noqa: PLW1509 - the child's stderr closed, as `2>&-` does
+        text=True,
+        timeout=600,
+    )
+    assert r.returncode == 0 and r.stdout.startswith("rendered default at 16x9 ") and r.stdout.count("\n") == 1
+    assert out.exists() and list(Path(env["TMPDIR"]).iterdir()) == []
+
+
+def test_a_closed_stdout_is_said_as_an_error(capsys):
+    from nubis_addon import cli
+
+    assert cli._print_summary("rendered", stdout_closed=True) == 1
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert captured.err == "nubis: error: could not write the summary to standard output (it is closed)\n"
