@@ -65,6 +65,9 @@ class TemporalViewport:
         self.redraw_index = 0  # counts every march, for the Bayer order
         self.since_change = 0  # marches since the last change
         self.samples = 8
+        # Where this view starts in the jitter sequence: two views at different offsets are independent
+        # estimates of the same converged image, and half their difference is its grain.
+        self.first_pass = 0
         self._valid = False
         self._key = None
         self._time = None
@@ -195,7 +198,7 @@ class TemporalViewport:
             return False
 
         sample_pass = self.since_change // REDRAWS_PER_SAMPLE if self._valid else 0
-        state = dataclasses.replace(state, jitter_pass=sample_pass)
+        state = dataclasses.replace(state, jitter_pass=sample_pass + self.first_pass)
         clouds.update(state)
         bayer = self.redraw_index % REDRAWS_PER_SAMPLE
         ox, oy = march.bayer_offset(bayer)

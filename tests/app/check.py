@@ -15,6 +15,7 @@ EXPECTED = {
         "startup",
         "install",
         "new_cloudscape",
+        "grain",
         "sidebar",
         "edit",
         "render_eevee",

@@ -455,6 +455,54 @@ def s_new_cloudscape(step: Step):
     yield from view_has_clouds(step, "02_camera_view")
 
 
+def _luminance(png: str):
+    import numpy as np
+
+    img = bpy.data.images.load(png)
+    try:
+        w, h = img.size
+        px = np.empty(w * h * 4, np.float32)
+        img.pixels.foreach_get(px)
+    finally:
+        bpy.data.images.remove(img)
+    px = px.reshape(h, w, 4)
+    return px[..., 0] * 0.2126 + px[..., 1] * 0.7152 + px[..., 2] * 0.0722
+
+
+def _converge(timeout: float = 180.0):
+    views = list(ext_module("viewport")._views.values())
+    t = time.monotonic()
+    while time.monotonic() - t < timeout and not all(tv.converged for tv in views):
+        yield 1.0
+    return time.monotonic() - t
+
+
+def s_grain(step: Step):
+    """The converged camera view's grain: half the difference of two converged views whose jitter
+    sequences start apart (independent estimates of the same image), against its mean luminance, on the
+    screenshots an artist sees."""
+    import numpy as np
+
+    views = list(ext_module("viewport")._views.values())
+    step.check(bool(views), f"{len(views)} viewport(s) drawing the clouds")
+    took = yield from _converge()
+    first = shot(step, "02_grain_a", "view")
+    for tv in views:
+        tv.first_pass = 1000
+        tv.restart("grain")
+    ext_module("scene_io").redraw_views()
+    took_b = yield from _converge()
+    second = shot(step, "02_grain_b", "view")
+    for tv in views:
+        tv.first_pass = 0
+    a, b = _luminance(first), _luminance(second)
+    grain = float(np.abs(a - b).mean() / 2 / a.mean())
+    step.check(
+        grain < 0.01,
+        f"grain {grain * 100:.2f} % of the mean luminance (< 1 %), converged in {took:.0f} s and {took_b:.0f} s",
+    )
+
+
 def s_sidebar(step: Step):
     """Every sidebar panel opened with a click on its header, shot at its top and scrolled to its end, and
     closed again, as an artist looks through them. The headers are found by OCR once every sub-panel is
@@ -741,6 +789,7 @@ MAIN = [
     s_startup,
     s_install,
     s_new_cloudscape,
+    s_grain,
     s_sidebar,
     s_edit,
     s_render_eevee,
