@@ -7,10 +7,11 @@ import time
 import bpy
 import gpu
 import numpy as np
+from mathutils import Matrix
 
 from ..core import camera
 from ..core.errors import NubisError
-from ..render import temporal
+from ..render import engine, temporal
 from . import cycles_setup, runtime, scene_io, status
 
 _handle = None
@@ -80,6 +81,7 @@ def draw_view(
     depth=None,
     depth_key=None,
     wait_for_noise: bool | None = None,
+    sky: bool = False,
 ) -> temporal.TemporalViewport | None:
     """One redraw of the temporal viewport (render/temporal.py) over the bound framebuffer: march one
     pixel in 16 and resolve the history, unless it has converged, then upscale it behind the scene's
@@ -87,7 +89,8 @@ def draw_view(
 
     Noise for a new seed is made synchronously headless, and in the interface (`wait_for_noise` False)
     on a worker thread: meanwhile the previous seed's clouds are drawn, or nothing (None is returned),
-    and the sidebar says "Generating noise"; the views redraw when it is ready (blender/runtime.py)."""
+    and the sidebar says "Generating noise"; the views redraw when it is ready (blender/runtime.py).
+    `sky` draws the World's sky behind the clouds first (Solid shading, where Blender draws none)."""
     settings = scene.nubis
     if wait_for_noise is None:
         wait_for_noise = bpy.app.background
@@ -105,9 +108,12 @@ def draw_view(
     tv = temporal_view(key)
     tv.redraw(clouds, state, view, settings.viewport_resolution, settings.viewport_samples, depth, depth_key)
     with target.bind():
-        gpu.state.blend_set("ALPHA_PREMULT")
         gpu.state.depth_test_set("LESS_EQUAL")
         gpu.state.depth_mask_set(False)
+        if sky:
+            gpu.state.blend_set("NONE")
+            engine.draw_stage("sky", clouds, {"inv_view_proj": Matrix(view.inv_view_proj), "eye": view.eye})
+        gpu.state.blend_set("ALPHA_PREMULT")
         tv.upscale(clouds, settings.viewport_blur)
     # Leave Blender's default state behind: a disabled depth mask would also stop later depth clears.
     gpu.state.depth_mask_set(True)
@@ -209,7 +215,9 @@ def draw_in_context(context) -> bool:
     if region is None or rv3d is None:
         return False
     try:
-        draw_region(scene, region, rv3d)
+        shading = getattr(context.space_data, "shading", None)
+        sky = scene.nubis.viewport_solid_sky and shading is not None and shading.type == "SOLID"
+        draw_region(scene, region, rv3d, sky)
         status.clear_error()
     except NubisError as err:
         # A draw callback cannot report; remember the message for the sidebar instead of spamming the console.
@@ -217,7 +225,7 @@ def draw_in_context(context) -> bool:
     return True
 
 
-def draw_region(scene, region, rv3d) -> temporal.TemporalViewport | None:
+def draw_region(scene, region, rv3d, sky: bool = False) -> temporal.TemporalViewport | None:
     """One redraw of a 3D view's region (`region`: width, height, as_pointer(); `rv3d`: view_matrix,
     window_matrix, is_perspective) over the bound framebuffer, its depth culling the march; asks for
     more redraws while the view converges."""
@@ -237,6 +245,7 @@ def draw_region(scene, region, rv3d) -> temporal.TemporalViewport | None:
         key=region.as_pointer(),
         depth=depth,
         depth_key=_geometry[0],
+        sky=sky,
     )
     if tv is not None and not tv.converged:
         _keep_converging()

@@ -872,6 +872,16 @@ SCENE: tuple[Setting, ...] = (
         soft_max=64,
         panel="viewport",
     ),
+    S(
+        "viewport",
+        "solid_sky",
+        "bool",
+        True,
+        "Sky in Solid",
+        "In Solid shading, draw the World's sky behind the clouds, so they sit in the sky that lights them "
+        "(Material Preview and Rendered show the World themselves)",
+        panel="viewport",
+    ),
     # -- the sky and final renders: a physically based World (Blender's Sky Texture), the clouds in F12
     #    renders through the World (camera background and lighting environment), cloud shadows
     S(

@@ -82,6 +82,8 @@ STAGES: dict[str, Stage] = {
         outputs=_TEMPORAL_TARGETS,
     ),
     "resolve": Stage(**_RESOLVE),
+    # The World's sky behind the clouds in Solid shading, on the far plane like the upscale.
+    "sky": Stage(_VIEW, far_plane=True),
     # Drawn on the far plane, so a LESS_EQUAL depth test keeps the clouds behind the scene's objects.
     "upscale": Stage(
         (("VEC4", "filter_size"),),

@@ -94,3 +94,41 @@ def test_motion_vectors_follow_the_wind(make_scene):
     np.testing.assert_allclose(m[..., 0][cloudy], expected, rtol=0.01)
     assert np.abs(m[..., 1][cloudy]).max() < 0.01 * expected.max()
     assert np.all(m[m[..., 3] == 0] == 0.0)
+
+
+def test_solid_shading_draws_the_worlds_sky_behind_the_clouds(make_scene):
+    """Sky in Solid: the World's sky (the capture the clouds are lit by) behind the clouds, which stay
+    over it, and nothing drawn in front of an object (the far plane)."""
+    import gpu
+
+    from nubis_addon.blender import pipeline, scene_io, viewport
+    from nubis_addon.render.engine import read_pixels
+
+    scene = make_scene("default")
+    assert scene.nubis.viewport_solid_sky  # on by default
+    w, h = 64, 36
+    inv = scene_io.camera_inv_view_proj(scene, w, h)
+    eye = scene.camera.matrix_world.translation
+    offscreen = gpu.types.GPUOffScreen(w, h, format="RGBA32F")
+    with offscreen.bind():
+        fb = gpu.state.active_framebuffer_get()
+        for _ in range(16):  # every pixel marched once
+            fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+            viewport.draw_view(scene, inv, eye, w, h, key="sky", sky=True)
+        got = read_pixels(fb, w, h)[::-1]
+        fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=0.5)  # an object in front of everything
+        viewport.draw_view(scene, inv, eye, w, h, key="sky", sky=True)
+        covered = read_pixels(fb, w, h)[::-1]
+    offscreen.free()
+    clouds = pipeline.render_viewport(scene, w, h)
+    sky = pipeline.sky_background(scene, w, h)
+    assert np.all(got[..., 3] > 0.999) and np.abs(covered).max() == 0.0
+    clear = clouds[..., 3] < 0.01
+    assert clear.sum() > 50
+    # The lighting's capture of the World is coarser than the final renders' background (the sun's glow
+    # is softer), so per pixel it agrees within a few per cent, not exactly.
+    rel = np.abs(got[clear][:, :3] - sky[clear]) / np.maximum(sky[clear], 1e-3)
+    assert np.median(rel) < 0.03 and np.abs(got[clear][:, :3] - sky[clear]).mean() < 0.1 * sky[clear].mean()
+    # The clouds over the sky: premultiplied over, as in Material Preview.
+    over = clouds[..., :3] + sky * (1.0 - clouds[..., 3:4])
+    assert np.abs(got[..., :3] - over).mean() < 0.05 * over.mean()
