@@ -21,15 +21,4 @@ def split_coverage_scene(make_scene, **overrides):
     a[..., 2] = 1.0
     scene_io.write_field_image(scene.nubis, "a", a)
     scene_io.write_field_image(scene.nubis, "cirrus", np.zeros((res, res, 4), np.float32))
-    scene.nubis.density_cover = 1.0  # overcast where there is coverage: the -X half at full coverage
     return scene
-
-
-def keep_multiplier(scene, multiplier: float = 1.0) -> None:
-    """Set Coverage to the fraction `multiplier` covers on the scene's (hand-written) field, so the
-    shaders multiply the field by it as before Coverage was a fraction (core/coverage.py)."""
-    from nubis_addon.blender import scene_io
-    from nubis_addon.core import coverage
-
-    field = scene_io.read_fields(scene.nubis)[0][..., 0]
-    scene.nubis.density_cover = coverage.covered_fraction(multiplier, coverage.field_histogram(field))

@@ -142,6 +142,8 @@ def on_save_pre(*_args) -> None:
                     scene_io.generate_fields(scene)
                 except NubisError as err:
                     status.set_error(str(err))
+            with scene_io.batch_edit():  # the file keeps the multiplier its Coverage gives
+                scene.nubis.density_coverage = scene_io.coverage_multiplier(scene)
             scene_io.pack_fields(scene.nubis)
 
 

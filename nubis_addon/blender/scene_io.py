@@ -147,6 +147,7 @@ def pack_fields(settings) -> None:
 # ---- a composite owed: the field's inputs changed since the last one ---------------------------------
 
 _stale: set[int] = set()
+_cover_hist: dict = {}  # scene pointer -> the histogram of its last composite's coverage, before the storms
 
 
 def mark_field_stale(scene) -> None:
@@ -163,7 +164,17 @@ def stale_scenes() -> list:
 
 
 def forget_stale() -> None:
+    """Forget what is remembered per scene pointer (on file loads, when pointers are reused)."""
     _stale.clear()
+    _cover_hist.clear()
+
+
+def coverage_multiplier(scene) -> float:
+    """The multiplier on the coverage field that covers the fraction Coverage asks for: from the last
+    composite's field before the storms, or, until this session composites, the one saved with the file."""
+    hist = _cover_hist.get(scene.as_pointer())
+    s = scene.nubis
+    return coverage.multiplier_for(s.density_cover, hist) if hist is not None else s.density_coverage
 
 
 def read_field_image(img, which: str, resolution: int) -> np.ndarray:
@@ -219,6 +230,15 @@ def generate_fields(scene, progress=None) -> None:
         fieldgen.apply_rain_rule(result, settings.rule_cumulonimbus_top)
     if settings.rule_horizon:
         fieldgen.apply_horizon_rule(result, params, _camera_xy(scene), settings.rule_horizon_start)
+    # Coverage is the fraction of the sky covered: the multiplier on this field that gives it, found from
+    # the field before the storms (a superstorm's stencil is its own system, GDC22: counting it would thin
+    # the fair-weather clouds everywhere else). Kept in the file, so a reopened file draws the same sky.
+    _cover_hist[scene.as_pointer()] = coverage.field_histogram(result["a"][..., 0])
+    try:
+        with batch_edit():
+            settings.density_coverage = coverage_multiplier(scene)
+    except (AttributeError, RuntimeError):
+        pass  # a composite made while Blender draws cannot write settings; renders read coverage_multiplier
     # GDC22: superstorm stencils override the field inside their radius, after everything else
     # (docs/sources.md#storm-stencil).
     storms = storm_stencils(settings, params)
@@ -448,8 +468,9 @@ def apply_preset(scene, preset: Preset, progress=None, keep: Keep = Keep()) -> N
             add_storm(scene, data)
     generate_fields(scene, progress)  # after the camera and storms: the rules and stencils are placed by them
     if preset.legacy_coverage is not None:
-        hist = coverage.field_histogram(read_fields(settings)[0][..., 0])
-        settings.density_cover = coverage.covered_fraction(preset.legacy_coverage, hist)
+        with batch_edit():
+            settings.density_cover = coverage.covered_fraction(preset.legacy_coverage, _cover_hist[scene.as_pointer()])
+            settings.density_coverage = preset.legacy_coverage
     # The sky after the (possibly long) composite: its capture renders with Cycles for a second.
     if not keep.world or scene.world is None:
         build_sky = preset.extra["world"]["sky"] if keep.sky is None else keep.sky
@@ -667,7 +688,10 @@ def state_from_scene(scene, camera_location=None, fields: tuple | None = None, w
     The sky light comes from the World's radiance (blender/sky.py); `wait` False (the viewport's draw)
     takes the last capture of the World rather than rendering a new one there and then."""
     settings = scene.nubis
+    if fields is None:
+        fields = read_fields(settings)  # first: a composite owed also sets the coverage multiplier
     params = params_from_scene(settings)
+    params["density_coverage"] = coverage_multiplier(scene)
     sun = find_sun(scene)
     if sun is not None:
         direction = tuple(evaluated_matrix(sun).to_3x3() @ Vector((0.0, 0.0, 1.0)))
@@ -678,14 +702,8 @@ def state_from_scene(scene, camera_location=None, fields: tuple | None = None, w
         camera_location = evaluated_matrix(scene.camera).translation if scene.camera else (0.0, 0.0, 0.0)
     fps = scene_fps(scene)
     time = (scene.frame_current + scene.frame_subframe) / fps * params["wind_time_scale"] + params["wind_time_offset"]
-    if fields is None:
-        fields = read_fields(settings)
     env = sky.environment(scene, wait)
     above, below = skymath.hemisphere_radiance_cached(env)
-    # Coverage is the fraction of the sky covered; the shaders take the multiplier on this field that gives it.
-    params["density_coverage"] = coverage.multiplier_for(
-        params["density_cover"], coverage.field_histogram(fields[0][..., 0])
-    )
     return CloudState(
         params=params,
         field_a=fields[0],

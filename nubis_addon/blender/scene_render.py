@@ -18,7 +18,9 @@ is in the README ("Final renders").
 
 from __future__ import annotations
 
+import hashlib
 import os
+import time
 import traceback
 from pathlib import Path
 
@@ -49,6 +51,7 @@ _SOLID_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT", "CURVES", "POINTCLOU
 
 _swapped: dict[str, str] = {}  # scene name -> the World it had before the render
 last_error: list[str] = []
+last_seconds: dict[str, float] = {}  # what the last frame's clouds took, part by part (tests/benchmarks/bench_f12.py)
 
 
 def wants_clouds(scene) -> bool:
@@ -91,11 +94,15 @@ def _write_image(name: str, pixels: np.ndarray) -> bpy.types.Image:
 def prepare_frame(scene) -> None:
     """Make this frame's clouds for a render: the camera's view, the panorama, the shadow map and its
     caster. Runs on the main thread (the GPU module's context lives there)."""
+    start = time.perf_counter()
     sky.sync_sun(scene)
     pipeline.check_scene(scene)
     w, h = render_size(scene)
     rgba = pipeline.render_shot(pipeline.viewport_shot(scene, w, h))  # top row first
     _write_image(CAMERA_IMAGE, rgba[::-1])
+    last_seconds.clear()
+    last_seconds["camera view"] = time.perf_counter() - start
+    t = time.perf_counter()
     s = scene.nubis
     state = scene_io.state_from_scene(scene)
     clouds = runtime.cloud_gpu(s.noise_seed)
@@ -107,8 +114,11 @@ def prepare_frame(scene) -> None:
     alpha = np.repeat(pano[..., 3:4], 4, axis=-1)
     alpha[..., 3] = 1.0
     _write_image(PANORAMA_ALPHA, alpha)
+    last_seconds["panorama"] = time.perf_counter() - t
+    t = time.perf_counter()
     if s.sky_shadows:
         update_shadow(scene, state, clouds)
+        last_seconds["shadow map"] = time.perf_counter() - t
     else:
         caster = bpy.data.objects.get(CASTER_NAME)
         if caster is not None:
@@ -233,15 +243,28 @@ def _caster_material(image) -> bpy.types.Material:
 # ---- the render World -------------------------------------------------------------------------------
 
 
+_MADE_FROM = "nubis_made_from"  # the render World's ID property: the fingerprint of the World it was built on
+
+
 def render_world(base) -> bpy.types.World:
     """A copy of the World `base` (or none) with the clouds composited over it: camera rays see the
     camera's clouds image (window coordinates), other rays the clouds panorama; both are premultiplied, so
-    the World's own shader is kept where the clouds let it through and their light is added."""
+    the World's own shader is kept where the clouds let it through and their light is added.
+
+    The previous frame's render World is kept when `base` has not changed since it was built: its images
+    are refilled in place, and a new World would make EEVEE compile its shader again, for every frame of
+    an animation (minutes each on a software rasterizer)."""
     old = bpy.data.worlds.get(RENDER_WORLD)
+    made_from = hashlib.sha1(repr(sky.fingerprint(base)).encode()).hexdigest()
+    if old is not None and old.get(_MADE_FROM) == made_from and old.node_tree is not None:
+        used = {n.image.name for n in old.node_tree.nodes if getattr(n, "image", None) is not None}
+        if {CAMERA_IMAGE, PANORAMA_IMAGE, PANORAMA_ALPHA} <= used:
+            return old
     world = base.copy() if base is not None else bpy.data.worlds.new(RENDER_WORLD)
     if old is not None:  # the previous frame's (copied first: a file saved mid-render may have it as base)
         bpy.data.worlds.remove(old)
     world.name = RENDER_WORLD
+    world[_MADE_FROM] = made_from
     if sky.MARKER in world:
         del world[sky.MARKER]
     if world.node_tree is None:

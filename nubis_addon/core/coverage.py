@@ -84,7 +84,7 @@ _cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
 
 
 def field_histogram(coverage_field: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """histogram() remembered by the field's contents: the viewport asks at every redraw."""
+    """histogram() remembered by the field's contents (a composite asks once per edit)."""
     data = np.ascontiguousarray(coverage_field, np.float32)
     key = hashlib.blake2b(data.tobytes(), digest_size=16).digest() + str(data.shape).encode()
     hist = _cache.get(key)

@@ -310,6 +310,7 @@ SCENE: tuple[Setting, ...] = (
         min=0.0,
         max=1.0,
         panel="shape",
+        trigger="field",
     ),
     S(
         "density",
@@ -317,10 +318,11 @@ SCENE: tuple[Setting, ...] = (
         "float",
         1.0,
         "Coverage Multiplier",
-        "Multiplier on the coverage field: found from Coverage for the scene's field; a preset that sets it "
-        "without `cover` (written before Coverage was a fraction) is read as the fraction it covered",
+        "Multiplier on the coverage field: found from Coverage for the scene's field when it is composited; "
+        "a preset that sets it without `cover` (written before Coverage was a fraction) keeps it and is read "
+        "as the fraction it covers",
         min=0.0,
-        max=2.0,
+        max=50.0,
         internal="derived from density.cover for the scene's field (core/coverage.py)",
         gpu=True,
     ),

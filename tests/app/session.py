@@ -618,6 +618,15 @@ def s_edit(step: Step):
     """One edit an artist makes, through the setting's RNA property as the sidebar sets it: Shape >
     Extinction from 0.10 to 0.03, and the viewport must change."""
     scene = bpy.context.scene
+    scene_io = ext_module("scene_io")
+    fields = scene_io.read_fields(scene.nubis, flush=False)
+    params = scene_io.params_from_scene(scene.nubis)
+    preset = sys.modules[f"{EXT}.nubis_addon.core.presets"].load_preset("default").params
+    changed = {k: v for k, v in params.items() if k in preset and v != preset[k]}
+    step.note(
+        f"before the edit: coverage field max {fields[0][..., 0].max():.3f}, cirrus max {fields[2][..., 0].max():.3f}, "
+        f"settings unlike the preset: {changed}"
+    )
     before = shot(step, "04_before_edit", "view")
     old = scene.nubis.density_sigma
     scene.nubis.density_sigma = 0.03
@@ -625,6 +634,9 @@ def s_edit(step: Step):
     after = shot(step, "04_after_edit", "view")
     d = mae(before, after)
     step.check(d >= 0.005, f"the viewport changed after Extinction {old:.3g} -> 0.03 (MAE {d:.4f})")
+    step.check(
+        not ext_module("status").last_error(), f"the sidebar shows no error ({ext_module('status').last_error()})"
+    )
     scene.nubis.density_sigma = old
     yield 10.0
     # Shape > Coverage is the fraction of the sky covered; an edit reaches the viewport's clouds.
@@ -632,6 +644,9 @@ def s_edit(step: Step):
     scene.nubis.density_cover = 0.45
     yield 15.0
     yield from view_has_clouds(step, "04_coverage_045", min_mae=0.002)
+    step.check(
+        not ext_module("status").last_error(), f"the sidebar shows no error ({ext_module('status').last_error()})"
+    )
     scene.nubis.density_cover = coverage
     yield 10.0
 
@@ -721,7 +736,8 @@ def s_bake(step: Step):
 
 def _modal_running(idname: str) -> bool:
     ops = getattr(window(), "modal_operators", None)  # Window.modal_operators: Blender 4.2 and later
-    return ops is not None and any(op.bl_idname == idname.replace(".", "_OT_").upper() for op in ops)
+    module, name = idname.split(".")
+    return ops is not None and any(op.bl_idname in (idname, f"{module.upper()}_OT_{name}") for op in ops)
 
 
 def s_render_clouds(step: Step):

@@ -2,7 +2,6 @@
 (docs/sources.md#vertical-profile)."""
 
 import numpy as np
-from gpu_helpers import keep_multiplier
 
 
 def _band(make_scene, tmp_path, cloud_type: float) -> float:
@@ -15,7 +14,6 @@ def _band(make_scene, tmp_path, cloud_type: float) -> float:
     a[..., 0] = 0.8  # the same coverage everywhere: only the type differs
     a[..., 2] = cloud_type
     scene_io.write_field_image(scene.nubis, "a", a)
-    keep_multiplier(scene)
     result = pipeline.bake(scene, tmp_path / f"type_{cloud_type}.vdb", voxel_size=250.0)
     dense, lo = vdbio.read_grid_array(result.path, "density")
     z = np.nonzero(dense > 1e-3)[0] + lo[2]

@@ -17,16 +17,13 @@ _noise_sets: dict[int, object] = {}
 _sampler_unorm8: dict[int, bool] = {}
 
 
-def _inputs(scene, multiplier: float | None = None):
-    """(CloudGPU updated to the scene, its CloudState, the NoiseSet behind the GPU textures). `multiplier`
-    fixes the one on the coverage field, which otherwise follows the field (core/coverage.py)."""
+def _inputs(scene):
+    """(CloudGPU updated to the scene, its CloudState, the NoiseSet behind the GPU textures)."""
     from nubis_addon.blender import runtime, scene_io
     from nubis_addon.core import noise
 
     seed = scene.nubis.noise_seed
     state = scene_io.state_from_scene(scene)
-    if multiplier is not None:
-        state.params["density_coverage"] = multiplier
     clouds = runtime.cloud_gpu(seed)
     clouds.update(state)
     if seed not in _noise_sets:
@@ -243,7 +240,7 @@ def test_density_never_falls_as_coverage_rises(make_scene):
     for c in (0.2, 0.4, 0.6, 0.8, 1.0):
         field_a[..., 0] = c
         scene_io.write_field_image(scene.nubis, "a", field_a)
-        clouds, state, _noise = _inputs(scene, multiplier=1.0)
+        clouds, state, _noise = _inputs(scene)
         results.append(probe_density(clouds, points))
     for lower, higher in zip(results, results[1:], strict=False):
         # Exact arithmetic is monotonic (clamp(base - 1 + c, 0, c) then an increasing erosion remap);

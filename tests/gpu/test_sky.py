@@ -323,6 +323,33 @@ def test_renders_without_the_clouds_get_no_stale_shadow(blender, f12_scene):
         scene.nubis.sky_render_clouds = True
 
 
+def test_the_render_world_is_built_again_only_when_the_world_changed(blender, f12_scene):
+    """A new render World each frame made EEVEE compile its shader again for every frame; it is kept
+    while the artist's World is unchanged, its images refilled in place."""
+    from nubis_addon.blender import scene_render
+
+    scene = f12_scene
+    base = scene.world
+    try:
+        scene_render.attach(scene)
+        first = scene.world
+        scene_render.detach(scene)
+        scene_render.attach(scene)
+        assert scene.world == first and scene.world.name == scene_render.RENDER_WORLD
+        scene_render.detach(scene)
+        assert scene.world == base
+        node = next(n for n in base.node_tree.nodes if n.type == "BACKGROUND")
+        node.inputs["Strength"].default_value *= 1.5
+        scene_render.attach(scene)
+        rebuilt = scene.world
+        assert rebuilt != base and rebuilt.name == scene_render.RENDER_WORLD
+        copied = next(n for n in rebuilt.node_tree.nodes if n.type == "BACKGROUND" and n.name == node.name)
+        assert copied.inputs["Strength"].default_value == node.inputs["Strength"].default_value
+        node.inputs["Strength"].default_value /= 1.5
+    finally:
+        scene_render.detach(scene)
+
+
 def _has_engine(blender, name: str) -> bool:
     return name in {e.identifier for e in blender.types.RenderSettings.bl_rna.properties["engine"].enum_items}
 

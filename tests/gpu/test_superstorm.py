@@ -29,8 +29,9 @@ def test_outside_every_stencil_the_density_is_the_storm_free_density(storm_scene
     from nubis_addon.blender import scene_io
 
     scene, storm = storm_scene
-    scene.nubis.layers[0].remap = (0.3, 0.7, 0.0, 0.5)  # denser fair-weather clouds around the storm
+    scene.nubis.layers[0].remap = (0.3, 0.7, 0.0, 0.5)
     blender.ops.nubis.generate_field()
+    scene.nubis.density_cover = 0.3  # more fair-weather clouds around the storm (the preset has 2 %)
     cx, cy = scene_io.storm_centre(storm)
     rng = np.random.default_rng(3)
     n = 6000
