@@ -16,6 +16,10 @@ from ..render.gpu_context import ensure_gpu_context
 from . import farm, pipeline, preview, registration, scene_io, scene_render
 
 PROG = "nubis"
+# compare --draft bakes voxels no finer than this (metres): at half the scene's size the camera-footprint
+# size is about 15 m for the default cloudscape, a 35 s bake; 30 m takes a few seconds and Cycles renders
+# it faster too, with the alpha RMSE within 0.01 of the finer bake's (measured 2026-12-02).
+DRAFT_VOXEL = 30.0
 # A field composite slower than this gets an estimate first, then a progress bar.
 SLOW_COMPOSITE_S = 5.0
 
@@ -127,6 +131,7 @@ def execute(args, in_blender: bool, log: Path, out: Path) -> str:
             args.bounces,
             reference=not args.draft,
             step=lambda text: console.current().line(f"{PROG}: {text}"),
+            voxel_floor=DRAFT_VOXEL if args.draft else 0.0,
         )
     capped = (
         f" (reference march in {m['reference_view_steps']} of {scene.nubis.march_steps_max} view steps: "

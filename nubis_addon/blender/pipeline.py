@@ -432,6 +432,7 @@ def compare(
     bounces: int | None = None,
     reference: bool = True,
     step: Callable[[str], None] | None = None,
+    voxel_floor: float = 0.0,
 ) -> dict:
     """Viewport and Cycles renders of the same shot, their side-by-side, a difference image and
     metrics.json (computed on the scene-linear EXR values); the bake Cycles rendered is kept as
@@ -439,12 +440,14 @@ def compare(
     at the nearest cloud (down to 20 m) unless `voxel_size` is given, and the cirrus as a slab two
     voxels thin. The eight files replace an earlier comparison together or not at all. `reference` adds
     the real-time light march against the reference march (the slowest part after Cycles); `step` is
-    told what each stage is about to do."""
+    told what each stage is about to do; `voxel_floor` keeps the automatic voxel size at least this big."""
     if mode not in COMPARE_MODES:
         raise NubisError(f"unknown comparison mode '{mode}': use single or full")
     out = check_output_dir(out_dir)
     with output_set() as outputs:
-        settings = _CompareSettings(samples, mode, voxel_size, noise_estimate, bounces, reference, step or _silent)
+        settings = _CompareSettings(
+            samples, mode, voxel_size, noise_estimate, bounces, reference, step or _silent, voxel_floor
+        )
         return _compare(scene, out, outputs.stage, width, height, settings)
 
 
@@ -474,6 +477,7 @@ class _CompareSettings:
     bounces: int | None
     reference: bool
     step: Callable[[str], None]
+    voxel_floor: float
 
 
 def _compare(scene, out: Path, stage, width, height, settings: _CompareSettings) -> dict:
@@ -492,6 +496,7 @@ def _compare(scene, out: Path, stage, width, height, settings: _CompareSettings)
         state = scene_io.state_from_scene(scene)
         inv = np.array(scene_io.camera_inv_view_proj(scene, width, height))
         voxel_size = camera_voxel_size(state, inv, width, height, scene.nubis.bake_voxel_size)
+        voxel_size = max(voxel_size, settings.voxel_floor)
     settings.step(f"1/{stages} baking what the camera sees, {voxel_size:.3g} m voxels")
     baked = bake(
         scene, stage(out / "clouds.vdb"), voxel_size, camera_only=True, size=(width, height), thin_cirrus=THIN_CIRRUS
