@@ -210,14 +210,7 @@ def test_an_address_without_a_usable_scheduler_fails_fast_in_one_line(scheduler,
         t0 = time.monotonic()
         for n, where in enumerate(cases):
             args = ["bake", "--blend", str(shot), "--out", str(tmp_path / f"c{n}.vdb"), "--distributed", where]
-            procs[where] = subprocess.Popen(
-                [sys.executable, "-m", "nubis_addon", *args],
-                cwd=ROOT,
-                env=env,
-                stdout=subprocess.PIPE,
-                stderr=subprocess.PIPE,
-                text=True,
-            )
+            procs[where] = test_robustness._start(args, env)
         for where, proc in procs.items():
             stdout, stderr = proc.communicate(timeout=90)
             line = _error(subprocess.CompletedProcess(proc.args, proc.returncode, stdout, stderr))
@@ -261,14 +254,7 @@ def test_a_worker_that_keeps_dying_ends_in_one_line(shot, tmp_path):
     out = tmp_path / "c_#.vdb"
     args = ["bake", "--blend", str(shot), "--voxel-size", "600", "--frames", "1-2", "--out", str(out)]
     args += ["--distributed", "local:1"]
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "nubis_addon", *args],
-        cwd=ROOT,
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    proc = test_robustness._start(args, env)
     seen, killed = set(), 0
     try:
         end = time.monotonic() + 90
