@@ -236,7 +236,7 @@ def _snapshot(scene):
 
 
 def test_a_saved_user_preset_loads_back_to_every_setting(make_scene, blender, tmp_path, monkeypatch):
-    from nubis_addon.blender import operators
+    from nubis_addon.blender import operators, scene_io
     from nubis_addon.core import presets, schema
 
     monkeypatch.setenv("NUBIS_PRESET_DIR", str(tmp_path / "presets"))
@@ -274,7 +274,11 @@ def test_a_saved_user_preset_loads_back_to_every_setting(make_scene, blender, tm
     blender.context.view_layer.update()
     after = _snapshot(scene)
     for setting in schema.PRESET_SCENE:
+        if setting.key == "density_coverage":  # derived from Coverage for the field at each composite
+            continue
         assert after["settings"][setting.key] == before["settings"][setting.key], setting.key
+    # ... and the multiplier a composite finds from the saved Coverage is the one the saved scene drew with.
+    assert after["settings"]["density_coverage"] == pytest.approx(scene_io.coverage_multiplier(scene), rel=1e-4)
     assert after["layers"] == before["layers"]
     assert after["storms"] == before["storms"]
     np.testing.assert_allclose(after["sun"][0], before["sun"][0], atol=1e-5)
