@@ -445,10 +445,21 @@ def compare(
         raise NubisError(f"unknown comparison mode '{mode}': use single or full")
     out = check_output_dir(out_dir)
     with output_set() as outputs:
-        settings = _CompareSettings(
-            samples, mode, voxel_size, noise_estimate, bounces, reference, step or _silent, voxel_floor
+        return _compare(
+            scene,
+            out,
+            outputs.stage,
+            width,
+            height,
+            samples,
+            mode,
+            voxel_size,
+            noise_estimate,
+            bounces,
+            reference=reference,
+            step=step or _silent,
+            voxel_floor=voxel_floor,
         )
-        return _compare(scene, out, outputs.stage, width, height, settings)
 
 
 # The comparison bakes the cirrus as a slab two voxels thin: the viewport samples the 2D layer at one
@@ -468,27 +479,23 @@ def _silent(_text: str) -> None:
     pass
 
 
-@dataclass(frozen=True)
-class _CompareSettings:
-    samples: int | None
-    mode: str
-    voxel_size: float | None
-    noise_estimate: bool
-    bounces: int | None
-    reference: bool
-    step: Callable[[str], None]
-    voxel_floor: float
-
-
-def _compare(scene, out: Path, stage, width, height, settings: _CompareSettings) -> dict:
-    samples, mode, voxel_size, noise_estimate, bounces = (
-        settings.samples,
-        settings.mode,
-        settings.voxel_size,
-        settings.noise_estimate,
-        settings.bounces,
-    )
-    stages = 4 if mode == "full" and settings.reference else 3
+def _compare(
+    scene,
+    out: Path,
+    stage,
+    width,
+    height,
+    samples,
+    mode,
+    voxel_size,
+    noise_estimate,
+    bounces,
+    *,
+    reference,
+    step,
+    voxel_floor,
+) -> dict:
+    stages = 4 if mode == "full" and reference else 3
     timings = {}
     t = time.perf_counter()
     if voxel_size is None:
@@ -496,8 +503,8 @@ def _compare(scene, out: Path, stage, width, height, settings: _CompareSettings)
         state = scene_io.state_from_scene(scene)
         inv = np.array(scene_io.camera_inv_view_proj(scene, width, height))
         voxel_size = camera_voxel_size(state, inv, width, height, scene.nubis.bake_voxel_size)
-        voxel_size = max(voxel_size, settings.voxel_floor)
-    settings.step(f"1/{stages} baking what the camera sees, {voxel_size:.3g} m voxels")
+        voxel_size = max(voxel_size, voxel_floor)
+    step(f"1/{stages} baking what the camera sees, {voxel_size:.3g} m voxels")
     baked = bake(
         scene, stage(out / "clouds.vdb"), voxel_size, camera_only=True, size=(width, height), thin_cirrus=THIN_CIRRUS
     )
@@ -509,7 +516,7 @@ def _compare(scene, out: Path, stage, width, height, settings: _CompareSettings)
     # Cycles integrates each pixel's area (box filter below); the viewport samples the pixel centre.
     # Supersampling the viewport makes both estimate the same pixel value.
     ss = max(1, min(4, 1024 // max(width, height)))
-    settings.step(f"2/{stages} the viewport's march, {width * ss}x{height * ss} pixels, {COMPARE_PASSES} passes")
+    step(f"2/{stages} the viewport's march, {width * ss}x{height * ss} pixels, {COMPARE_PASSES} passes")
     # The viewport converged as its accumulation converges when the view stands still: two halves of
     # COMPARE_PASSES jittered passes, whose difference measures what grain is left.
     halves = [
@@ -529,7 +536,7 @@ def _compare(scene, out: Path, stage, width, height, settings: _CompareSettings)
     # noise, so the mean's noise is half their difference. No extra cost.
     total = samples or scene.cycles.samples
     runs = 2 if noise_estimate else 1
-    settings.step(f"3/{stages} Cycles, {width}x{height} pixels, {total} samples, {bounces} volume bounces")
+    step(f"3/{stages} Cycles, {width}x{height} pixels, {total} samples, {bounces} volume bounces")
     renders = []
     for seed_offset in range(runs):
         scene.cycles.seed += seed_offset
@@ -552,7 +559,7 @@ def _compare(scene, out: Path, stage, width, height, settings: _CompareSettings)
     result["viewport_noise"] = {k: grain[k] / 2 for k in ("alpha_rmse", "luminance_rel_error")}
     if stages == 4:
         # The real-time cone march against the reference march, everything else equal.
-        settings.step(f"4/{stages} the reference light march, {width * ss}x{height * ss} pixels")
+        step(f"4/{stages} the reference light march, {width * ss}x{height * ss} pixels")
         t = time.perf_counter()
         reference = downsample(render_viewport(scene, width * ss, height * ss, 1, mode, clip, COMPARE_PASSES), ss)
         cone = metrics.compare(viewport, reference)

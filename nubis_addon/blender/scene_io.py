@@ -233,7 +233,7 @@ def generate_fields(scene, progress=None) -> None:
     # Coverage is the fraction of the sky covered: the multiplier on this field that gives it, found from
     # the field before the storms (a superstorm's stencil is its own system, GDC22: counting it would thin
     # the fair-weather clouds everywhere else). Kept in the file, so a reopened file draws the same sky.
-    _cover_hist[scene.as_pointer()] = coverage.field_histogram(result["a"][..., 0])
+    _cover_hist[scene.as_pointer()] = coverage.histogram(result["a"][..., 0])
     try:
         with batch_edit():
             settings.density_coverage = coverage_multiplier(scene)

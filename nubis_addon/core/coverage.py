@@ -16,8 +16,6 @@ at every multiplier from 0.5 to 2. No bpy here."""
 
 from __future__ import annotations
 
-import hashlib
-
 import numpy as np
 
 # (uniform coverage, fraction of columns covered) measured as described above.
@@ -78,18 +76,3 @@ def multiplier_for(cover: float, hist: tuple[np.ndarray, np.ndarray]) -> float:
         else:
             hi = mid
     return hi
-
-
-_cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
-
-
-def field_histogram(coverage_field: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """histogram() remembered by the field's contents (a composite asks once per edit)."""
-    data = np.ascontiguousarray(coverage_field, np.float32)
-    key = hashlib.blake2b(data.tobytes(), digest_size=16).digest() + str(data.shape).encode()
-    hist = _cache.get(key)
-    if hist is None:
-        if len(_cache) > 16:
-            _cache.clear()
-        hist = _cache[key] = histogram(data)
-    return hist
