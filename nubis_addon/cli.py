@@ -111,6 +111,19 @@ def build_parser() -> argparse.ArgumentParser:
                 action="store_true",
                 help="split the samples over two seeds to measure Cycles' own noise",
             )
+            p.add_argument(
+                "--noise-target",
+                type=float,
+                metavar="PERCENT",
+                help="add samples (seed pairs, starting from --samples) until Cycles' own noise is at most this "
+                "percentage of the luminance; implies --noise-estimate",
+            )
+            p.add_argument(
+                "--reuse-reference",
+                action="store_true",
+                help="keep the Cycles image of an earlier comparison in --out when the bake and everything Cycles "
+                "sees are unchanged (after a viewport-only edit): the viewport is rendered again, Cycles is not",
+            )
     _realtime_commands(sub, common, size)
     p = sub.add_parser("panorama", help="write an equirectangular HDR of the clouds and the sky (a World environment)")
     common(p)
@@ -318,6 +331,7 @@ def check_arguments(args) -> None:
     ):
         limits.check_int(f"--{name}", getattr(args, name, None), lo, hi)
     limits.check_voxel_size("--voxel-size", getattr(args, "voxel_size", None))
+    limits.check_noise_target("--noise-target", getattr(args, "noise_target", None))
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -132,6 +132,8 @@ def execute(args, in_blender: bool, log: Path, out: Path) -> str:
             reference=not args.draft,
             step=lambda text: console.current().line(f"{PROG}: {text}"),
             voxel_floor=DRAFT_VOXEL if args.draft else 0.0,
+            noise_target=args.noise_target,
+            reuse_reference=args.reuse_reference,
         )
     capped = (
         f" (reference march in {m['reference_view_steps']} of {scene.nubis.march_steps_max} view steps: "
@@ -139,11 +141,14 @@ def execute(args, in_blender: bool, log: Path, out: Path) -> str:
         if m.get("reference_steps_capped")
         else ""
     )
+    noise = f" (noise {m['cycles_noise']['luminance_rel_error'] * 100:.1f}%)" if "cycles_noise" in m else ""
+    ref = m["cycles_reference"]
+    cycles_time = "reused" if ref["reused"] else f"{m['seconds']['cycles_s']:.0f} s"
     return (
         f"compared {label} ({args.mode}) at {w}x{h}: alpha RMSE {m['alpha_rmse']:.4f}, luminance error "
         f"{m['luminance_rel_error'] * 100:.1f}%, silhouette IoU {m['silhouette_iou']:.3f}{capped} "
-        f"against Cycles at {m['volume_bounces']} volume bounces ({m['seconds']['cycles_s']:.0f} s of "
-        f"{time.perf_counter() - start:.0f} s) -> {out}"
+        f"against Cycles at {m['samples']} samples{noise}, {m['volume_bounces']} volume bounces "
+        f"({cycles_time} of {time.perf_counter() - start:.0f} s) -> {out}"
     )
 
 

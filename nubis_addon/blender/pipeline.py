@@ -22,6 +22,7 @@ from ..core.state import MAX_STORMS, CloudState
 from ..render import bake as gpu_bake
 from ..render import engine
 from . import cycles_setup, runtime, scene_io, sky
+from . import reference as cycles_reference
 
 Progress = Callable[[float], None]
 
@@ -433,6 +434,8 @@ def compare(
     reference: bool = True,
     step: Callable[[str], None] | None = None,
     voxel_floor: float = 0.0,
+    noise_target: float | None = None,
+    reuse_reference: bool = False,
 ) -> dict:
     """Viewport and Cycles renders of the same shot, their side-by-side, a difference image and
     metrics.json (computed on the scene-linear EXR values); the bake Cycles rendered is kept as
@@ -459,6 +462,8 @@ def compare(
             reference=reference,
             step=step or _silent,
             voxel_floor=voxel_floor,
+            noise_target=noise_target,
+            reuse_reference=reuse_reference,
         )
 
 
@@ -479,6 +484,23 @@ def _silent(_text: str) -> None:
     pass
 
 
+def _cycles_samples(scene, width, height, total, bounces, vdb, split, target, step):
+    """Cycles' image of the bake, its noise (None unless `split`) and the samples taken. Split, the
+    samples go to two seeds (their mean is the reference, half their difference its noise, at no extra
+    cost); with a target, seed pairs are added until the noise is under it (blender/reference.py)."""
+
+    def render(n: int, seed_offset: int) -> np.ndarray:
+        scene.cycles.seed += seed_offset
+        try:
+            return render_cycles(scene, width, height, n, str(vdb), bounces=bounces, exact_samples=True)
+        finally:
+            scene.cycles.seed -= seed_offset
+
+    if not split:
+        return render(total, 0), None, total
+    return cycles_reference.sample_to_target(render, total, target, lambda text: step(f"   {text}"))
+
+
 def _compare(
     scene,
     out: Path,
@@ -494,6 +516,8 @@ def _compare(
     reference,
     step,
     voxel_floor,
+    noise_target,
+    reuse_reference,
 ) -> dict:
     stages = 4 if mode == "full" and reference else 3
     timings = {}
@@ -531,30 +555,30 @@ def _compare(
     elif bounces is None:
         bounces = REFERENCE_BOUNCES
     t = time.perf_counter()
-    # With a noise estimate, Cycles renders half the samples twice with different seeds: their mean is
-    # the reference, noisier than either by 1/sqrt(2), and their difference is sqrt(2) x either's
-    # noise, so the mean's noise is half their difference. No extra cost.
     total = samples or scene.cycles.samples
-    runs = 2 if noise_estimate else 1
-    step(f"3/{stages} Cycles, {width}x{height} pixels, {total} samples, {bounces} volume bounces")
-    renders = []
-    for seed_offset in range(runs):
-        scene.cycles.seed += seed_offset
-        try:
-            renders.append(
-                render_cycles(
-                    scene, width, height, max(1, total // runs), str(baked.path), bounces=bounces, exact_samples=True
-                )
-            )
-        finally:
-            scene.cycles.seed -= seed_offset
-    cycles = sum(renders) / runs
-    scene.cycles.samples = max(1, total // runs) * runs
+    target = noise_target / 100 if noise_target is not None else None
+    ref_key = cycles_reference.key(scene, baked.path, width, height, bounces)
+    earlier = cycles_reference.reusable(out, ref_key, total, target) if reuse_reference else None
+    if earlier is not None:
+        cycles, info = earlier
+        taken, noise = info["samples"], info["cycles_noise"]
+        step(f"3/{stages} Cycles: the earlier reference in {out} ({taken} samples, same bake and scene)")
+    else:
+        step(f"3/{stages} Cycles, {width}x{height} pixels, {total} samples, {bounces} volume bounces")
+        cycles, noise, taken = _cycles_samples(
+            scene, width, height, total, bounces, baked.path, noise_estimate or target is not None, target, step
+        )
     timings["cycles_s"] = time.perf_counter() - t
     result = metrics.compare(viewport, cycles)
-    if noise_estimate:
-        own = metrics.compare(renders[0], renders[1])
-        result["cycles_noise"] = {k: own[k] / 2 for k in ("alpha_rmse", "luminance_rel_error")}
+    if noise is not None:
+        result["cycles_noise"] = noise
+    result["cycles_reference"] = {
+        "key": ref_key,
+        "samples": taken,
+        "reused": earlier is not None,
+        "cycles_s": earlier[1]["cycles_s"] if earlier is not None else timings["cycles_s"],
+    }
+    scene.cycles.samples = taken
     grain = metrics.compare(halves[0], halves[1])
     result["viewport_noise"] = {k: grain[k] / 2 for k in ("alpha_rmse", "luminance_rel_error")}
     if stages == 4:
@@ -578,7 +602,7 @@ def _compare(
         width=width,
         height=height,
         samples=scene.cycles.samples,
-        volume_bounces=scene.cycles.volume_bounces,
+        volume_bounces=bounces,
         preset=scene.nubis.preset,
         voxel_size=baked.plan.voxel_size,
         bake_dims=list(baked.plan.dims),

@@ -48,6 +48,18 @@ def check_voxel_size(flag: str, value: float | None) -> None:
         raise NubisError(f"{flag} {value:g} is out of range: use a voxel edge of at least {VOXEL_MIN:g} metres")
 
 
+# A noise target below 0.5 % of the luminance would take tens of thousands of samples.
+NOISE_TARGET_RANGE = (0.5, 50.0)
+
+
+def check_noise_target(flag: str, value: float | None) -> None:
+    """A noise target in percent of the luminance."""
+    lo, hi = NOISE_TARGET_RANGE
+    if value is None or (math.isfinite(value) and lo <= value <= hi):
+        return
+    raise NubisError(f"{flag} {value:g} is out of range: use a percentage between {lo:g} and {hi:g}")
+
+
 def check_position(what: str, xyz: Sequence[float], fix: str) -> None:
     """A position in metres: finite and within POSITION_MAX of the origin on every axis."""
     if all(math.isfinite(v) and abs(v) <= POSITION_MAX for v in xyz):
