@@ -103,6 +103,31 @@ def sky_volume(state) -> Volume:
     return volume((0.0, 0.0, 1.0), state)
 
 
+# The volumes are refilled once the wind has carried the noise this share of a texel: the coverage field,
+# which places the clouds, does not move with the wind (only the noises drift through it), so between
+# refills the volumes hold the same clouds, their detail up to this drift out of date.
+REFILL_DRIFT = 0.25
+
+
+def refill_time(state) -> float:
+    """The time the volumes hold for `state`: its time rounded down to the step in which the wind carries
+    the noise REFILL_DRIFT of a texel (the faster of the two noises). A still wind refills only on edits."""
+    p = state.params
+    speed = abs(float(p["wind_speed"])) * max(1.0, abs(float(p.get("wind_detail_speed", 1.0))))
+    _centre, half, _bottom, _top = domain(state)
+    texel = 2.0 * max(half) / SIZE[0]
+    if speed <= 0.0:
+        return 0.0
+    step = REFILL_DRIFT * texel / speed
+    return float(np.floor(state.time / step) * step)
+
+
+# Settings the volumes' contents do not depend on: the lighting terms applied when they are read (rain's
+# absorption is not among them: the volumes hold it).
+def lighting_only(key: str) -> bool:
+    return key.startswith("lighting_") and key != "lighting_rain_absorption"
+
+
 def key_centre(state) -> tuple[float, float]:
     """The draw centre as the volumes see it (snapped), for deciding when to refill them."""
     return domain(state)[0]

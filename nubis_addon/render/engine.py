@@ -13,6 +13,7 @@ from gpu_extras.batch import batch_for_shader
 
 from ..core import lightvolume, noise, sky
 from ..core.errors import NubisError
+from ..core.schema import defaults
 from ..core.state import CloudState
 from . import uniforms
 from .sources import CLOUD_LIBS, assemble, read_shader
@@ -217,11 +218,18 @@ class CloudGPU:
             self._update_volumes(state)
 
     def _update_volumes(self, state: CloudState) -> None:
-        """Refill the optical-depth volumes when what they hold changed: the field, the density and
-        lighting settings, the sun, the time, the storms or the box (core/lightvolume.py). The jitter of
-        an accumulation pass and small camera moves do not refill them."""
+        """Refill the optical-depth volumes when what they hold changed: the field, the density
+        settings, the sun's direction, the storms, the box, or the time by a step of the wind's drift
+        (core/lightvolume.py). The jitter of an accumulation pass, small camera moves and lighting-only
+        settings do not refill them."""
+        plain = defaults()
         still = replace(
             state,
+            params={k: (plain.get(k, v) if lightvolume.lighting_only(k) else v) for k, v in state.params.items()},
+            time=lightvolume.refill_time(state),
+            sun_radiance=(1.0, 1.0, 1.0),
+            ambient=(1.0, 1.0, 1.0),
+            ambient_below=None,
             jitter=True,
             jitter_pass=0,
             pixel_angle=0.0,

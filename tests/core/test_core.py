@@ -298,3 +298,21 @@ def test_light_volume_boxes_hold_the_cloud_domain_and_face_the_light():
     centre, half, _low, _high = lightvolume.domain(state)
     assert centre == (500.0, 100.0) and half == (1000.0, 500.0)
     assert lightvolume.memory_bytes() <= 20 * 2**20 // 4  # a fraction of GPU Pro 7's 20 MB
+
+
+def test_light_volumes_follow_the_wind_in_steps_of_a_quarter_texel():
+    from nubis_addon.core import lightvolume
+    from nubis_addon.core.state import CloudState
+
+    state = CloudState()
+    p = state.params
+    speed = p["wind_speed"] * max(1.0, p["wind_detail_speed"])
+    texel = 2 * max(lightvolume.domain(state)[1]) / lightvolume.SIZE[0]
+    step = lightvolume.REFILL_DRIFT * texel / speed
+    at = [lightvolume.refill_time(CloudState(time=t)) for t in (0.0, 0.9 * step, 1.1 * step, 10.5 * step)]
+    assert at == pytest.approx([0.0, 0.0, step, 10 * step])
+    still = CloudState(time=1234.5)
+    still.params["wind_speed"] = 0.0
+    assert lightvolume.refill_time(still) == 0.0
+    assert lightvolume.lighting_only("lighting_ambient") and not lightvolume.lighting_only("lighting_rain_absorption")
+    assert not lightvolume.lighting_only("density_sigma")

@@ -9,6 +9,7 @@ import numpy as np
 
 def test_volumes_are_refilled_only_when_what_they_hold_changes(make_scene):
     from nubis_addon.blender import runtime, scene_io
+    from nubis_addon.core import lightvolume
 
     scene = make_scene("default")
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
@@ -22,6 +23,13 @@ def test_volumes_are_refilled_only_when_what_they_hold_changes(make_scene):
     clouds.update(replace(state, light_mode=1))
     # A bake reads densities only: a new time without light fills nothing.
     clouds.update(replace(state, time=state.time + 99.0), light=False)
+    # Lighting-only settings are applied when the volumes are read, not held in them.
+    lit = {"lighting_ambient": 3.0, "lighting_sky_occlusion": 0.1, "lighting_ms_attenuation": 0.5}
+    clouds.update(replace(state, params={**state.params, **lit}), light=True)
+    clouds.update(replace(state, sun_radiance=(9.0, 1.0, 1.0), ambient=(0.0, 0.0, 2.0)))
+    # Playback within one step of the wind's drift keeps them (a quarter texel: core/lightvolume.py).
+    held = lightvolume.refill_time(state)
+    clouds.update(replace(state, time=held + 1e-3))
     assert clouds.volume_fills == fills
     clouds.update(state)
     # The wind's time, the sun and a density setting refill them.
