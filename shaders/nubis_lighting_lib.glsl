@@ -19,6 +19,8 @@ const float NUBIS_EXTERNAL_FLASH_STRENGTH = 0.05;
 const int NUBIS_REFERENCE_SUN_SAMPLES = 48;
 const int NUBIS_REFERENCE_SKY_DIRECTIONS = 12;
 const int NUBIS_REFERENCE_SKY_SAMPLES = 16;
+/* ... and, for the full model's reference, samples up and down the point's column. */
+const int NUBIS_REFERENCE_COLUMN_SAMPLES = 24;
 const float NUBIS_REFERENCE_REACH = 2.0;
 
 /* Below this eccentricity a Henyey-Greenstein lobe is sampled as isotropic (its inverse distribution
@@ -40,8 +42,10 @@ const float NUBIS_GOLDEN_ANGLE = 2.39996323;
 const int NUBIS_MAX_OCTAVES = 8;
 
 /* S15 and GPU Pro 7 switch the light march to cheap samples at 0.3; measured, 0.5 keeps 40 dB against
- * full samples where 0.3 gave 35.9 dB (docs/sources.md#cheap-light-samples). */
-const float NUBIS_CHEAP_LIGHT_ALPHA = 0.5;
+ * full samples where 0.3 gave 35.9 dB (docs/sources.md#cheap-light-samples). The cheap samples' uneroded
+ * density overestimates the optical depth: at 0.5 the real-time light read 4-7 % darker than with full
+ * samples, at 0.8 1-2 %, for 4 % more redraw time (docs/viewport.md#light-model). */
+const float NUBIS_CHEAP_LIGHT_ALPHA = 0.8;
 /* GPU Pro 7: light samples read the noise one mip level coarser than the view sample, at most the
  * coarsest level stored (docs/sources.md#light-mip-level). */
 const float NUBIS_LIGHT_LOD_OFFSET = 1.0;
@@ -354,6 +358,16 @@ vec3 nubis_reference_sky_light(vec3 p, vec3 view_dir, vec2 pixel)
   return P.lighting_ambient * light;
 }
 
+/* Diffusion through a slab of cloud lit from one side (docs/viewport.md#light-model): the share of the
+ * light entering that side found at a point with optical depth `near` between it and that side and
+ * `far` beyond it. Diffusion in a cloud that scatters without absorbing falls off linearly with the
+ * transport depth (`rate` x optical depth), from the lit boundary to the far one, each extended by
+ * the extrapolation length `edge`; a thin cloud (both depths near 0) gets one half. */
+float nubis_slab_diffusion(float near, float far, float rate, float edge)
+{
+  return (rate * far + edge) / (rate * (near + far) + 2.0 * edge);
+}
+
 /* What the light of one view ray shares along its length (for a sun light they are constant along
  * the ray, so they are computed once per pixel rather than at every sample): the cosine to the sun,
  * the phase of each multiple-scattering octave (up to 8) and the powder weight. */
@@ -420,26 +434,50 @@ vec2 nubis_sky_volume_depths(vec3 p)
   return vec2(above, max(column - above, 0.0));
 }
 
-/* Optical depth towards the sun (docs/sources.md#light-march). Real time: the march of GPU Pro 7 / S15, samples in a widening cone
- * plus one long-distance sample (GPU Pro 7 fig 4.36) at the coarse density. The taps (offset from the
- * point, and the length each stands for) are the same for every sample of a frame, so Python computes
- * them once (core/march.py) into P.light_taps; P.march_light_samples counts them, the long one last. Samples
- * read the noise one mip level coarser than the view ray (GPU Pro 7) and switch to cheap samples
- * once the view ray is half opaque (S15: "2x faster"); the naive march of the benchmark keeps full
- * samples. The reference permutation marches many fine samples out of the
- * layer instead, for measuring the real-time one. */
-float nubis_light_optical_depth(vec3 p, float view_alpha, float lod, vec2 pixel, out float powder_depth)
+/* The optical depths the light of a point reads (sigma included; docs/viewport.md#light-model). */
+struct NubisLightDepths {
+  float sun;    /* towards the sun until the cloud domain ends, with rain's and storms' absorption */
+  float powder; /* the density alone towards the sun near the point, for the powder term */
+  float above;  /* the cloud above the point, to the domain's top */
+  float below;  /* and below it, to the domain's floor */
+  bool column;  /* above and below are known: the light volumes, or the reference march */
+};
+
+/* The light's optical depths at p (docs/sources.md#light-march). Real time: towards the sun the march of
+ * GPU Pro 7 / S15, samples in a widening cone, then the sun's optical-depth volume for the rest of the
+ * layer (docs/viewport.md#light-volumes; without the volumes GPU Pro 7's one long-distance sample);
+ * the sky's volume gives the cloud above and below. The cone's taps (offset from the point, and the length each stands for) are the same for
+ * every sample of a frame, so Python computes them once (core/march.py) into P.light_taps;
+ * P.march_light_samples counts them, the long one last. They read the noise one mip level coarser than
+ * the view ray (GPU Pro 7) and switch to cheap samples once the view ray is half opaque (S15: "2x
+ * faster"); the naive march of the benchmark keeps full samples. The reference permutation marches
+ * many fine samples along each direction instead, for measuring the real-time depths. */
+NubisLightDepths nubis_light_depths(vec3 p, float view_alpha, float lod, vec2 pixel)
 {
-  float tau = 0.0;
-  powder_depth = 0.0;
+  NubisLightDepths l;
+  l.sun = 0.0;
+  l.powder = 0.0;
+  l.above = 0.0;
+  l.below = 0.0;
+  l.column = false;
 #if NUBIS_REFERENCE
-  tau = nubis_reference_depth(p, P.sun_dir.xyz, NUBIS_REFERENCE_SUN_SAMPLES, nubis_reference_jitter(pixel), powder_depth);
+  float jitter = nubis_reference_jitter(pixel);
+  l.sun = nubis_reference_depth(p, P.sun_dir.xyz, NUBIS_REFERENCE_SUN_SAMPLES, jitter, l.powder) * P.density_sigma;
+  l.powder *= P.density_sigma;
+#  if NUBIS_REFERENCE == 2
+  /* The real-time model's column depths, marched: each direction's samples elsewhere in their strata. */
+  vec3 up = normalize(p + vec3(0.0, 0.0, P.layer_planet_radius));
+  float plain;
+  l.above = nubis_reference_depth(p, up, NUBIS_REFERENCE_COLUMN_SAMPLES,
+                                  fract(jitter + NUBIS_GOLDEN_RATIO_FRACT), plain) * P.density_sigma;
+  l.below = nubis_reference_depth(p, -up, NUBIS_REFERENCE_COLUMN_SAMPLES,
+                                  fract(jitter + 2.0 * NUBIS_GOLDEN_RATIO_FRACT), plain) * P.density_sigma;
+  l.column = true;
+#  endif
 #else
 #  if NUBIS_NAIVE
   bool cheap = false;
 #  else
-  /* GPU Pro 7 and S15 switch at 0.3 with "almost no visual difference"; measured against full light
-   * samples on the default sky that was 35.9 dB PSNR, 0.5 keeps 40 dB (docs/viewport.md). */
   bool cheap = view_alpha > NUBIS_CHEAP_LIGHT_ALPHA;
 #  endif
   float light_lod = min(lod + NUBIS_LIGHT_LOD_OFFSET, NUBIS_LIGHT_COARSEST_LOD);
@@ -449,69 +487,67 @@ float nubis_light_optical_depth(vec3 p, float view_alpha, float lod, vec2 pixel,
     vec3 q = p + tap.xyz;
     NubisDensity s = nubis_density(q, cheap, light_lod);
     float w = (cheap ? s.coarse : s.fine) * tap.w;
-    powder_depth += w;
-    tau += w * nubis_extinction_factor(q, s.precipitation);
+    l.powder += w;
+    l.sun += w * nubis_extinction_factor(q, s.precipitation);
   }
+  l.sun *= P.density_sigma;
+  l.powder *= P.density_sigma;
 #  if NUBIS_LIGHT_VOLUME
-  /* Beyond the cone, the sun's optical-depth volume: the whole layer towards the sun
-   * (docs/viewport.md#light-volumes). It is already scaled by sigma. */
-  /* The powder term keeps the cone's depth alone: it is the in-scattering probability near the
-   * sample, and cloud kilometres further towards the sun must not lighten a sun-facing edge. */
-  float far_depth = nubis_sun_volume_depth(p + P.sun_dir.xyz * P.light_cone_reach);
-  tau += far_depth / P.density_sigma;
+  /* Beyond the cone, the sun's optical-depth volume: the whole layer towards the sun. The powder term
+   * keeps the cone's depth alone: it is the in-scattering probability near the sample, and cloud
+   * kilometres further towards the sun must not lighten a sun-facing edge. */
+  l.sun += nubis_sun_volume_depth(p + P.sun_dir.xyz * P.light_cone_reach);
+  vec2 sky = nubis_sky_volume_depths(p);
+  l.above = sky.x;
+  l.below = sky.y;
+  l.column = true;
 #  else
   /* GPU Pro 7's long-distance sample at three times the cone's reach. */
   vec4 long_tap = P.light_taps[taps - 1];
   vec3 far_point = p + long_tap.xyz;
   NubisDensity far_sample = nubis_density(far_point, true, light_lod);
-  float w = far_sample.coarse * long_tap.w;
-  powder_depth += w;
-  tau += w * nubis_extinction_factor(far_point, far_sample.precipitation);
+  float w = far_sample.coarse * long_tap.w * P.density_sigma;
+  l.powder += w;
+  l.sun += w * nubis_extinction_factor(far_point, far_sample.precipitation);
 #  endif
 #endif
-  powder_depth *= P.density_sigma;
-  return tau * P.density_sigma;
+  return l;
 }
 
 /* Light scattered towards the eye per unit of scattering at a point inside the cloud, without the
  * lightning flashes (nubis_flash_energy). `extinction_factor` is nubis_extinction_factor at p: where
- * rain or a storm absorbs, the albedo is its inverse. */
+ * rain or a storm absorbs, the albedo is its inverse. The model is docs/viewport.md#light-model. */
 vec3 nubis_in_scattering(
     vec3 p, vec3 view_dir, NubisDensity d, NubisRayLight ray, float view_alpha, float extinction_factor, float lod, vec2 pixel)
 {
-  /* The octaves and the powder term see the cloud's own depth towards the sun (GPU Pro 7, GDC22),
-   * the powder the density alone: rain's and storms' absorption darken the light, not thin the
-   * dark sun-facing rim. */
-  float powder_depth;
-  float tau = nubis_light_optical_depth(p, view_alpha, lod, pixel, powder_depth);
-  /* NOT from the Guerrilla sources: Wrenninge et al.'s octaves (Oz, 2013; docs/sources.md#multiple-scattering)
-   * stand in for the light
-   * that scatters more than once: each octave sees a thinner cloud and a flatter phase. Octave 1 alone
-   * is plain single scattering (Beer-Lambert x phase). Octave i stands for light scattered once more
-   * than octave i - 1, so it loses another factor of the albedo where the cloud absorbs: without it
-   * the octaves kept rain cores and storms bright that Cycles' absorbing bounces make dark. */
+  NubisLightDepths l = nubis_light_depths(p, view_alpha, lod, pixel);
+  float albedo = 1.0 / max(extinction_factor, 1.0);
+  /* Light scatters many times only where there is cloud around to scatter it: what scatters more than
+   * once grows with the optical depth of the point's column. */
+  float buildup = l.column && P.lighting_ms_buildup > 0.0 ? 1.0 - exp(-P.lighting_ms_buildup * (l.above + l.below)) : 1.0;
+  /* NOT from the Guerrilla sources: Wrenninge et al.'s octaves (Oz, 2013; docs/sources.md#multiple-scattering):
+   * octave 1 is plain single scattering (Beer-Lambert x phase), each further one sees a thinner cloud
+   * and a flatter phase and loses another factor of the albedo where the cloud absorbs (without it the
+   * octaves kept rain cores and storms bright that Cycles' absorbing bounces make dark). */
   float direct_energy = 0.0;
   float a = 1.0, b = 1.0;
-  float albedo = 1.0 / max(extinction_factor, 1.0);
   int octaves = min(int(P.lighting_ms_octaves), NUBIS_MAX_OCTAVES);
   for (int i = 0; i < octaves; i++) {
     float phase = i < 4 ? ray.phase_lo[i] : ray.phase_hi[i - 4];
-    direct_energy += b * exp(-a * tau) * phase;
+    direct_energy += b * exp(-a * l.sun) * phase;
     a *= P.lighting_ms_attenuation;
-    b *= P.lighting_ms_contribution * albedo;
+    b *= P.lighting_ms_contribution * albedo * (i == 0 ? buildup : 1.0);
   }
   /* GPU Pro 7's factor 2 restores the energy where the powder term applies. */
-  direct_energy *= mix(1.0, NUBIS_POWDER_GAIN * (1.0 - exp(-NUBIS_POWDER_RATE * powder_depth)), ray.powder_weight);
+  direct_energy *= mix(1.0, NUBIS_POWDER_GAIN * (1.0 - exp(-NUBIS_POWDER_RATE * l.powder)), ray.powder_weight);
 #if NUBIS_CIRRUS
   /* High cirrus dims the sun on the clouds below it by its own transmittance, as its baked slab does in
    * Cycles: a separate factor, so it neither hides the powder rim nor thins the octaves. */
   direct_energy *= exp(-nubis_cirrus_optical_depth(p, P.sun_dir.xyz, 0.0));
 #endif
   vec3 direct = P.sun_radiance.rgb * direct_energy;
-  /* The sky light: the sky's volume (below), or with the long tap GDC22's ambient probability
-   * pow(1 - coarse, 0.5), growing with height (S15; docs/sources.md#ambient); the reference
-   * permutation measures the sky's visibility direction by direction. */
-#if NUBIS_REFERENCE
+#if NUBIS_REFERENCE == 1
+  /* Single scattering's reference: the sky's visibility direction by direction. */
   vec3 sky_light = nubis_reference_sky_light(p, view_dir, pixel);
 #else
   float overhead = 1.0;
@@ -519,20 +555,21 @@ vec3 nubis_in_scattering(
   /* ... and the sky light from above by its transmittance overhead. */
   overhead = exp(-nubis_cirrus_optical_depth(p, normalize(p + vec3(0.0, 0.0, P.layer_planet_radius)), 0.0));
 #  endif
-#  if NUBIS_LIGHT_VOLUME
-  /* The sky from above through the cloud above the point, the ground's light through the cloud below
-   * it, each over its hemisphere (an isotropic share of one half); the optical depths come from the
-   * sky's volume (docs/viewport.md#light-volumes), scaled by the occlusion setting. S15's height
-   * gradient stays as art direction. */
-  /* This replaces GDC22's ambient probability pow(1 - coarse, 0.5): a local guess at the same
-   * occlusion, which on top of the measured one darkened the cloud twice (docs/viewport.md#light-volumes). */
-  vec2 depths = nubis_sky_volume_depths(p) * P.lighting_sky_occlusion;
-  vec3 sky_light = 0.5 * (P.ambient.rgb * (overhead * exp(-depths.x)) + P.ambient_below.rgb * exp(-depths.y));
-  sky_light *= mix(P.lighting_ambient_bottom, 1.0, d.h);
-#  else
-  float ambient_probability = sqrt(1.0 - clamp01(d.coarse));
-  vec3 sky_light = nubis_ambient_light(d.h) * (ambient_probability * overhead);
-#  endif
+  vec3 sky_light;
+  if (l.column) {
+    /* The sky's light from above and the ground's from below, each diffusing through the slab of cloud
+     * above and below the point (docs/viewport.md#light-model). This replaces GDC22's ambient
+     * probability pow(1 - coarse, 0.5), a local guess at the same occlusion. S15's height gradient
+     * stays as art direction. */
+    float k = P.lighting_sky_occlusion, e = P.lighting_diffusion_edge;
+    sky_light = P.ambient.rgb * (overhead * nubis_slab_diffusion(l.above, l.below, k, e)) +
+                P.ambient_below.rgb * nubis_slab_diffusion(l.below, l.above, k, e);
+    sky_light *= mix(P.lighting_ambient_bottom, 1.0, d.h);
+  }
+  else {
+    /* With the long tap: GDC22's ambient probability, growing with height (S15; docs/sources.md#ambient). */
+    sky_light = nubis_ambient_light(d.h) * (sqrt(1.0 - clamp01(d.coarse)) * overhead);
+  }
 #endif
   sky_light *= nubis_storm_ambient(p, d.h);
   return direct + sky_light + nubis_storm_steady_glow(p, d.fine);

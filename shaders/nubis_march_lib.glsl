@@ -41,9 +41,9 @@ float nubis_slab_scattering(float mu_v, float mu_l, float tau)
 
 /* GPU Pro 7, S15: the cirrus layer, sampled once where the ray crosses its sphere
  * (docs/sources.md#cirrus-layer, docs/sources.md#cirrus-lighting), lit as the thin homogeneous slab
- * Cycles renders from the bake (nubis_slab_scattering). The sun's light is exact. The reference
- * permutation lights it by the World the same way, in the phase-sampled directions of the reference sky
- * light; the real-time one takes the sky light as scattered in proportion to the layer's opacity.
+ * Cycles renders from the bake (nubis_slab_scattering). The sun's light is exact. Single scattering's
+ * reference permutation lights it by the World the same way, in the phase-sampled directions of the
+ * reference sky light; otherwise the sky light is scattered in proportion to the layer's opacity.
  * Premultiplied radiance, alpha. */
 vec4 nubis_cirrus(vec3 origin, vec3 dir, vec2 pixel)
 {
@@ -65,7 +65,7 @@ vec4 nubis_cirrus(vec3 origin, vec3 dir, vec2 pixel)
   float alpha = 1.0 - exp(-tau_view);
   vec3 light = P.sun_radiance.rgb * nubis_phase(dot(dir, P.sun_dir.xyz), 1.0) *
                nubis_slab_scattering(mu_v, dot(P.sun_dir.xyz, up), tau);
-#if NUBIS_REFERENCE
+#if NUBIS_REFERENCE == 1
   NubisSkyDirections s = nubis_sky_directions(dir, pixel);
   vec3 sky = vec3(0.0);
   for (int i = 0; i < NUBIS_REFERENCE_SKY_DIRECTIONS; i++) {

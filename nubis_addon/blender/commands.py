@@ -143,12 +143,12 @@ def execute(args, in_blender: bool, log: Path, out: Path) -> str:
     )
     noise = f" (noise {m['cycles_noise']['luminance_rel_error'] * 100:.1f}%)" if "cycles_noise" in m else ""
     ref = m["cycles_reference"]
-    cycles_time = "reused" if ref["reused"] else f"{m['seconds']['cycles_s']:.0f} s"
+    cycles_time = "Cycles' image reused" if ref["reused"] else f"{m['seconds']['cycles_s']:.0f} s"
     return (
         f"compared {label} ({args.mode}) at {w}x{h}: alpha RMSE {m['alpha_rmse']:.4f}, luminance error "
         f"{m['luminance_rel_error'] * 100:.1f}%, silhouette IoU {m['silhouette_iou']:.3f}{capped} "
         f"against Cycles at {m['samples']} samples{noise}, {m['volume_bounces']} volume bounces "
-        f"({cycles_time} of {time.perf_counter() - start:.0f} s) -> {out}"
+        f"({cycles_time}, {time.perf_counter() - start:.0f} s in all) -> {out}"
     )
 
 

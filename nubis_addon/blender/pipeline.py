@@ -121,7 +121,8 @@ def viewport_shot(
     x1, y1) keeps only the clouds inside a bake's box, so both renderers light the same clouds."""
     state = scene_io.state_from_scene(scene)
     state.clip_box = clip_box
-    state.light_mode = light_mode
+    # A full comparison's reference march measures the real-time light model's own optical depths.
+    state.light_mode = 2 if light_mode == 1 and mode == "full" else light_mode
     if mode == "single":
         state.light_mode = 1
         # Physical single scattering: the sky is the world's radiance, not the real-time ambient's
@@ -594,7 +595,9 @@ def _compare(
     # The reference march keeps within the shader loop limit by taking longer steps (core/march.py).
     steps_max = scene.nubis.march_steps_max
     storms = len(scene_io.storm_lights(scene.nubis))
-    result["reference_view_steps"] = min(steps_max, march.max_steps(scene.nubis.march_light_samples, storms, True))
+    result["reference_view_steps"] = min(
+        steps_max, march.max_steps(scene.nubis.march_light_samples, storms, 2 if mode == "full" else 1)
+    )
     result["reference_steps_capped"] = result["reference_view_steps"] < steps_max
     result.update(
         mode=mode,

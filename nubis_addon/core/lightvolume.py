@@ -77,10 +77,17 @@ def domain(state) -> tuple[tuple[float, float], tuple[float, float], float, floa
     return centre, half, float(bottom) - sag, float(top)
 
 
+# Above this sine of its elevation the light's volume is sliced by altitude (`_layered`); a lower light
+# (within 5 degrees of the horizon, or below it) takes a box around the domain along its direction.
+LAYERED_MIN_SIN = 0.087
+
+
 def volume(direction, state) -> Volume:
-    """The box around the cloud domain laid out along `direction` (towards the light)."""
+    """The volume around the cloud domain laid out along `direction` (towards the light)."""
     s = np.asarray(direction, np.float64)
     s = s / np.linalg.norm(s)
+    if s[2] > LAYERED_MIN_SIN:
+        return _layered(s, state)
     helper = np.array([1.0, 0.0, 0.0]) if abs(s[2]) > NEAR_VERTICAL else np.array([0.0, 0.0, 1.0])
     u = np.cross(helper, s)
     u /= np.linalg.norm(u)
@@ -92,6 +99,23 @@ def volume(direction, state) -> Volume:
     extent = [max(float(c.max() - c.min()), 1.0) for c in (cu, cv, cs)]
     origin = u * cu.min() + v * cv.min() + s * cs.max()
     axes = np.array([u * extent[0], v * extent[1], -s * extent[2]])
+    return Volume(origin, axes)
+
+
+def _layered(s: np.ndarray, state) -> Volume:
+    """A parallelepiped whose depth slices are altitudes: its top face is the domain's top, its columns
+    run from there against the light down to the domain's floor. A box along the light's direction
+    would spread its 32 slices over the whole domain's length seen along the sun (70 km for a stratus
+    deck under a 30 degree sun, 2 km a slice), and interpolating the optical depth across the deck's
+    sunlit face overestimated it there (the real-time light read 10-15 % darker than the reference
+    march); sliced by altitude the same deck gets 85 m a slice."""
+    centre, half, bottom, top = domain(state)
+    w = -s * ((top - bottom) / s[2])  # from the top face down to the floor, away from the light
+    # A point on the floor at (x, y) is reached by the column starting at (x, y) - w_xy on the top face.
+    lo = [min(centre[i] - half[i], centre[i] - half[i] - w[i]) for i in (0, 1)]
+    hi = [max(centre[i] + half[i], centre[i] + half[i] - w[i]) for i in (0, 1)]
+    origin = np.array([lo[0], lo[1], top])
+    axes = np.array([[hi[0] - lo[0], 0.0, 0.0], [0.0, hi[1] - lo[1], 0.0], w])
     return Volume(origin, axes)
 
 

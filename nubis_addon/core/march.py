@@ -81,18 +81,26 @@ def bayer_offset(index: int) -> tuple[int, int]:
 #   any step          1 + n                       (the view loop and its density call)
 #   a lit step adds   8 + 4n + the light march    (octaves; extinction, glow, flash, ambient)
 #   real-time light   taps x (1 + 2n)
-#   reference light   48 x (1 + 2n), and the sky: 12 x (1 + 16 x (1 + 2n))
+#   reference light   48 x (1 + 2n), and the sky: 12 x (1 + 16 x (1 + 2n)) (single scattering's, mode 1)
+#                     or the column up and down: 2 x 24 x (1 + 2n) (the full model's, mode 2)
 LOOP_LIMIT = 65535
 _MARGIN = 512  # per-ray set-up, the octaves' phases, the cirrus
 
 
-def iterations_per_step(light_taps: int, storms: int, reference: bool) -> int:
+def iterations_per_step(light_taps: int, storms: int, reference: int) -> int:
+    """`reference` is the light mode: 0 real time, 1 or 2 a reference march (core/state.py)."""
     n = int(storms)
-    light = 48 * (1 + 2 * n) + 12 * (1 + 16 * (1 + 2 * n)) if reference else int(light_taps) * (1 + 2 * n)
+    per_sample = 1 + 2 * n
+    if reference == 2:
+        light = (48 + 2 * 24) * per_sample
+    elif reference:
+        light = 48 * per_sample + 12 * (1 + 16 * per_sample)
+    else:
+        light = int(light_taps) * per_sample
     return (1 + n) + (8 + 4 * n + light)
 
 
-def max_steps(light_taps: int, storms: int, reference: bool) -> int:
+def max_steps(light_taps: int, storms: int, reference: int) -> int:
     """The most view steps a march can take within the loop limit, every step lit. Beyond it the march
     takes longer steps (the ray still ends where it should) rather than being cut short."""
     return max(8, (LOOP_LIMIT - _MARGIN) // iterations_per_step(light_taps, storms, reference))

@@ -482,7 +482,7 @@ SCENE: tuple[Setting, ...] = (
         "lighting",
         "ambient",
         "float",
-        1.3,
+        1.2,
         "Ambient",
         "Strength of the sky's ambient light",
         min=0.0,
@@ -495,9 +495,10 @@ SCENE: tuple[Setting, ...] = (
         "lighting",
         "ambient_bottom",
         "float",
-        0.5,
+        1.0,
         "Base Ambient",
-        "Ambient light at the cloud base relative to the top (S15)",
+        "Ambient light at the cloud base relative to the top (S15's art-directed gradient; 1 leaves the "
+        "base to the sky light's own diffusion)",
         min=0.0,
         max=1.0,
         panel="lighting",
@@ -507,12 +508,38 @@ SCENE: tuple[Setting, ...] = (
         "lighting",
         "sky_occlusion",
         "float",
-        0.4,
+        1.2,
         "Sky Occlusion",
-        "How much the cloud above and below a point dims its sky light: a scale on that cloud's optical "
-        "depth (docs/viewport.md#light-volumes)",
+        "How much the cloud above and below a point dims its sky light: the share of that cloud's optical "
+        "depth the light diffuses through (docs/viewport.md#light-model)",
         min=0.0,
         max=4.0,
+        panel="lighting",
+        gpu=True,
+    ),
+    S(
+        "lighting",
+        "ms_buildup",
+        "float",
+        1.6,
+        "Build-up",
+        "Light scatters many times only inside enough cloud: how fast the optical depth of the point's "
+        "column builds up the octaves beyond the first (0: everywhere alike; docs/viewport.md#light-model)",
+        min=0.0,
+        max=8.0,
+        panel="lighting",
+        gpu=True,
+    ),
+    S(
+        "lighting",
+        "diffusion_edge",
+        "float",
+        0.8,
+        "Slab Edge",
+        "How far past the cloud's top and base the sky light's diffusion extends (in optical depths times "
+        "Sky Occlusion): larger lets more sky light through thin cloud (docs/viewport.md#light-model)",
+        min=0.01,
+        max=10.0,
         panel="lighting",
         gpu=True,
     ),
@@ -550,8 +577,8 @@ SCENE: tuple[Setting, ...] = (
         panel="lighting",
         gpu=True,
     ),
-    # Not from the Guerrilla sources: Wrenninge et al.'s multiple-scattering octaves. Ambient, octave and
-    # powder defaults were tuned against Cycles with 8 volume bounces (docs/sources.md#multiple-scattering).
+    # Not from the Guerrilla sources: Wrenninge et al.'s multiple-scattering octaves. The lighting defaults
+    # are fitted against converged Cycles references (docs/viewport.md#fitted-to-converged-cycles).
     S(
         "lighting",
         "ms_octaves",
@@ -568,7 +595,7 @@ SCENE: tuple[Setting, ...] = (
         "lighting",
         "ms_attenuation",
         "float",
-        0.04,
+        0.35,
         "Attenuation",
         "Optical-depth scale per octave (Wrenninge et al.'s a)",
         min=0.0,
@@ -580,7 +607,7 @@ SCENE: tuple[Setting, ...] = (
         "lighting",
         "ms_contribution",
         "float",
-        0.85,
+        0.97,
         "Contribution",
         "Energy per octave (Wrenninge et al.'s b)",
         min=0.0,

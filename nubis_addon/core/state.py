@@ -57,7 +57,9 @@ class CloudState:
     sky_env: np.ndarray | None = None
     draw_center: tuple[float, float] = (0.0, 0.0)
     time: float = 0.0  # seconds of simulated wind
-    light_mode: int = 0  # 0 real-time cone march, 1 reference march
+    # 0 the real-time light; 1 single scattering's reference march (the sky direction by direction); 2 the
+    # real-time light model with every optical depth it reads marched (docs/viewport.md#light-model)
+    light_mode: int = 0
     jitter: bool = True
     jitter_pass: int = 0  # which accumulation pass: shifts the per-pixel jitter
     cirrus_slab: float | None = None  # the bake's cirrus slab thickness, when wider than the setting

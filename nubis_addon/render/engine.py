@@ -209,7 +209,7 @@ class CloudGPU:
         self.ubo = gpu.types.GPUUniformBuf(self.ubo_bytes)
         self.switches.update(
             NUBIS_STORMS=int(bool(state.storms)),
-            NUBIS_REFERENCE=int(state.light_mode == 1),
+            NUBIS_REFERENCE=int(state.light_mode),
             NUBIS_CIRRUS=int(state.has_cirrus()),
         )
         if self._no_volume is None:  # bound in place of the volumes while they are filled or skipped

@@ -195,7 +195,7 @@ def pack(state: CloudState) -> np.ndarray:
 def state_max_steps(state: CloudState) -> int:
     """The view steps this state's march may take within the shader loop limit (core/march.py)."""
     p = state.params
-    return march.max_steps(p["march_light_samples"], len(state.storms), state.light_mode == 1)
+    return march.max_steps(p["march_light_samples"], len(state.storms), state.light_mode)
 
 
 def _vortex_time(state: CloudState, storm) -> float:

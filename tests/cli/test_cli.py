@@ -54,7 +54,7 @@ def test_compare_writes_every_output(tmp_path):
     from nubis_addon.blender.pipeline import REFERENCE_BOUNCES
 
     assert m["volume_bounces"] == REFERENCE_BOUNCES > 8
-    assert f"against Cycles at {REFERENCE_BOUNCES} volume bounces" in r.stdout
+    assert f"samples, {REFERENCE_BOUNCES} volume bounces" in r.stdout
     # Progress while it works: one line per stage, the reference march last in full mode.
     steps = [ln for ln in r.stderr.splitlines() if ln.startswith("nubis: ")]
     assert [ln.split()[1] for ln in steps] == ["1/4", "2/4", "3/4", "4/4"], r.stderr

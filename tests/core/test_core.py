@@ -316,3 +316,27 @@ def test_light_volumes_follow_the_wind_in_steps_of_a_quarter_texel():
     assert lightvolume.refill_time(still) == 0.0
     assert lightvolume.lighting_only("lighting_ambient") and not lightvolume.lighting_only("lighting_rain_absorption")
     assert not lightvolume.lighting_only("density_sigma")
+
+
+def test_a_sun_above_the_horizon_gets_a_volume_sliced_by_altitude():
+    """Its depth slices are altitudes whatever the sun's elevation: a stratus deck under a 30 degree sun
+    gets its 32 slices over the layer's height, not over the domain's 70 km seen along the sun."""
+    from nubis_addon.core import lightvolume
+    from nubis_addon.core.state import CloudState
+
+    state = CloudState()
+    _centre, _half, bottom, top = lightvolume.domain(state)
+    sun = np.array([0.0, np.cos(np.radians(30.0)), np.sin(np.radians(30.0))])
+    box = lightvolume.volume(sun, state)
+    rows = box.to_unit()
+    # Every texel of one slice has the same altitude, and the slices run from the top to the floor.
+    for k in (0.0, 0.5, 1.0):
+        zs = [box.point((x, y, k))[2] for x in (0.0, 1.0) for y in (0.0, 1.0)]
+        assert np.allclose(zs, top + k * (bottom - top))
+    # Its columns run along the sun, away from it.
+    column = box.point((0.5, 0.5, 1.0)) - box.point((0.5, 0.5, 0.0))
+    assert np.allclose(np.cross(column, sun), 0.0, atol=1e-6) and np.dot(column, sun) < 0
+    # A point just under the top and one on the floor, at the same xy, both map inside.
+    for z in (top - 1.0, bottom + 1.0):
+        unit = rows[:, :3] @ np.array([0.0, 0.0, z]) + rows[:, 3]
+        assert np.all(unit >= 0) and np.all(unit <= 1), unit

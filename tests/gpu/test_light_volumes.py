@@ -40,8 +40,9 @@ def test_volumes_are_refilled_only_when_what_they_hold_changes(make_scene):
 
 
 def test_volumes_see_the_whole_deck_that_the_long_tap_misses(make_scene):
-    """A stratus deck: the real-time light with the volumes against the reference march (48 fine samples
-    towards the sun, 12 sky directions), and GPU Pro 7's long tap against the same, in one run."""
+    """A stratus deck: the real-time light with the volumes against the reference march (the same light
+    model with its optical depths marched: 48 fine samples towards the sun, 24 up and 24 down), and GPU
+    Pro 7's long tap against the same, in one run."""
     from nubis_addon.blender import pipeline, runtime
     from nubis_addon.core import metrics
 
@@ -57,8 +58,9 @@ def test_volumes_see_the_whole_deck_that_the_long_tap_misses(make_scene):
     assert all(np.all(np.isfinite(i)) for i in images.values())
     long_tap = metrics.compare(images["long tap"], images["reference"])
     volumes = metrics.compare(images["volumes"], images["reference"])
-    # Measured 2026-12-02 (5.3, llvmpipe): the long tap 41.5 % error, bias +41.1 % (the deck beyond the
-    # cone is missed, so its inside is far too bright); the volumes 11.4 %, bias -9.8 %.
-    assert long_tap["luminance_bias"] > 0.3, long_tap
-    assert volumes["luminance_rel_error"] < 0.4 * long_tap["luminance_rel_error"], (volumes, long_tap)
-    assert abs(volumes["luminance_bias"]) < 0.15, volumes
+    # Measured 2026-12-02 (5.3, llvmpipe), with the light model of docs/viewport.md#light-model: the long
+    # tap 18.5 % error, bias +10.9 % (the deck beyond the cone is missed, so its inside is too bright);
+    # the volumes sliced by altitude 11.1 %, bias -9.5 % (a box along the sun: 15.6 %, -15.6 %).
+    assert long_tap["luminance_bias"] > 0.05, long_tap
+    assert volumes["luminance_rel_error"] < 0.75 * long_tap["luminance_rel_error"], (volumes, long_tap)
+    assert abs(volumes["luminance_bias"]) < 0.13, volumes
