@@ -564,10 +564,9 @@ vec3 nubis_in_scattering(
     float k = P.lighting_sky_occlusion, e = P.lighting_diffusion_edge;
     sky_light = P.ambient.rgb * (overhead * nubis_slab_diffusion(l.above, l.below, k, e)) +
                 P.ambient_below.rgb * nubis_slab_diffusion(l.below, l.above, k, e);
-    /* Diffused light has scattered many times on its way in: where rain or a storm absorbs, it keeps
-     * the albedo's share of each scattering, as the octaves do; twice, measured on the cumulonimbus'
-     * rain tower against Cycles (docs/viewport.md#light-model). */
-    sky_light *= mix(P.lighting_ambient_bottom, 1.0, d.h) * albedo * albedo;
+    /* Diffused light has scattered on its way in: where rain or a storm absorbs, it keeps the albedo's
+     * share, as each octave does (docs/viewport.md#light-model). */
+    sky_light *= mix(P.lighting_ambient_bottom, 1.0, d.h) * albedo;
   }
   else {
     /* With the long tap: GDC22's ambient probability, growing with height (S15; docs/sources.md#ambient). */
