@@ -216,7 +216,7 @@ def test_compare_says_when_the_reference_march_takes_longer_steps(tmp_path):
     preset = tmp_path / "long.toml"
     text = (ROOT / "presets" / "default.toml").read_text()
     assert "[march]" not in text
-    preset.write_text(text + "\n[march]\nsteps_min = 300\nsteps_max = 400\n")
+    preset.write_text(text + "\n[march]\nsteps_min = 600\nsteps_max = 700\n")
     out = tmp_path / "cmp"
     r = run_cli(
         "compare",
@@ -236,8 +236,8 @@ def test_compare_says_when_the_reference_march_takes_longer_steps(tmp_path):
     assert r.returncode == 0, r.stderr
     from nubis_addon.core.march import max_steps
 
-    cap = max_steps(6, 0, True)
-    assert f"reference march in {cap} of 400 view steps" in r.stdout
+    cap = max_steps(6, 0, 2)  # a full comparison's reference march (light mode 2)
+    assert f"reference march in {cap} of 700 view steps" in r.stdout
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["reference_view_steps"] == cap and metrics["reference_steps_capped"] is True
 
