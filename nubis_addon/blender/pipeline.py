@@ -580,8 +580,7 @@ def _compare(
         "cycles_s": earlier[1]["cycles_s"] if earlier is not None else timings["cycles_s"],
     }
     scene.cycles.samples = taken
-    grain = metrics.compare(halves[0], halves[1])
-    result["viewport_noise"] = {k: grain[k] / 2 for k in ("alpha_rmse", "luminance_rel_error")}
+    result["viewport_noise"] = cycles_reference.noise_of(halves[0], halves[1])
     if stages == 4:
         # The real-time cone march against the reference march, everything else equal.
         step(f"4/{stages} the reference light march, {width * ss}x{height * ss} pixels")

@@ -21,6 +21,7 @@ import bpy
 import numpy as np
 
 from ..core import imageio, metrics
+from ..core.errors import NubisError
 from . import cycles_setup, sky
 
 # The most samples a noise target may ask of Cycles: 16384 at 160x90 is several hours on a 2-core machine.
@@ -30,7 +31,8 @@ _AIM = 0.9
 
 
 def noise_of(a: np.ndarray, b: np.ndarray) -> dict[str, float]:
-    """Noise of the mean of two equally sampled renders with different seeds: half their difference."""
+    """Noise of the mean of two equally sampled renders (Cycles' seeds, or the viewport's jitter passes):
+    half their difference."""
     own = metrics.compare(a, b)
     return {k: own[k] / 2 for k in ("alpha_rmse", "luminance_rel_error")}
 
@@ -150,6 +152,6 @@ def reusable(out: Path, wanted: str, samples: int, target: float | None) -> tupl
         return None
     try:
         image = imageio.read_image(out / REFERENCE_FILE)
-    except Exception:  # a damaged file is rendered again, not reported
+    except (OSError, NubisError):  # a damaged file is rendered again, not reported
         return None
     return image, {"samples": ref["samples"], "cycles_noise": noise, "cycles_s": ref.get("cycles_s", 0.0)}
