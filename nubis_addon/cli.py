@@ -190,6 +190,7 @@ def run(argv: Sequence[str], in_blender: bool = False) -> int:
                 summary = _execute(args, in_blender, log)
             except NubisError as err:
                 interrupt.stop()  # a failure caused by an interrupt's clean-up ends as the interrupt
+                terminal.break_bar(console.fd)
                 print(f"{PROG}: error: {printable(err)}", file=sys.stderr)
                 return 1
             except Exception as err:  # an unexpected fault: one line, the details in the log
@@ -198,6 +199,7 @@ def run(argv: Sequence[str], in_blender: bool = False) -> int:
                 with open(log, "a") as f:
                     traceback.print_exc(file=f)
                 log = _kept(log)
+                terminal.break_bar(console.fd)
                 if os.environ.get("NUBIS_DEBUG"):
                     traceback.print_exc()
                 print(

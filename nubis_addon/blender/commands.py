@@ -81,7 +81,7 @@ def execute(args, in_blender: bool, log: Path, out: Path) -> str:
     if cmd == "render":
         w, h = pipeline.resolution(scene, args.width, args.height)
         with console.quiet(log), staging.output_set() as outputs:  # the image and its motion vectors together
-            rgba = pipeline.render_viewport(scene, w, h, passes=args.passes)
+            rgba = pipeline.render_viewport(scene, w, h, passes=args.passes, progress=console.progress("rendering"))
             pipeline.save_render(scene, outputs.stage(out), rgba)
             if args.motion:
                 imageio.write_image(outputs.stage(args.motion), pipeline.render_motion(scene, w, h))

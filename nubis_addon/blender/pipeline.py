@@ -137,11 +137,14 @@ def viewport_shot(
     return ViewportShot(state, inv, scene_io.camera_eye(scene), scene.nubis.noise_seed, width, height)
 
 
-def render_shot(shot: ViewportShot, passes: int = 1, first_pass: int = 0) -> np.ndarray:
+def render_shot(
+    shot: ViewportShot, passes: int = 1, first_pass: int = 0, progress: Progress | None = None
+) -> np.ndarray:
     """Premultiplied scene-linear RGBA, top row first. Offline, several passes with shifted jitter
     replace the viewport's grain with a converged image; `first_pass` starts later in the jitter
-    sequence, so renders of disjoint passes are independent estimates of the same image."""
-    return run_steps(render_shot_steps(shot, passes, first_pass))
+    sequence, so renders of disjoint passes are independent estimates of the same image. `progress`
+    gets the fraction done after each tile."""
+    return run_steps(render_shot_steps(shot, passes, first_pass), progress)
 
 
 def render_shot_steps(shot: ViewportShot, passes: int = 1, first_pass: int = 0):
@@ -178,9 +181,11 @@ def render_viewport(
     clip_box: tuple | None = None,
     passes: int = 1,
     first_pass: int = 0,
+    progress: Progress | None = None,
 ) -> np.ndarray:
     """The viewport's clouds from the scene camera: premultiplied scene-linear RGBA, top row first."""
-    return render_shot(viewport_shot(scene, width, height, light_mode, mode, clip_box), passes, first_pass)
+    shot = viewport_shot(scene, width, height, light_mode, mode, clip_box)
+    return render_shot(shot, passes, first_pass, progress)
 
 
 def downsample(rgba: np.ndarray, factor: int) -> np.ndarray:

@@ -10,6 +10,17 @@ import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
+_bars: set[int] = set()  # descriptors whose last line is an unfinished progress bar
+
+
+def break_bar(fd: int) -> None:
+    """End an unfinished progress bar's line on ``fd``, so that the next message (an error, the interrupt
+    line) starts a line of its own and the bar stays visible above it."""
+    if fd in _bars:
+        _bars.discard(fd)
+        with contextlib.suppress(OSError):
+            os.write(fd, b"\n")
+
 
 class Console:
     def __init__(self) -> None:
@@ -21,6 +32,7 @@ class Console:
             os.write(self.fd, text.encode("utf-8", "replace"))
 
     def line(self, text: str) -> None:
+        break_bar(self.fd)
         self.write(text.rstrip("\n") + "\n")
 
     def progress(self, label: str) -> Callable[[float], None] | None:
@@ -32,6 +44,7 @@ class Console:
             fraction = min(max(fraction, 0.0), 1.0)
             bar = "#" * int(fraction * 30)
             self.write(f"\r{label} [{bar:<30}] {fraction * 100:5.1f}%" + ("\n" if fraction >= 1.0 else ""))
+            (_bars.discard if fraction >= 1.0 else _bars.add)(self.fd)
 
         return report
 

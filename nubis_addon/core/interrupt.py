@@ -26,6 +26,8 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
+from . import console
+
 MESSAGE = "nubis: interrupted\n"
 # SIGHUP does not exist on Windows.
 SIGNALS = tuple(s for s in (signal.SIGINT, signal.SIGTERM, getattr(signal, "SIGHUP", None)) if s is not None)
@@ -170,6 +172,7 @@ def _die(signum: int) -> None:
     remove_registered()
     fd = _installed.get("message_fd")
     if fd is not None:
+        console.break_bar(fd)
         with contextlib.suppress(OSError):
             os.write(fd, MESSAGE.encode())
     os._exit(128 + signum)

@@ -4,8 +4,11 @@ Each test runs the command line as a child process (`python -m nubis_addon`), wi
 that anything left in the temporary folder is seen.
 """
 
+import contextlib
 import os
+import pty
 import re
+import select
 import signal
 import subprocess
 import sys
@@ -92,16 +95,40 @@ def test_an_interrupt_during_a_large_render_is_acted_on_within_seconds(tmp_path)
     it ends within a tile's time (measured 0.5 s at 2048x2048 and 0.7 s at 4096x4096)."""
     env = _tmp_env(tmp_path)
     out = tmp_path / "big.png"
-    # A large frame: about a minute of drawing on llvmpipe after some 15 s of set-up, so the signal lands
-    # while the GPU draws.
-    proc = _start(["render", "--out", str(out), "--width", "2048", "--height", "2048"], env)
-    time.sleep(25.0)
-    assert proc.poll() is None, proc.communicate()
-    t0 = time.monotonic()
-    proc.send_signal(signal.SIGINT)
-    _stdout, stderr = proc.communicate(timeout=120)
-    latency = time.monotonic() - t0
-    assert proc.returncode == 130 and stderr.strip() == "nubis: interrupted", stderr
+    # stderr on a terminal, so the render shows its progress bar: the signal goes once the first tiles are
+    # drawn, however fast the machine sets up or draws (a fixed wait missed the whole 24 s render).
+    leader, follower = pty.openpty()
+    full = dict(os.environ, **env)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "nubis_addon", "render", "--out", str(out), "--width", "4096", "--height", "4096"],
+        cwd=ROOT,
+        env=full,
+        stdout=subprocess.PIPE,
+        stderr=follower,
+        text=True,
+    )
+    os.close(follower)
+    seen = ""
+    try:
+        while not re.search(r"rendering \[#*\s*\]\s+[1-9]\d*\.\d%", seen):
+            assert proc.poll() is None, (proc.communicate(), seen)
+            ready, _, _ = select.select([leader], [], [], 120.0)
+            assert ready, f"no progress within 120 s: {seen!r}"
+            seen += os.read(leader, 4096).decode("utf-8", "replace")
+        t0 = time.monotonic()
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=120)
+        latency = time.monotonic() - t0
+        rest = b""
+        with contextlib.suppress(OSError):  # the terminal's other end reads EIO once the child is gone
+            while select.select([leader], [], [], 0.5)[0] and (chunk := os.read(leader, 4096)):
+                rest += chunk
+    finally:
+        os.close(leader)
+    # The interrupt line starts a line of its own under the bar (it was once appended to the bar's line).
+    lines = (seen + rest.decode("utf-8", "replace")).strip().splitlines()
+    assert proc.returncode == 130 and lines[-1] == "nubis: interrupted", (proc.returncode, lines)
+    assert lines[-2].split("\r")[-1].startswith("rendering ["), lines
     assert latency < 5.0, f"the interrupt waited {latency:.1f} s"
     assert not out.exists() and list(Path(env["TMPDIR"]).iterdir()) == []
 
