@@ -209,8 +209,8 @@ float nubis_detail_fbm(vec3 p_hf, float h, int level)
 }
 
 struct NubisDensity {
-  float fine;   /* the full sample, detail erosion included */
-  float coarse; /* the cheap sample: never below `fine` (erosion only removes density, GPU Pro 7, S15) */
+  float fine;   /* the full sample, detail erosion included (a cheap sample's: eroded by the detail's mean) */
+  float coarse; /* the base shape, uneroded: never below `fine` (erosion only removes density, GPU Pro 7, S15) */
   float h;      /* height fraction */
   float precipitation;
 };
@@ -320,12 +320,19 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
 #endif
   float multiplier = max(f.b.a, 0.0);
   d.coarse = with_coverage * multiplier;
+  /* GPU Pro 7: a wispy base eroded by the detail, billows carved above it; a rising bottom type keeps
+   * the wisps higher up the cloud, for ragged undersides (GDC22; docs/sources.md#wispy-and-billowy-detail). */
+  float billow = clamp01(detail_h * mix(NUBIS_BILLOW_RATE, NUBIS_BILLOW_RATE_RAGGED, clamp01(f.a.a)));
 #if NUBIS_NAIVE
   if (cheap) {
 #else
   if (cheap || with_coverage <= 0.0) {
 #endif
-    d.fine = d.coarse;
+    /* A cheap sample skips the detail noise (S15): it erodes by the detail's mean instead, so that on
+     * average it removes what the full sample removes (uneroded, the light's cheap samples read 3 %
+     * darker than full ones; docs/viewport.md#light-model). */
+    float mean_modifier = mix(NUBIS_HF_FBM_MEAN, 1.0 - NUBIS_HF_FBM_MEAN, billow);
+    d.fine = clamp01(remap(with_coverage, mean_modifier * P.density_erosion, 1.0, 0.0, 1.0)) * multiplier;
     return d;
   }
 
@@ -355,9 +362,7 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
   }
 #endif
   /* GPU Pro 7: the stored (inverted) Worley fBm erodes the base into wisps, and flipped back it carves
-   * billows above the lowest 10 %. A rising bottom type keeps the wisps higher up the cloud, for ragged
-   * undersides (GDC22; docs/sources.md#wispy-and-billowy-detail). */
-  float billow = clamp01(detail_h * mix(NUBIS_BILLOW_RATE, NUBIS_BILLOW_RATE_RAGGED, clamp01(f.a.a)));
+   * billows above the lowest 10 % (`billow`, above). */
   float hf_modifier = mix(hf_fbm, 1.0 - hf_fbm, billow);
   /* GPU Pro 7: erosion strength 0.2 (P.density_erosion); the remap never raises a value, so fine <= coarse. */
   float eroded = clamp01(remap(with_coverage, hf_modifier * P.density_erosion, 1.0, 0.0, 1.0));

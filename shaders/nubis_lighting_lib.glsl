@@ -449,8 +449,8 @@ struct NubisLightDepths {
  * the sky's volume gives the cloud above and below. The cone's taps (offset from the point, and the length each stands for) are the same for
  * every sample of a frame, so Python computes them once (core/march.py) into P.light_taps;
  * P.march_light_samples counts them, the long one last. They read the noise one mip level coarser than
- * the view ray (GPU Pro 7) and switch to cheap samples once the view ray is half opaque (S15: "2x
- * faster"); the naive march of the benchmark keeps full samples. The reference permutation marches
+ * the view ray (GPU Pro 7) and switch to cheap samples once the view ray is mostly opaque (S15: "2x
+ * faster"; NUBIS_CHEAP_LIGHT_ALPHA); the naive march of the benchmark keeps full samples. The reference permutation marches
  * many fine samples along each direction instead, for measuring the real-time depths. */
 NubisLightDepths nubis_light_depths(vec3 p, float view_alpha, float lod, vec2 pixel)
 {
@@ -486,7 +486,7 @@ NubisLightDepths nubis_light_depths(vec3 p, float view_alpha, float lod, vec2 pi
     vec4 tap = P.light_taps[i];
     vec3 q = p + tap.xyz;
     NubisDensity s = nubis_density(q, cheap, light_lod);
-    float w = (cheap ? s.coarse : s.fine) * tap.w;
+    float w = s.fine * tap.w;
     l.powder += w;
     l.sun += w * nubis_extinction_factor(q, s.precipitation);
   }

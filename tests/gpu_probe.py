@@ -27,8 +27,9 @@ _MODE_GLOW = 4.0
 NOISE_TEXTURES = {"lf": 0.0, "hf": 1.0, "curl": 2.0}
 
 
-def probe_density(gpu_inputs: CloudGPU, points: np.ndarray) -> np.ndarray:
+def probe_density(gpu_inputs: CloudGPU, points: np.ndarray, cheap: bool = False) -> np.ndarray:
     """(fine, coarse, height fraction) of the shader's density at `points` (N, 3) world metres: (N, 3) float32.
+    `cheap` takes the cheap sample (no detail fetch) the light march takes in opaque cloud.
 
     The points reach the GPU as float32; pass the same float32 values to anything compared with the result.
     """
@@ -37,7 +38,7 @@ def probe_density(gpu_inputs: CloudGPU, points: np.ndarray) -> np.ndarray:
         raise ValueError(f"points must have shape (N, 3), not {pts.shape}")
     texels = np.zeros((len(pts), 4), np.float32)
     texels[:, :3] = pts
-    return _run(gpu_inputs, texels, (_MODE_DENSITY, 0.0, 0.0, 0.0))[:, :3]
+    return _run(gpu_inputs, texels, (_MODE_DENSITY, float(cheap), 0.0, 0.0))[:, :3]
 
 
 def probe_remap(gpu_inputs: CloudGPU, args: np.ndarray) -> np.ndarray:

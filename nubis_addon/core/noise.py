@@ -1028,3 +1028,9 @@ def load_or_generate(
             stacklevel=2,
         )
     return ns
+
+
+def fbm_mean(texture: np.ndarray) -> float:
+    """The mean of a uint8 noise texture's fBm (its first three channels weighted by FBM_WEIGHTS), in [0, 1]."""
+    channels = np.asarray(texture[..., :3], np.float64).reshape(-1, 3).mean(axis=0) / 255.0
+    return float(channels @ np.asarray(FBM_WEIGHTS))

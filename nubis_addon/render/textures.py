@@ -95,6 +95,8 @@ class NoiseTextures:
             "NUBIS_CIRRUS_SIZE": cirrus_size,
             "NUBIS_CIRRUS_LEVELS": cirrus_levels(cirrus_size),
             "NUBIS_CIRRUS_ATLAS": f"ivec2({atlas.shape[1]}, {atlas.shape[0]})",
+            # The detail fBm's mean, which a cheap sample erodes by in place of the detail noise.
+            "NUBIS_HF_FBM_MEAN": f"{noise.fbm_mean(noise_set.hf):.6f}",
         }
         # Four 8-bit channels per texel on the GPU.
         self.gpu_bytes = sum(int(np.prod(a.shape[:-1])) * 4 for a in (*padded.values(), atlas))

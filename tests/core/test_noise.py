@@ -487,3 +487,12 @@ def test_eviction_and_clearing_never_delete_a_look_alike_file(tmp_path: Path, co
     noise.load_or_generate(tmp_path, 1)
     assert noise.clear_cache(tmp_path).sets == 1
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(look_alikes)
+
+
+def test_fbm_mean_weights_the_first_three_channels():
+    tex = np.zeros((4, 4, 4, 4), np.uint8)
+    tex[..., 0] = 255
+    tex[..., 3] = 255  # the fourth channel is not part of the fBm
+    assert noise.fbm_mean(tex) == pytest.approx(noise.FBM_WEIGHTS[0])
+    tex[..., 1:3] = 255
+    assert noise.fbm_mean(tex) == pytest.approx(1.0)

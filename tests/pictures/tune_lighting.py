@@ -2,6 +2,7 @@
 
 Run from the repository root:
     .venv-5.3/bin/python tests/pictures/tune_lighting.py OUT_DIR [W H SAMPLES [EVALUATIONS]] [--presets A,B]
+        [--params NAME,NAME]
 (defaults 160 90 256 120, the README's parity size; SAMPLES is where Cycles starts: it adds samples
 until its own noise is at most 5 %, at 256 volume bounces, more than any preset needs to converge,
 docs/convergence.md)
@@ -11,8 +12,9 @@ not depend on the viewport's lighting terms, so it is rendered once; then a Neld
 only the viewport. The objective is the mean over the presets of the luminance error plus |bias|, the
 error measured on 4x4-pixel blocks: Cycles' per-pixel noise (5 %) would otherwise weigh as much as the
 light's own error and flatten the search. Presets that set a tuned parameter themselves keep their
-value. Prints each improvement and the before/after table (per pixel, as compare measures); nothing is
-written to the presets: copy the result into core/schema.py by hand.
+value. --params frees only those of TUNED (the others keep their defaults). Prints each improvement
+and the before/after table (per pixel, as compare measures); nothing is written to the presets: copy
+the result into core/schema.py by hand.
 """
 
 from __future__ import annotations
@@ -81,6 +83,7 @@ def reference(name: str, out: Path, width: int, height: int, samples: int) -> di
 
 
 PRESETS: list[str] = []  # --presets: fit these only (default: every shipped preset)
+PARAMS: list[str] = []  # --params: free these only (default: all of TUNED)
 SUPERSAMPLING = 2  # the viewport shots of the search (compare takes 4; 2 keeps a round under a minute)
 
 
@@ -197,7 +200,10 @@ def main(out_dir: str, width: int = 160, height: int = 90, samples: int = 256, e
     nubis_addon.register()
     ensure_gpu_context()
     shots = prepare(Path(out_dir), width, height, samples)
-    keys = list(TUNED)
+    unknown = sorted(set(PARAMS) - set(TUNED))
+    if unknown:
+        raise SystemExit(f"--params: not tuned here: {', '.join(unknown)} (choose from {', '.join(TUNED)})")
+    keys = PARAMS or list(TUNED)
     start = np.array([float(defaults()[k]) for k in keys])
     lo, hi, steps = (np.array([TUNED[k][i] for k in keys]) for i in range(3))
     before = evaluate(shots, dict(zip(keys, start, strict=True)))
@@ -225,5 +231,9 @@ if __name__ == "__main__":
     if "--presets" in args:
         i = args.index("--presets")
         PRESETS.extend(args[i + 1].split(","))
+        del args[i : i + 2]
+    if "--params" in args:
+        i = args.index("--params")
+        PARAMS.extend(args[i + 1].split(","))
         del args[i : i + 2]
     main(args[0] if args else "tune_lighting", *(int(a) for a in args[1:5]))

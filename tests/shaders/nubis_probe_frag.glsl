@@ -1,7 +1,8 @@
 /* Density probe, for tests only: one fragment per texel of probe_points, so the density the viewport,
  * the render and the bake share can be read back and compared with an independent implementation.
  * probe_mode.x picks what is written, t being the fragment's texel of probe_points:
- *   0: vec4(fine density, coarse density, height fraction, 0) at the world point t.xyz;
+ *   0: vec4(fine density, coarse density, height fraction, 0) at the world point t.xyz, of the cheap sample
+ *      when probe_mode.y is 1;
  *   1: vec4(remap(t.x, t.y, t.z, t.w, probe_mode.y), 0, 0, 0): the shared helper (GPU Pro 7's remap) as compiled;
  *   2: the raw filtered noise at normalised coordinates t.xyz, from noise_lf (probe_mode.y = 0),
  *      noise_hf (1) or noise_curl (2, t.xy), so a test can see how this GPU filters 8-bit textures;
@@ -38,6 +39,6 @@ void main()
     color = vec4(remap(t.x, t.y, t.z, t.w, probe_mode.y), 0.0, 0.0, 0.0);
     return;
   }
-  NubisDensity d = nubis_density(t.xyz, false, 0.0);
+  NubisDensity d = nubis_density(t.xyz, probe_mode.y > 0.5, 0.0);
   color = vec4(d.fine, d.coarse, d.h, 0.0);
 }
