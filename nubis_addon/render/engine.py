@@ -137,7 +137,7 @@ def _volume_create_info(defines: dict[str, object]) -> GPUShaderCreateInfo:
     info.uniform_buf(0, "NubisParams", "P")
     for slot, (kind, sampler) in enumerate(CLOUD_SAMPLERS):
         info.sampler(slot, kind, sampler)
-    info.image(0, "R32F", "FLOAT_3D", "volume_out", qualifiers={"WRITE"})
+    info.image(0, lightvolume.FORMAT, "FLOAT_3D", "volume_out", qualifiers={"WRITE"})
     for name in ("volume_origin", "volume_u", "volume_v", "volume_w"):
         info.push_constant("VEC4", name)
     info.local_group_size(VOLUME_GROUP, VOLUME_GROUP, 1)
@@ -249,7 +249,7 @@ class CloudGPU:
             return
         for name in VOLUMES:
             if self.volumes[name] is None:
-                self.volumes[name] = gpu.types.GPUTexture(lightvolume.SIZE, format="R32F")
+                self.volumes[name] = gpu.types.GPUTexture(lightvolume.SIZE, format=lightvolume.FORMAT)
         defines = self.defines(NUBIS_REFERENCE=0, NUBIS_NAIVE=0, NUBIS_FETCH_STATS=0)
         sh = shader("light_volume", defines)
         for name, box in (("sun_volume", lightvolume.sun_volume(state)), ("sky_volume", lightvolume.sky_volume(state))):

@@ -297,10 +297,10 @@ def test_light_volume_boxes_hold_the_cloud_domain_and_face_the_light():
     state.clip_box = (-500.0, -400.0, 1500.0, 600.0)
     centre, half, _low, _high = lightvolume.domain(state)
     assert centre == (500.0, 100.0) and half == (1000.0, 500.0)
-    assert lightvolume.memory_bytes() <= 20 * 2**20 // 4  # a fraction of GPU Pro 7's 20 MB
+    assert lightvolume.memory_bytes() <= 8 * 2**20  # with the noise set's 10.3 MiB, within GPU Pro 7's 20 MB
 
 
-def test_light_volumes_follow_the_wind_in_steps_of_a_quarter_texel():
+def test_light_volumes_follow_the_wind_in_steps_of_the_refill_drift():
     from nubis_addon.core import lightvolume
     from nubis_addon.core.state import CloudState
 
