@@ -360,12 +360,35 @@ vec3 nubis_reference_sky_light(vec3 p, vec3 view_dir, vec2 pixel)
 
 /* Diffusion through a slab of cloud lit from one side (docs/viewport.md#light-model): the share of the
  * light entering that side found at a point with optical depth `near` between it and that side and
- * `far` beyond it. Diffusion in a cloud that scatters without absorbing falls off linearly with the
- * transport depth (`rate` x optical depth), from the lit boundary to the far one, each extended by
- * the extrapolation length `edge`; a thin cloud (both depths near 0) gets one half. */
-float nubis_slab_diffusion(float near, float far, float rate, float edge)
+ * `far` beyond it. In transport depth (`rate` x optical depth) the diffusion equation phi'' = kappa^2 phi
+ * holds across the slab, with the extrapolation length `edge` at both boundaries (phi -+ edge phi' = the
+ * light coming in: 1 on the lit side, 0 on the far one). Cloud that scatters without absorbing
+ * (`kappa` 0) gives the linear falloff (rate far + edge) / (rate (near + far) + 2 edge): one half in a
+ * thin cloud. Where rain or a storm absorbs, the light dies out exponentially on its way in, `kappa`
+ * per optical depth (nubis_absorbing_decay), from about 1 / (1 + kappa edge / rate) at a thick slab's
+ * lit face. */
+/* The rate per optical depth at which diffuse light dies out in cloud of single-scattering `albedo`:
+ * diffusion theory's sqrt(3 (1 - albedo) (1 - g albedo)), which overestimates it where the cloud absorbs
+ * much (by 28 % at albedo 1/2, 42 % at 1/3), bent so that it never exceeds 1, the rate of unscattered
+ * light. For isotropic scattering this follows transport theory's exact rate (the root of
+ * albedo / (2 kappa) ln((1 + kappa) / (1 - kappa)) = 1) within 6 % at every albedo. */
+float nubis_absorbing_decay(float albedo, float g)
 {
-  return (rate * far + edge) / (rate * (near + far) + 2.0 * edge);
+  float kd = sqrt(3.0 * (1.0 - albedo) * (1.0 - g * albedo));
+  return kd / pow(1.0 + pow(kd, 6.0), 1.0 / 6.0);
+}
+
+float nubis_slab_diffusion(float near, float far, float rate, float edge, float kappa)
+{
+  float u = rate * far, span = rate * (near + far);
+  float k = kappa / max(rate, 1e-4);
+  if (k * (span + 2.0 * edge) < 1e-3) {
+    return (u + edge) / (span + 2.0 * edge);
+  }
+  /* [sinh(k u) + k edge cosh(k u)] / [(1 + (k edge)^2) sinh(k span) + 2 k edge cosh(k span)], written
+   * with decaying exponentials only (u <= span). */
+  float a = 1.0 + k * edge, b = 1.0 - k * edge;
+  return exp(k * (u - span)) * (a - exp(-2.0 * k * u) * b) / (a * a - exp(-2.0 * k * span) * b * b);
 }
 
 /* What the light of one view ray shares along its length (for a sun light they are constant along
@@ -562,11 +585,13 @@ vec3 nubis_in_scattering(
      * probability pow(1 - coarse, 0.5), a local guess at the same occlusion. S15's height gradient
      * stays as art direction. */
     float k = P.lighting_sky_occlusion, e = P.lighting_diffusion_edge;
-    sky_light = P.ambient.rgb * (overhead * nubis_slab_diffusion(l.above, l.below, k, e)) +
-                P.ambient_below.rgb * nubis_slab_diffusion(l.below, l.above, k, e);
-    /* Diffused light has scattered on its way in: where rain or a storm absorbs, it keeps the albedo's
-     * share, as each octave does (docs/viewport.md#light-model). */
-    sky_light *= mix(P.lighting_ambient_bottom, 1.0, d.h) * albedo;
+    /* Diffused light has scattered on its way in: where rain or a storm absorbs, it dies out on the way
+     * (the point's own albedo stands for the cloud's around it; docs/viewport.md#light-model). */
+    float g = mix(P.lighting_phase_g0, P.lighting_phase_g1, P.lighting_phase_mix);
+    float kappa = nubis_absorbing_decay(albedo, g);
+    sky_light = P.ambient.rgb * (overhead * nubis_slab_diffusion(l.above, l.below, k, e, kappa)) +
+                P.ambient_below.rgb * nubis_slab_diffusion(l.below, l.above, k, e, kappa);
+    sky_light *= mix(P.lighting_ambient_bottom, 1.0, d.h);
   }
   else {
     /* With the long tap: GDC22's ambient probability, growing with height (S15; docs/sources.md#ambient). */

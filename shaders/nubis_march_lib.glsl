@@ -39,6 +39,29 @@ float nubis_slab_scattering(float mu_v, float mu_l, float tau)
   return m_v / (m_v + m_l) * (1.0 - exp(-tau * (m_v + m_l)));
 }
 
+/* Radiance per unit of the sun's irradiance that a homogeneous slab of vertical optical depth `tau`,
+ * scattering without absorbing, sends towards a viewer at cosine `mu_v` after more than one scattering,
+ * the sun at cosine `mu_l` (nubis_cirrus; docs/sources.md#cirrus-lighting). The Eddington approximation
+ * gives the slab's diffuse reflection and transmission (Shettle and Weinman 1970); of the diffuse light
+ * on the viewer's side, the share beyond single scattering (which nubis_slab_scattering gives exactly)
+ * is taken as (1 - p)^2, p = (1 - e^-2 tau) / (2 tau) the chance that light scattered in the slab leaves
+ * it unscattered: second order in a thin layer, all of it in a thick one. The square is fitted, not
+ * derived. The light leaves evenly in all directions. */
+float nubis_slab_multiple_scattering(float mu_v, float mu_l, float tau)
+{
+  if (mu_l <= 0.0 || tau <= 0.0) {
+    return 0.0;
+  }
+  float mu0 = max(mu_l, NUBIS_MIN_SLANT_COS);
+  float g = mix(P.lighting_phase_g0, P.lighting_phase_g1, P.lighting_phase_mix);
+  float k = 0.75 * (1.0 - g) * tau;
+  float direct = exp(-tau / mu0);
+  float reflected = (k + (0.5 - 0.75 * mu0) * (1.0 - direct)) / (1.0 + k);
+  float diffuse = mu_v > 0.0 ? max(1.0 - reflected - direct, 0.0) : reflected;
+  float once = tau < 1e-3 ? 1.0 - tau : (1.0 - exp(-2.0 * tau)) / (2.0 * tau);
+  return mu0 * diffuse * (1.0 - once) * (1.0 - once) / NUBIS_PI;
+}
+
 /* GPU Pro 7, S15: the cirrus layer, sampled once where the ray crosses its sphere
  * (docs/sources.md#cirrus-layer, docs/sources.md#cirrus-lighting), lit as the thin homogeneous slab
  * Cycles renders from the bake (nubis_slab_scattering). The sun's light is exact. Single scattering's
@@ -76,6 +99,9 @@ vec4 nubis_cirrus(vec3 origin, vec3 dir, vec2 pixel)
   light += P.lighting_ambient * sky;
 #else
   light += P.ambient.rgb * alpha;
+  /* The sun's light that scatters more than once in the layer: thin cirrus hardly, a thick anvil mostly
+   * (a converged path tracer lights its underside white; docs/sources.md#cirrus-lighting). */
+  light += P.sun_radiance.rgb * nubis_slab_multiple_scattering(mu_v, dot(P.sun_dir.xyz, up), tau);
 #endif
   return vec4(light, alpha);
 }

@@ -24,6 +24,8 @@ _MODE_REMAP = 1.0
 _MODE_NOISE = 2.0
 _MODE_VORTEX = 3.0
 _MODE_GLOW = 4.0
+_MODE_SLAB = 5.0
+_MODE_DIFFUSION = 6.0
 NOISE_TEXTURES = {"lf": 0.0, "hf": 1.0, "curl": 2.0}
 
 
@@ -88,6 +90,21 @@ def probe_glow(gpu_inputs: CloudGPU, points: np.ndarray, fine_density: float = 0
     texels[:, :3] = p
     texels[:, 3] = fine_density
     return _run(gpu_inputs, texels, (_MODE_GLOW, 0.0, 0.0, 0.0))[:, :3]
+
+
+def probe_slab(gpu_inputs: CloudGPU, args: np.ndarray) -> np.ndarray:
+    """A cirrus slab's light per unit of the sun's irradiance for each row (view cosine, sun cosine,
+    vertical optical depth) of `args` (N, 3): (N, 2) holding its multiple and its single scattering."""
+    a = np.asarray(args, dtype=np.float32)
+    texels = np.zeros((len(a), 4), np.float32)
+    texels[:, :3] = a
+    return _run(gpu_inputs, texels, (_MODE_SLAB, 0.0, 0.0, 0.0))[:, :2]
+
+
+def probe_diffusion(gpu_inputs: CloudGPU, args: np.ndarray, kappa: float) -> np.ndarray:
+    """The sky light's slab diffusion for each row (near, far, rate, edge) of `args` (N, 4) at decay
+    rate `kappa`, and the decay rate for (albedo, g) read from the first two columns: (N, 2)."""
+    return _run(gpu_inputs, np.asarray(args, dtype=np.float32), (_MODE_DIFFUSION, float(kappa), 0.0, 0.0))[:, :2]
 
 
 def _run(gpu_inputs: CloudGPU, texels: np.ndarray, mode: tuple[float, float, float, float]) -> np.ndarray:

@@ -7,10 +7,21 @@
  *   2: the raw filtered noise at normalised coordinates t.xyz, from noise_lf (probe_mode.y = 0),
  *      noise_hf (1) or noise_curl (2, t.xy), so a test can see how this GPU filters 8-bit textures;
  *   3: vec4(vortex-moved xy, the second ring's xy) for the world xy t.xy (GDC22's vortex);
- *   4: vec4(storm glow rgb, 0) at the world point t.xyz for a fine density t.w (GDC22's glow). */
+ *   4: vec4(storm glow rgb, 0) at the world point t.xyz for a fine density t.w (GDC22's glow);
+ *   5: vec4(nubis_slab_multiple_scattering(t.x, t.y, t.z), nubis_slab_scattering(t.x, t.y, t.z), 0, 0):
+ *      a slab's light at view cosine t.x, sun cosine t.y, vertical optical depth t.z;
+ *   6: vec4(nubis_slab_diffusion(t.x, t.y, t.z, t.w, probe_mode.y), nubis_absorbing_decay(t.x, t.y), 0, 0). */
 void main()
 {
   vec4 t = texelFetch(probe_points, ivec2(gl_FragCoord.xy), 0);
+  if (probe_mode.x > 5.5) {
+    color = vec4(nubis_slab_diffusion(t.x, t.y, t.z, t.w, probe_mode.y), nubis_absorbing_decay(t.x, t.y), 0.0, 0.0);
+    return;
+  }
+  if (probe_mode.x > 4.5) {
+    color = vec4(nubis_slab_multiple_scattering(t.x, t.y, t.z), nubis_slab_scattering(t.x, t.y, t.z), 0.0, 0.0);
+    return;
+  }
   if (probe_mode.x > 3.5) {
     color = vec4(nubis_storm_glow(t.xyz, t.w), 0.0);
     return;
