@@ -93,6 +93,12 @@ float nubis_phase(float cos_angle, float eccentricity_scale)
              P.lighting_phase_mix);
 }
 
+/* The mean cosine of the two lobes together: the asymmetry g the closed-form slab terms take. */
+float nubis_phase_mean_cosine()
+{
+  return mix(P.lighting_phase_g0, P.lighting_phase_g1, P.lighting_phase_mix);
+}
+
 /* GPU Pro 7: raining clouds absorb more light (docs/sources.md#rain-and-storm-absorption). Modelled as
  * absorption added to the
  * scattering, so extinction grows by this factor and the albedo is its inverse; the view march, the
@@ -358,6 +364,20 @@ vec3 nubis_reference_sky_light(vec3 p, vec3 view_dir, vec2 pixel)
   return P.lighting_ambient * light;
 }
 
+/* The rate per optical depth at which diffuse light dies out in cloud of single-scattering `albedo`:
+ * diffusion theory's sqrt(3 (1 - albedo) (1 - g albedo)), which overestimates it where the cloud absorbs
+ * much (by 28 % at albedo 1/2, 42 % at 1/3), bent so that it never exceeds 1, the rate of unscattered
+ * light. For isotropic scattering this follows transport theory's exact rate (the root of
+ * albedo / (2 kappa) ln((1 + kappa) / (1 - kappa)) = 1) within 6 % at every albedo. */
+float nubis_absorbing_decay(float albedo, float g)
+{
+  if (albedo >= 1.0) {
+    return 0.0; /* cloud that does not absorb, nearly all of it: no decay, and no powers to take */
+  }
+  float kd = sqrt(3.0 * (1.0 - albedo) * (1.0 - g * albedo));
+  return kd / pow(1.0 + pow(kd, 6.0), 1.0 / 6.0);
+}
+
 /* Diffusion through a slab of cloud lit from one side (docs/viewport.md#light-model): the share of the
  * light entering that side found at a point with optical depth `near` between it and that side and
  * `far` beyond it. In transport depth (`rate` x optical depth) the diffusion equation phi'' = kappa^2 phi
@@ -367,17 +387,6 @@ vec3 nubis_reference_sky_light(vec3 p, vec3 view_dir, vec2 pixel)
  * thin cloud. Where rain or a storm absorbs, the light dies out exponentially on its way in, `kappa`
  * per optical depth (nubis_absorbing_decay), from about 1 / (1 + kappa edge / rate) at a thick slab's
  * lit face. */
-/* The rate per optical depth at which diffuse light dies out in cloud of single-scattering `albedo`:
- * diffusion theory's sqrt(3 (1 - albedo) (1 - g albedo)), which overestimates it where the cloud absorbs
- * much (by 28 % at albedo 1/2, 42 % at 1/3), bent so that it never exceeds 1, the rate of unscattered
- * light. For isotropic scattering this follows transport theory's exact rate (the root of
- * albedo / (2 kappa) ln((1 + kappa) / (1 - kappa)) = 1) within 6 % at every albedo. */
-float nubis_absorbing_decay(float albedo, float g)
-{
-  float kd = sqrt(3.0 * (1.0 - albedo) * (1.0 - g * albedo));
-  return kd / pow(1.0 + pow(kd, 6.0), 1.0 / 6.0);
-}
-
 float nubis_slab_diffusion(float near, float far, float rate, float edge, float kappa)
 {
   float u = rate * far, span = rate * (near + far);
@@ -587,8 +596,7 @@ vec3 nubis_in_scattering(
     float k = P.lighting_sky_occlusion, e = P.lighting_diffusion_edge;
     /* Diffused light has scattered on its way in: where rain or a storm absorbs, it dies out on the way
      * (the point's own albedo stands for the cloud's around it; docs/viewport.md#light-model). */
-    float g = mix(P.lighting_phase_g0, P.lighting_phase_g1, P.lighting_phase_mix);
-    float kappa = nubis_absorbing_decay(albedo, g);
+    float kappa = nubis_absorbing_decay(albedo, nubis_phase_mean_cosine());
     sky_light = P.ambient.rgb * (overhead * nubis_slab_diffusion(l.above, l.below, k, e, kappa)) +
                 P.ambient_below.rgb * nubis_slab_diffusion(l.below, l.above, k, e, kappa);
     sky_light *= mix(P.lighting_ambient_bottom, 1.0, d.h);

@@ -53,8 +53,7 @@ float nubis_slab_multiple_scattering(float mu_v, float mu_l, float tau)
     return 0.0;
   }
   float mu0 = max(mu_l, NUBIS_MIN_SLANT_COS);
-  float g = mix(P.lighting_phase_g0, P.lighting_phase_g1, P.lighting_phase_mix);
-  float k = 0.75 * (1.0 - g) * tau;
+  float k = 0.75 * (1.0 - nubis_phase_mean_cosine()) * tau;
   float direct = exp(-tau / mu0);
   float reflected = (k + (0.5 - 0.75 * mu0) * (1.0 - direct)) / (1.0 + k);
   float diffuse = mu_v > 0.0 ? max(1.0 - reflected - direct, 0.0) : reflected;
