@@ -22,7 +22,7 @@ def _dense_and_tiled(scene, state, plan, packed=False):
     from nubis_addon.render import bake as gpu_bake
 
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
-    clouds.update(state)
+    clouds.update(state, light=False)  # the bake reads densities only
     dense = gpu_bake.bake_density(clouds, plan)[0]
     tiled = np.zeros_like(dense)
 

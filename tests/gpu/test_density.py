@@ -25,7 +25,7 @@ def _inputs(scene):
     seed = scene.nubis.noise_seed
     state = scene_io.state_from_scene(scene)
     clouds = runtime.cloud_gpu(seed)
-    clouds.update(state)
+    clouds.update(state, light=False)  # densities only
     if seed not in _noise_sets:
         # Already generated and cached by cloud_gpu: this is a load of the very arrays on the GPU.
         _noise_sets[seed] = noise.load_or_generate(runtime.cache_dir(), seed)

@@ -19,7 +19,7 @@ def _gpu(scene):
 
     state = scene_io.state_from_scene(scene)
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
-    clouds.update(state)
+    clouds.update(state, light=False)  # densities and the vortex only
     return clouds, state
 
 
