@@ -364,6 +364,19 @@ vec3 nubis_reference_sky_light(vec3 p, vec3 view_dir, vec2 pixel)
   return P.lighting_ambient * light;
 }
 
+/* The share of a beam arriving at cosine `mu0` that a homogeneous slab of vertical optical depth `tau`,
+ * scattering without absorbing, sends out as diffuse light: on the far side (`transmitted`) or back
+ * towards the beam. The Eddington approximation (Shettle and Weinman 1970;
+ * docs/sources.md#cirrus-lighting): the reflection (k + (1/2 - 3/4 mu0)(1 - e^(-tau/mu0))) / (1 + k),
+ * k = 3/4 (1 - g) tau; the transmission is what neither is reflected nor passes unscattered. */
+float nubis_slab_diffuse_share(float mu0, float tau, bool transmitted)
+{
+  float k = 0.75 * (1.0 - nubis_phase_mean_cosine()) * tau;
+  float direct = exp(-tau / mu0);
+  float reflected = (k + (0.5 - 0.75 * mu0) * (1.0 - direct)) / (1.0 + k);
+  return transmitted ? max(1.0 - reflected - direct, 0.0) : reflected;
+}
+
 /* The rate per optical depth at which diffuse light dies out in cloud of single-scattering `albedo`:
  * diffusion theory's sqrt(3 (1 - albedo) (1 - g albedo)), which overestimates it where the cloud absorbs
  * much (by 28 % at albedo 1/2, 42 % at 1/3), bent so that it never exceeds 1, the rate of unscattered
@@ -583,9 +596,22 @@ vec3 nubis_in_scattering(
   vec3 sky_light = nubis_reference_sky_light(p, view_dir, pixel);
 #else
   float overhead = 1.0;
+  vec3 from_above = P.ambient.rgb;
 #  if NUBIS_CIRRUS
-  /* ... and the sky light from above by its transmittance overhead. */
-  overhead = exp(-nubis_cirrus_optical_depth(p, normalize(p + vec3(0.0, 0.0, P.layer_planet_radius)), 0.0));
+  /* ... and the light from above is what comes through the layer: the sky's, diffusing through it as
+   * through the clouds (the light model's weights at its lower face, 2 e / (k tau + 2 e) of the sky's
+   * and the rest the ground's, sent back), and the sun's that it scatters down
+   * (nubis_slab_diffuse_share). The long tap's model takes the sky's share alone. */
+  vec3 up = normalize(p + vec3(0.0, 0.0, P.layer_planet_radius));
+  float tau_c = nubis_cirrus_optical_depth(p, up, 0.0);
+  float e2 = 2.0 * P.lighting_diffusion_edge;
+  overhead = e2 / (P.lighting_sky_occlusion * tau_c + e2);
+  float mu_sun = dot(P.sun_dir.xyz, up);
+  from_above = mix(P.ambient_below.rgb, P.ambient.rgb, overhead);
+  if (mu_sun > 0.0 && tau_c > 0.0) {
+    float mu0 = max(mu_sun, NUBIS_MIN_SLANT_COS);
+    from_above += P.sun_radiance.rgb * (mu0 * nubis_slab_diffuse_share(mu0, tau_c, true) / NUBIS_PI);
+  }
 #  endif
   vec3 sky_light;
   if (l.column) {
@@ -597,7 +623,7 @@ vec3 nubis_in_scattering(
     /* Diffused light has scattered on its way in: where rain or a storm absorbs, it dies out on the way
      * (the point's own albedo stands for the cloud's around it; docs/viewport.md#light-model). */
     float kappa = nubis_absorbing_decay(albedo, nubis_phase_mean_cosine());
-    sky_light = P.ambient.rgb * (overhead * nubis_slab_diffusion(l.above, l.below, k, e, kappa)) +
+    sky_light = from_above * nubis_slab_diffusion(l.above, l.below, k, e, kappa) +
                 P.ambient_below.rgb * nubis_slab_diffusion(l.below, l.above, k, e, kappa);
     sky_light *= mix(P.lighting_ambient_bottom, 1.0, d.h);
   }

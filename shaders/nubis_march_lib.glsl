@@ -39,6 +39,13 @@ float nubis_slab_scattering(float mu_v, float mu_l, float tau)
   return m_v / (m_v + m_l) * (1.0 - exp(-tau * (m_v + m_l)));
 }
 
+/* p = (1 - e^(-2 tau)) / (2 tau): the chance that light scattered in a slab of vertical optical depth
+ * `tau` leaves it unscattered (its mean over the depth and the directions, in the two-stream sense). */
+float nubis_slab_leave_unscattered(float tau)
+{
+  return tau < 1e-3 ? 1.0 - tau : (1.0 - exp(-2.0 * tau)) / (2.0 * tau);
+}
+
 /* Radiance per unit of the sun's irradiance that a homogeneous slab of vertical optical depth `tau`,
  * scattering without absorbing, sends towards a viewer at cosine `mu_v` after more than one scattering,
  * the sun at cosine `mu_l` (nubis_cirrus; docs/sources.md#cirrus-lighting). The Eddington approximation
@@ -53,12 +60,29 @@ float nubis_slab_multiple_scattering(float mu_v, float mu_l, float tau)
     return 0.0;
   }
   float mu0 = max(mu_l, NUBIS_MIN_SLANT_COS);
-  float k = 0.75 * (1.0 - nubis_phase_mean_cosine()) * tau;
-  float direct = exp(-tau / mu0);
-  float reflected = (k + (0.5 - 0.75 * mu0) * (1.0 - direct)) / (1.0 + k);
-  float diffuse = mu_v > 0.0 ? max(1.0 - reflected - direct, 0.0) : reflected;
-  float once = tau < 1e-3 ? 1.0 - tau : (1.0 - exp(-2.0 * tau)) / (2.0 * tau);
-  return mu0 * diffuse * (1.0 - once) * (1.0 - once) / NUBIS_PI;
+  float diffuse = nubis_slab_diffuse_share(mu0, tau, mu_v > 0.0);
+  return mu0 * diffuse * (1.0 - nubis_slab_leave_unscattered(tau)) / NUBIS_PI;
+}
+
+/* The sky's light from above and the ground's from below, diffusing through a homogeneous slab of
+ * vertical optical depth `tau` scattering without absorbing, as it reaches a viewer at cosine `mu_v`:
+ * the clouds' light model (nubis_slab_diffusion with kappa = 0, `rate` and `edge` its Sky Occlusion and
+ * Slab Edge) gives the diffuse light at depth x below the top face the weight (rate (tau - x) + edge) /
+ * (rate tau + 2 edge) from above, and the layer between that depth and the viewer lets e^(-m y) of it
+ * through (m the view ray's slant factor, y the depth below x). Integrated along the ray in closed form,
+ * with a = 1 - e^(-m tau) (the layer's opacity) and b = (a - m tau e^(-m tau)) / m:
+ * x: the weight of the light from the face away from the viewer, (rate b + edge a) / (rate tau + 2 edge);
+ * y: from the viewer's own face, (rate (tau a - b) + edge a) / (rate tau + 2 edge).
+ * Thin, each is half the opacity; thick, the far face's light fades as 1 / tau and the near face's is
+ * all sent back. */
+vec2 nubis_slab_sky_weights(float mu_v, float tau, float rate, float edge)
+{
+  float m = 1.0 / max(abs(mu_v), NUBIS_MIN_SLANT_COS);
+  float mt = m * tau;
+  float a = 1.0 - exp(-mt);
+  float b = mt < 1e-3 ? 0.5 * m * tau * tau : (a - mt * exp(-mt)) / m;
+  float span = rate * tau + 2.0 * edge;
+  return vec2(rate * b + edge * a, rate * (tau * a - b) + edge * a) / span;
 }
 
 /* GPU Pro 7, S15: the cirrus layer, sampled once where the ray crosses its sphere
@@ -87,7 +111,9 @@ vec4 nubis_cirrus(vec3 origin, vec3 dir, vec2 pixel)
   float alpha = 1.0 - exp(-tau_view);
   vec3 light = P.sun_radiance.rgb * nubis_phase(dot(dir, P.sun_dir.xyz), 1.0) *
                nubis_slab_scattering(mu_v, dot(P.sun_dir.xyz, up), tau);
-#if NUBIS_REFERENCE == 1
+  /* The World's light scattered once, direction by direction (once per pixel, so the real-time view
+   * affords the reference's directions): grazing views of thin cirrus see mostly the bright horizon
+   * behind it through the forward lobe. */
   NubisSkyDirections s = nubis_sky_directions(dir, pixel);
   vec3 sky = vec3(0.0);
   for (int i = 0; i < NUBIS_REFERENCE_SKY_DIRECTIONS; i++) {
@@ -96,8 +122,14 @@ vec4 nubis_cirrus(vec3 origin, vec3 dir, vec2 pixel)
     sky += nubis_sky_radiance(l) * (nubis_slab_scattering(mu_v, dot(l, up), tau) * weight);
   }
   light += P.lighting_ambient * sky;
-#else
-  light += P.ambient.rgb * alpha;
+#if NUBIS_REFERENCE != 1
+  /* Beyond single scattering, the sky's and the ground's light diffuse through the layer as through the
+   * clouds, the share (1 - p) that scatters again: a thick anvil seen from below sends back the ground's
+   * light and lets little of the sky's through. */
+  vec2 w = nubis_slab_sky_weights(mu_v, tau, P.lighting_sky_occlusion, P.lighting_diffusion_edge) *
+           (1.0 - nubis_slab_leave_unscattered(tau));
+  bool below = mu_v > 0.0; /* the viewer looks up at the layer */
+  light += P.ambient.rgb * (below ? w.x : w.y) + P.ambient_below.rgb * (below ? w.y : w.x);
   /* The sun's light that scatters more than once in the layer: thin cirrus hardly, a thick anvil mostly
    * (a converged path tracer lights its underside white; docs/sources.md#cirrus-lighting). */
   light += P.sun_radiance.rgb * nubis_slab_multiple_scattering(mu_v, dot(P.sun_dir.xyz, up), tau);

@@ -26,6 +26,7 @@ _MODE_VORTEX = 3.0
 _MODE_GLOW = 4.0
 _MODE_SLAB = 5.0
 _MODE_DIFFUSION = 6.0
+_MODE_SKY_WEIGHTS = 7.0
 NOISE_TEXTURES = {"lf": 0.0, "hf": 1.0, "curl": 2.0}
 
 
@@ -105,6 +106,13 @@ def probe_diffusion(gpu_inputs: CloudGPU, args: np.ndarray, kappa: float) -> np.
     """The sky light's slab diffusion for each row (near, far, rate, edge) of `args` (N, 4) at decay
     rate `kappa`, and the decay rate for (albedo, g) read from the first two columns: (N, 2)."""
     return _run(gpu_inputs, np.asarray(args, dtype=np.float32), (_MODE_DIFFUSION, float(kappa), 0.0, 0.0))[:, :2]
+
+
+def probe_sky_weights(gpu_inputs: CloudGPU, args: np.ndarray) -> np.ndarray:
+    """A slab's weights of the diffuse light from its far and its near face, as the viewer sees them, for
+    each row (view cosine, vertical optical depth, rate, edge) of `args` (N, 4), and the chance that light
+    scattered in it leaves unscattered: (N, 3)."""
+    return _run(gpu_inputs, np.asarray(args, dtype=np.float32), (_MODE_SKY_WEIGHTS, 0.0, 0.0, 0.0))[:, :3]
 
 
 def _run(gpu_inputs: CloudGPU, texels: np.ndarray, mode: tuple[float, float, float, float]) -> np.ndarray:

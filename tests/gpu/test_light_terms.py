@@ -1,7 +1,8 @@
 """The light model's closed-form terms as the GPU compiles them, read back through the probe stage
-(tests/gpu_probe.py): the cirrus slab's multiple scattering and the sky light's diffusion through
-absorbing cloud (docs/sources.md#cirrus-lighting, docs/sources.md#diffusion-through-a-slab). Each is
-checked against a float64 evaluation written here from the physics, and for the limits it must keep."""
+(tests/gpu_probe.py): the cirrus slab's multiple scattering, the sky's and the ground's light diffusing
+through it, and the sky light's diffusion through absorbing cloud (docs/sources.md#cirrus-lighting,
+docs/sources.md#diffusion-through-a-slab). Each is checked against a float64 evaluation written here
+from the physics, and for the limits it must keep."""
 
 import numpy as np
 import pytest
@@ -27,7 +28,7 @@ def _eddington_multiple(mu_v, mu_l, tau, g):
     reflected = (k + (0.5 - 0.75 * mu_l) * (1.0 - direct)) / (1.0 + k)
     diffuse = np.where(mu_v > 0.0, 1.0 - reflected - direct, reflected)
     leaves_unscattered = -np.expm1(-2.0 * tau) / (2.0 * tau)
-    return mu_l * diffuse * (1.0 - leaves_unscattered) ** 2 / np.pi
+    return mu_l * diffuse * (1.0 - leaves_unscattered) / np.pi
 
 
 def test_a_cirrus_slab_scatters_more_than_once_only_where_it_is_thick(clouds):
@@ -56,6 +57,36 @@ def test_a_cirrus_slab_scatters_more_than_once_only_where_it_is_thick(clouds):
     # No sun above the layer, no light from it.
     dark = probe_slab(gpu_inputs, np.array([(0.3, -0.2, 2.0), (-0.3, -0.2, 2.0)]))
     assert np.all(dark[:, 0] == 0.0)
+
+
+def test_a_cirrus_slab_passes_the_sky_on_as_the_clouds_diffuse_it(clouds):
+    """The sky's and the ground's light through a cirrus layer: the clouds' linear diffusion weights
+    integrated along the view ray. Checked against a float64 quadrature; thin, each face gives half the
+    opacity (single scattering of a uniform sky); thick, the far face's light fades as 1 / tau and the
+    near face's is all sent back, which is why converged Cycles shows a thick anvil's underside
+    lit by the ground more than by the sky above it."""
+    from gpu_probe import probe_sky_weights
+
+    gpu_inputs, _g = clouds
+    rate, edge = 1.2, 1.0
+    rows = np.array([(mu_v, tau, rate, edge) for mu_v in (0.9, 0.3, -0.3, 0.05) for tau in (1e-4, 0.05, 0.5, 2.0, 8.0)])
+    got = probe_sky_weights(gpu_inputs, rows).astype(np.float64)
+    for (mu_v, tau, _r, _e), (far, near, once) in zip(rows, got, strict=True):
+        m = 1.0 / abs(mu_v)
+        y = (np.arange(20000) + 0.5) / 20000 * tau  # depth between the point and the viewer
+        seen = m * np.exp(-m * y) * (tau / 20000)
+        span = rate * tau + 2.0 * edge
+        assert far == pytest.approx(np.sum(seen * (rate * y + edge)) / span, rel=2e-3, abs=1e-7)
+        assert near == pytest.approx(np.sum(seen * (rate * (tau - y) + edge)) / span, rel=2e-3, abs=1e-7)
+        assert once == pytest.approx(-np.expm1(-2.0 * tau) / (2.0 * tau), rel=1e-3)
+    # Together the faces' weights are the layer's opacity at any depth: it sends on what it holds back.
+    opacity = -np.expm1(-rows[:, 1] / np.abs(rows[:, 0]))
+    np.testing.assert_allclose(got[:, 0] + got[:, 1], opacity, rtol=1e-4, atol=1e-7)
+    thin = got[rows[:, 1] == 0.05]
+    opacity = opacity[rows[:, 1] == 0.05]
+    np.testing.assert_allclose(thin[:, :2], 0.5 * np.stack([opacity, opacity], axis=1), rtol=0.01)
+    thick = got[(rows[:, 1] == 8.0) & (rows[:, 0] == 0.3)][0]
+    assert thick[0] < 0.15 and thick[1] > 0.8 and thick[0] + thick[1] == pytest.approx(1.0, abs=1e-3)
 
 
 def _robin_slab(near, far, rate, edge, kappa):

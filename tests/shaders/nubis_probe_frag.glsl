@@ -10,10 +10,16 @@
  *   4: vec4(storm glow rgb, 0) at the world point t.xyz for a fine density t.w (GDC22's glow);
  *   5: vec4(nubis_slab_multiple_scattering(t.x, t.y, t.z), nubis_slab_scattering(t.x, t.y, t.z), 0, 0):
  *      a slab's light at view cosine t.x, sun cosine t.y, vertical optical depth t.z;
- *   6: vec4(nubis_slab_diffusion(t.x, t.y, t.z, t.w, probe_mode.y), nubis_absorbing_decay(t.x, t.y), 0, 0). */
+ *   6: vec4(nubis_slab_diffusion(t.x, t.y, t.z, t.w, probe_mode.y), nubis_absorbing_decay(t.x, t.y), 0, 0);
+ *   7: vec4(nubis_slab_sky_weights(t.x, t.y, t.z, t.w), nubis_slab_leave_unscattered(t.y), 0): a slab's
+ *      weights of the far and the near face's diffuse light at view cosine t.x, vertical optical depth t.y. */
 void main()
 {
   vec4 t = texelFetch(probe_points, ivec2(gl_FragCoord.xy), 0);
+  if (probe_mode.x > 6.5) {
+    color = vec4(nubis_slab_sky_weights(t.x, t.y, t.z, t.w), nubis_slab_leave_unscattered(t.y), 0.0);
+    return;
+  }
   if (probe_mode.x > 5.5) {
     color = vec4(nubis_slab_diffusion(t.x, t.y, t.z, t.w, probe_mode.y), nubis_absorbing_decay(t.x, t.y), 0.0, 0.0);
     return;
