@@ -51,9 +51,9 @@ float nubis_slab_leave_unscattered(float tau)
  * the sun at cosine `mu_l` (nubis_cirrus; docs/sources.md#cirrus-lighting). The Eddington approximation
  * gives the slab's diffuse reflection and transmission (Shettle and Weinman 1970); of the diffuse light
  * on the viewer's side, the share beyond single scattering (which nubis_slab_scattering gives exactly)
- * is taken as (1 - p)^2, p = (1 - e^-2 tau) / (2 tau) the chance that light scattered in the slab leaves
- * it unscattered: second order in a thin layer, all of it in a thick one. The square is fitted, not
- * derived. The light leaves evenly in all directions. */
+ * is (1 - p), p the chance that light scattered in the slab leaves it unscattered
+ * (nubis_slab_leave_unscattered): second order in a thin layer, all of it in a thick one. The light
+ * leaves evenly in all directions. */
 float nubis_slab_multiple_scattering(float mu_v, float mu_l, float tau)
 {
   if (mu_l <= 0.0 || tau <= 0.0) {
@@ -87,10 +87,10 @@ vec2 nubis_slab_sky_weights(float mu_v, float tau, float rate, float edge)
 
 /* GPU Pro 7, S15: the cirrus layer, sampled once where the ray crosses its sphere
  * (docs/sources.md#cirrus-layer, docs/sources.md#cirrus-lighting), lit as the thin homogeneous slab
- * Cycles renders from the bake (nubis_slab_scattering). The sun's light is exact. Single scattering's
- * reference permutation lights it by the World the same way, in the phase-sampled directions of the
- * reference sky light; otherwise the sky light is scattered in proportion to the layer's opacity.
- * Premultiplied radiance, alpha. */
+ * Cycles renders from the bake (nubis_slab_scattering). The sun's single scattering is exact, the World's
+ * is taken in the phase-sampled directions of the reference sky light; beyond single scattering
+ * (not in single scattering's reference permutation) the sun's and the World's diffuse light through
+ * the slab are added. Premultiplied radiance, alpha. */
 vec4 nubis_cirrus(vec3 origin, vec3 dir, vec2 pixel)
 {
   float altitude = nubis_altitude(origin, P.layer_planet_radius);
