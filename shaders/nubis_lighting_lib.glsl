@@ -604,8 +604,7 @@ vec3 nubis_in_scattering(
    * (nubis_slab_diffuse_share). The long tap's model takes the sky's share alone. */
   vec3 up = normalize(p + vec3(0.0, 0.0, P.layer_planet_radius));
   float tau_c = nubis_cirrus_optical_depth(p, up, 0.0);
-  float e2 = 2.0 * P.lighting_diffusion_edge;
-  overhead = e2 / (P.lighting_sky_occlusion * tau_c + e2);
+  overhead = 2.0 * nubis_slab_diffusion(tau_c, 0.0, P.lighting_sky_occlusion, P.lighting_diffusion_edge, 0.0);
   float mu_sun = dot(P.sun_dir.xyz, up);
   from_above = mix(P.ambient_below.rgb, P.ambient.rgb, overhead);
   if (mu_sun > 0.0 && tau_c > 0.0) {
