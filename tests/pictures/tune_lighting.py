@@ -2,7 +2,7 @@
 
 Run from the repository root:
     .venv-5.3/bin/python tests/pictures/tune_lighting.py OUT_DIR [W H SAMPLES [EVALUATIONS]] [--presets A,B]
-        [--params NAME,NAME]
+        [--params NAME,NAME] [--lights DIR] [--supersampling N]
 (defaults 160 90 256 120, the README's parity size; SAMPLES is where Cycles starts: it adds samples
 until its own noise is at most 5 %, at 256 volume bounces, more than any preset needs to converge,
 docs/convergence.md)
@@ -15,6 +15,13 @@ light's own error and flatten the search. Presets that set a tuned parameter the
 value. --params frees only those of TUNED (the others keep their defaults). Prints each improvement
 and the before/after table (per pixel, as compare measures); nothing is written to the presets: copy
 the result into core/schema.py by hand.
+
+--lights DIR adds each preset lit by one light at a time (docs/viewport.md#one-light-at-a-time):
+DIR/presets/<preset>_sun.toml and <preset>_sky.toml, copies of the preset with the World's or the
+sun's strength at 0 (written when missing), and their converged references in DIR/<preset>_sun/ and
+DIR/<preset>_sky/ (made as above when missing: 1.5-6 minutes of Cycles each on the 2-core machine).
+Each counts in the objective as a preset of its own, so the sun's terms and the sky's are fitted to
+what each light does and not to how their errors cancel in the scene.
 """
 
 from __future__ import annotations
@@ -42,10 +49,28 @@ TUNED = {
 BLOCK = 4  # pixels a side of the blocks the search's luminance error is measured on
 
 
-def preset_overrides(name: str) -> set[str]:
-    from nubis_addon.core.presets import preset_dir
+def one_light_preset(path: Path, light: str) -> str:
+    """The preset's TOML lit by `light` alone ("sun" or "sky"): the other light's strength set to 0."""
+    section = "[world]" if light == "sun" else "[sun]"
+    lines = path.read_text(encoding="utf-8").splitlines()
+    start = next((i for i, line in enumerate(lines) if line.strip() == section), None)
+    if start is None:
+        lines += ["", section, "strength = 0.0"]
+    else:
+        end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("[")), len(lines))
+        key = next((i for i in range(start + 1, end) if lines[i].split("=")[0].strip() == "strength"), None)
+        if key is None:
+            lines.insert(start + 1, "strength = 0.0")
+        else:
+            lines[key] = "strength = 0.0"
+    text = "\n".join(lines) + "\n"
+    other = "world" if light == "sun" else "sun"
+    assert tomllib.loads(text)[other]["strength"] == 0.0
+    return text
 
-    data = tomllib.loads((preset_dir() / f"{name}.toml").read_text(encoding="utf-8"))
+
+def preset_overrides(path: Path) -> set[str]:
+    data = tomllib.loads(path.read_text(encoding="utf-8"))
     return {f"lighting_{k}" for k in data.get("lighting", {})}
 
 
@@ -84,7 +109,10 @@ def reference(name: str, out: Path, width: int, height: int, samples: int) -> di
 
 PRESETS: list[str] = []  # --presets: fit these only (default: every shipped preset)
 PARAMS: list[str] = []  # --params: free these only (default: all of TUNED)
-SUPERSAMPLING = 2  # the viewport shots of the search (compare takes 4; 2 keeps a round under a minute)
+LIGHTS: list[Path] = []  # --lights: the folder of the one-light presets and references
+# the viewport shots of the search (compare takes 4; 2 keeps a round of the nine presets under a minute;
+# --supersampling 1 keeps one with the one-light references, 27 shots, about as short)
+SUPERSAMPLING = [2]
 
 
 def prepare(out: Path, width: int, height: int, samples: int) -> dict:
@@ -93,19 +121,29 @@ def prepare(out: Path, width: int, height: int, samples: int) -> dict:
 
     from nubis_addon.blender import ensure_registered, pipeline, scene_io
     from nubis_addon.core import imageio
-    from nubis_addon.core.presets import list_presets, load_preset
+    from nubis_addon.core.presets import find_preset, list_presets, load_preset
 
-    shots = {}
+    cases = []  # (label, preset file, folder of its reference)
     for name in PRESETS or list_presets():
+        cases.append((name, find_preset(name), out))
+        for folder in LIGHTS:
+            for light in ("sun", "sky"):
+                path = folder / "presets" / f"{name}_{light}.toml"
+                if not path.exists():
+                    path.parent.mkdir(parents=True, exist_ok=True)
+                    path.write_text(one_light_preset(find_preset(name), light), encoding="utf-8")
+                cases.append((f"{name}_{light}", path, folder))
+    shots = {}
+    for name, path, where in cases:
         bpy.ops.wm.read_factory_settings(use_empty=True)
         ensure_registered()
         scene = bpy.context.scene
-        scene_io.apply_preset(scene, load_preset(name))
-        m = reference(name, out, width, height, samples)
-        ss = SUPERSAMPLING
+        scene_io.apply_preset(scene, load_preset(path))
+        m = reference(name, where, width, height, samples)
+        ss = SUPERSAMPLING[0]
         shot = pipeline.viewport_shot(scene, width * ss, height * ss, 0, "full", tuple(m["clip_box"]))
-        cycles = imageio.read_image(out / name / "cycles.exr")
-        shots[name] = (shot, ss, cycles, preset_overrides(name), m)
+        cycles = imageio.read_image(where / name / "cycles.exr")
+        shots[name] = (shot, ss, cycles, preset_overrides(path), m)
         noise = m["cycles_noise"]["luminance_rel_error"]
         ref = m["cycles_reference"]
         print(
@@ -235,5 +273,13 @@ if __name__ == "__main__":
     if "--params" in args:
         i = args.index("--params")
         PARAMS.extend(args[i + 1].split(","))
+        del args[i : i + 2]
+    if "--supersampling" in args:
+        i = args.index("--supersampling")
+        SUPERSAMPLING[0] = int(args[i + 1])
+        del args[i : i + 2]
+    if "--lights" in args:
+        i = args.index("--lights")
+        LIGHTS.append(Path(args[i + 1]))
         del args[i : i + 2]
     main(args[0] if args else "tune_lighting", *(int(a) for a in args[1:5]))
