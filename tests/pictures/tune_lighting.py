@@ -109,10 +109,10 @@ def reference(name: str, out: Path, width: int, height: int, samples: int) -> di
 
 PRESETS: list[str] = []  # --presets: fit these only (default: every shipped preset)
 PARAMS: list[str] = []  # --params: free these only (default: all of TUNED)
-LIGHTS: list[Path] = []  # --lights: the folder of the one-light presets and references
+LIGHTS: Path | None = None  # --lights: the folder of the one-light presets and references
 # the viewport shots of the search (compare takes 4; 2 keeps a round of the nine presets under a minute;
 # --supersampling 1 keeps one with the one-light references, 27 shots, about as short)
-SUPERSAMPLING = [2]
+SUPERSAMPLING = 2
 
 
 def prepare(out: Path, width: int, height: int, samples: int) -> dict:
@@ -126,13 +126,12 @@ def prepare(out: Path, width: int, height: int, samples: int) -> dict:
     cases = []  # (label, preset file, folder of its reference)
     for name in PRESETS or list_presets():
         cases.append((name, find_preset(name), out))
-        for folder in LIGHTS:
-            for light in ("sun", "sky"):
-                path = folder / "presets" / f"{name}_{light}.toml"
-                if not path.exists():
-                    path.parent.mkdir(parents=True, exist_ok=True)
-                    path.write_text(one_light_preset(find_preset(name), light), encoding="utf-8")
-                cases.append((f"{name}_{light}", path, folder))
+        for light in ("sun", "sky") if LIGHTS else ():
+            path = LIGHTS / "presets" / f"{name}_{light}.toml"
+            if not path.exists():
+                path.parent.mkdir(parents=True, exist_ok=True)
+                path.write_text(one_light_preset(find_preset(name), light), encoding="utf-8")
+            cases.append((f"{name}_{light}", path, LIGHTS))
     shots = {}
     for name, path, where in cases:
         bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -140,7 +139,7 @@ def prepare(out: Path, width: int, height: int, samples: int) -> dict:
         scene = bpy.context.scene
         scene_io.apply_preset(scene, load_preset(path))
         m = reference(name, where, width, height, samples)
-        ss = SUPERSAMPLING[0]
+        ss = SUPERSAMPLING
         shot = pipeline.viewport_shot(scene, width * ss, height * ss, 0, "full", tuple(m["clip_box"]))
         cycles = imageio.read_image(where / name / "cycles.exr")
         shots[name] = (shot, ss, cycles, preset_overrides(path), m)
@@ -264,22 +263,24 @@ def main(out_dir: str, width: int = 160, height: int = 90, samples: int = 256, e
     print("tuned:", json.dumps({k: round(v, 3) for k, v in values.items()}))
 
 
+def take_option(args: list[str], flag: str) -> str | None:
+    """The value after `flag` in `args`, both removed from it; None when the flag is not there."""
+    if flag not in args:
+        return None
+    i = args.index(flag)
+    value = args[i + 1]
+    del args[i : i + 2]
+    return value
+
+
 if __name__ == "__main__":
     args = sys.argv[1:]
-    if "--presets" in args:
-        i = args.index("--presets")
-        PRESETS.extend(args[i + 1].split(","))
-        del args[i : i + 2]
-    if "--params" in args:
-        i = args.index("--params")
-        PARAMS.extend(args[i + 1].split(","))
-        del args[i : i + 2]
-    if "--supersampling" in args:
-        i = args.index("--supersampling")
-        SUPERSAMPLING[0] = int(args[i + 1])
-        del args[i : i + 2]
-    if "--lights" in args:
-        i = args.index("--lights")
-        LIGHTS.append(Path(args[i + 1]))
-        del args[i : i + 2]
+    if (value := take_option(args, "--presets")) is not None:
+        PRESETS.extend(value.split(","))
+    if (value := take_option(args, "--params")) is not None:
+        PARAMS.extend(value.split(","))
+    if (value := take_option(args, "--supersampling")) is not None:
+        SUPERSAMPLING = int(value)
+    if (value := take_option(args, "--lights")) is not None:
+        LIGHTS = Path(value)
     main(args[0] if args else "tune_lighting", *(int(a) for a in args[1:5]))
