@@ -21,6 +21,8 @@ const int NUBIS_REFERENCE_SKY_DIRECTIONS = 12;
 const int NUBIS_REFERENCE_SKY_SAMPLES = 16;
 /* ... and, for the full model's reference, samples up and down the point's column. */
 const int NUBIS_REFERENCE_COLUMN_SAMPLES = 24;
+/* ... and sideways, along each of the 8 horizontal directions the sky volume's second channel takes. */
+const int NUBIS_REFERENCE_SIDE_SAMPLES = 4;
 const float NUBIS_REFERENCE_REACH = 2.0;
 
 /* Below this eccentricity a Henyey-Greenstein lobe is sampled as isotropic (its inverse distribution
@@ -281,6 +283,29 @@ float nubis_reference_depth(vec3 p, vec3 dir, int samples, float jitter, out flo
   return depth;
 }
 
+/* Reference of the sky volume's sideways depth (sigma included; shaders/nubis_sky_side_comp.glsl): the
+ * harmonic mean over 8 horizontal directions of the optical depth out to the sideways pass's reach,
+ * each marched with samples crowding near the point. */
+float nubis_reference_side_depth(vec3 p, float jitter)
+{
+  float inverse_sum = 0.0;
+  float n = float(NUBIS_REFERENCE_SIDE_SAMPLES);
+  for (int d = 0; d < 8; d++) {
+    float angle = float(d) * (0.25 * NUBIS_PI);
+    vec3 dir = vec3(cos(angle), sin(angle), 0.0);
+    float depth = 0.0;
+    for (int i = 0; i < NUBIS_REFERENCE_SIDE_SAMPLES; i++) {
+      float u = (float(i) + jitter) / n;
+      vec3 q = p + dir * (P.sky_side_reach * u * u);
+      bool inside = P.clip_box.z < P.clip_box.x || all(greaterThanEqual(q.xy, P.clip_box.xy)) && all(lessThanEqual(q.xy, P.clip_box.zw));
+      NubisDensity s = nubis_density(q, false, 0.0);
+      depth += inside ? s.fine * nubis_extinction_factor(q, s.precipitation) * (2.0 * P.sky_side_reach * u / n) : 0.0;
+    }
+    inverse_sum += 1.0 / (depth * P.density_sigma + 1.0);
+  }
+  return 8.0 / inverse_sum;
+}
+
 /* The cosine of the angle from the forward direction for a uniform u in [0, 1), distributed as a
  * Henyey-Greenstein lobe of eccentricity g (inverse of its cumulative distribution). */
 float nubis_henyey_greenstein_sample(float g, float u)
@@ -467,16 +492,17 @@ float nubis_sun_volume_depth(vec3 p)
   return texture(sun_volume, nubis_volume_coord(unit, vec3(textureSize(sun_volume, 0)))).r;
 }
 
-/* The optical depth of cloud above p and below it, to the domain's top and floor (sigma included). */
-vec2 nubis_sky_volume_depths(vec3 p)
+/* The optical depth of cloud above p and below it, to the domain's top and floor, and sideways to the
+ * open sky (sigma included). */
+vec3 nubis_sky_volume_depths(vec3 p)
 {
   vec3 unit = vec3(dot(P.sky_volume_x.xyz, p) + P.sky_volume_x.w,
                    dot(P.sky_volume_y.xyz, p) + P.sky_volume_y.w,
                    dot(P.sky_volume_z.xyz, p) + P.sky_volume_z.w);
   vec3 size = vec3(textureSize(sky_volume, 0));
-  float above = texture(sky_volume, nubis_volume_coord(unit, size)).r;
+  vec2 here = texture(sky_volume, nubis_volume_coord(unit, size)).rg;
   float column = texture(sky_volume, nubis_volume_coord(vec3(unit.xy, 1.0), size)).r;
-  return vec2(above, max(column - above, 0.0));
+  return vec3(here.x, max(column - here.x, 0.0), here.y);
 }
 
 /* The optical depths the light of a point reads (sigma included; docs/viewport.md#light-model). */
@@ -485,6 +511,7 @@ struct NubisLightDepths {
   float powder; /* the density alone towards the sun near the point, for the powder term */
   float above;  /* the cloud above the point, to the domain's top */
   float below;  /* and below it, to the domain's floor */
+  float side;   /* sideways to the open sky (the light volumes only; 0 otherwise) */
   bool column;  /* above and below are known: the light volumes, or the reference march */
 };
 
@@ -504,6 +531,7 @@ NubisLightDepths nubis_light_depths(vec3 p, float view_alpha, float lod, vec2 pi
   l.powder = 0.0;
   l.above = 0.0;
   l.below = 0.0;
+  l.side = 0.0;
   l.column = false;
 #if NUBIS_REFERENCE
   float jitter = nubis_reference_jitter(pixel);
@@ -517,6 +545,7 @@ NubisLightDepths nubis_light_depths(vec3 p, float view_alpha, float lod, vec2 pi
                                   fract(jitter + NUBIS_GOLDEN_RATIO_FRACT), plain) * P.density_sigma;
   l.below = nubis_reference_depth(p, -up, NUBIS_REFERENCE_COLUMN_SAMPLES,
                                   fract(jitter + 2.0 * NUBIS_GOLDEN_RATIO_FRACT), plain) * P.density_sigma;
+  l.side = nubis_reference_side_depth(p, fract(jitter + 3.0 * NUBIS_GOLDEN_RATIO_FRACT));
   l.column = true;
 #  endif
 #else
@@ -542,9 +571,10 @@ NubisLightDepths nubis_light_depths(vec3 p, float view_alpha, float lod, vec2 pi
    * keeps the cone's depth alone: it is the in-scattering probability near the sample, and cloud
    * kilometres further towards the sun must not lighten a sun-facing edge. */
   l.sun += nubis_sun_volume_depth(p + P.sun_dir.xyz * P.light_cone_reach);
-  vec2 sky = nubis_sky_volume_depths(p);
+  vec3 sky = nubis_sky_volume_depths(p);
   l.above = sky.x;
   l.below = sky.y;
+  l.side = sky.z;
   l.column = true;
 #  else
   /* GPU Pro 7's long-distance sample at three times the cone's reach. */
@@ -622,7 +652,13 @@ vec3 nubis_in_scattering(
     /* Diffused light has scattered on its way in: where rain or a storm absorbs, it dies out on the way
      * (the point's own albedo stands for the cloud's around it; docs/viewport.md#light-model). */
     float kappa = nubis_absorbing_decay(albedo, nubis_phase_mean_cosine());
-    sky_light = from_above * nubis_slab_diffusion(l.above, l.below, k, e, kappa) +
+    /* The sky's light also comes in sideways: through the cloud beside the point where that is thinner
+     * than the cloud above it (a tower's flank), the shorter path dominating as in diffusion. */
+    float above = l.above;
+    if (P.lighting_side_light > 0.0 && l.side > 0.0) {
+      above = l.above * l.side / (l.side + P.lighting_side_light * l.above);
+    }
+    sky_light = from_above * nubis_slab_diffusion(above, l.below, k, e, kappa) +
                 P.ambient_below.rgb * nubis_slab_diffusion(l.below, l.above, k, e, kappa);
     sky_light *= mix(P.lighting_ambient_bottom, 1.0, d.h);
   }

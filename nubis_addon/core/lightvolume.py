@@ -27,6 +27,8 @@ import numpy as np
 # optical depths to a few parts in ten thousand, far finer than the light can show.
 SIZE = (256, 256, 32)
 FORMAT = "R16F"
+# The sky's volume holds a second channel, the optical depth sideways to the open sky.
+SKY_FORMAT = "RG16F"
 BYTES_PER_TEXEL = 2
 # Density samples per depth slice when the volume is filled (each slice's depth is the midpoint sum).
 STEPS_PER_SLICE = 4
@@ -165,5 +167,23 @@ def key_centre(state) -> tuple[float, float]:
 
 
 def memory_bytes() -> int:
-    """GPU memory of the two volumes."""
-    return 2 * BYTES_PER_TEXEL * SIZE[0] * SIZE[1] * SIZE[2]
+    """GPU memory of the two volumes: the sun's one channel, the sky's two (a fill holds one more channel's
+    worth for a moment, the sky's depths before the sideways pass)."""
+    return 3 * BYTES_PER_TEXEL * SIZE[0] * SIZE[1] * SIZE[2]
+
+
+def side_scale(box: Volume) -> tuple[float, float, float, float]:
+    """The sky volume's texel widths across (u, v) and its depth slices' thickness, in metres, for the
+    pass that adds the sideways depths (shaders/nubis_sky_side_comp.glsl)."""
+    widths = [float(np.linalg.norm(box.axes[i])) / max(SIZE[i] - 1, 1) for i in range(3)]
+    return (widths[0], widths[1], max(widths[2], 1e-3), 0.0)
+
+
+# How far the sideways depths reach, in texels of the sky volume (the last of the pass's steps).
+SIDE_REACH_TEXELS = 24
+
+
+def side_reach(state) -> float:
+    """How far the sky volume's sideways depths reach, in metres (the reference march marches as far)."""
+    scale = side_scale(sky_volume(state))
+    return SIDE_REACH_TEXELS * 0.5 * (scale[0] + scale[1])

@@ -82,7 +82,8 @@ def bayer_offset(index: int) -> tuple[int, int]:
 #   a lit step adds   8 + 4n + the light march    (octaves; extinction, glow, flash, ambient)
 #   real-time light   taps x (1 + 2n)
 #   reference light   48 x (1 + 2n), and the sky: 12 x (1 + 16 x (1 + 2n)) (single scattering's, mode 1)
-#                     or the column up and down: 2 x 24 x (1 + 2n) (the full model's, mode 2)
+#                     or the column up and down: 2 x 24 x (1 + 2n), and sideways: 8 x (1 + 4 x (1 + 2n))
+#                     (the full model's, mode 2)
 LOOP_LIMIT = 65535
 _MARGIN = 512  # per-ray set-up, the octaves' phases, the cirrus
 
@@ -92,7 +93,7 @@ def iterations_per_step(light_taps: int, storms: int, reference: int) -> int:
     n = int(storms)
     per_sample = 1 + 2 * n
     if reference == 2:
-        light = (48 + 2 * 24) * per_sample
+        light = (48 + 2 * 24) * per_sample + 8 * (1 + 4 * per_sample)
     elif reference:
         light = 48 * per_sample + 12 * (1 + 16 * per_sample)
     else:

@@ -148,6 +148,17 @@ def _volume_create_info(defines: dict[str, object]) -> GPUShaderCreateInfo:
 VOLUME_GROUP = 8
 
 
+def _side_create_info() -> GPUShaderCreateInfo:
+    """The compute stage that adds the sideways depths to the sky volume (shaders/nubis_sky_side_comp.glsl)."""
+    info = GPUShaderCreateInfo()
+    info.sampler(0, "FLOAT_3D", "sky_depth")
+    info.image(0, lightvolume.SKY_FORMAT, "FLOAT_3D", "volume_out", qualifiers={"WRITE"})
+    info.push_constant("VEC4", "side_scale")
+    info.local_group_size(VOLUME_GROUP, VOLUME_GROUP, 1)
+    info.compute_source(read_shader("nubis_sky_side_comp.glsl"))
+    return info
+
+
 def _key(name: str, defines: dict[str, object]) -> tuple:
     return (name, *sorted(defines.items()))
 
@@ -155,7 +166,12 @@ def _key(name: str, defines: dict[str, object]) -> tuple:
 def shader(name: str, defines: dict[str, object]) -> gpu.types.GPUShader:
     key = _key(name, defines)
     if key not in _shaders:
-        info = _volume_create_info(defines) if name == "light_volume" else _create_info(name, defines)
+        if name == "light_volume":
+            info = _volume_create_info(defines)
+        elif name == "sky_side":
+            info = _side_create_info()
+        else:
+            info = _create_info(name, defines)
         _shaders[key] = gpu.shader.create_from_info(info)
     return _shaders[key]
 
@@ -247,19 +263,29 @@ class CloudGPU:
         )
         if key == self._volume_key and all(v is not None for v in self.volumes.values()):
             return
-        for name in VOLUMES:
-            if self.volumes[name] is None:
-                self.volumes[name] = gpu.types.GPUTexture(lightvolume.SIZE, format=lightvolume.FORMAT)
+        if self.volumes["sun_volume"] is None:
+            self.volumes["sun_volume"] = gpu.types.GPUTexture(lightvolume.SIZE, format=lightvolume.FORMAT)
+            self.volumes["sky_volume"] = gpu.types.GPUTexture(lightvolume.SIZE, format=lightvolume.SKY_FORMAT)
+        # The sky's depths from the top, which the sideways pass reads into the sky volume: held during
+        # the fill only (4 MB).
+        sky_depth = gpu.types.GPUTexture(lightvolume.SIZE, format=lightvolume.FORMAT)
         defines = self.defines(NUBIS_REFERENCE=0, NUBIS_NAIVE=0, NUBIS_FETCH_STATS=0)
         sh = shader("light_volume", defines)
-        for name, box in (("sun_volume", lightvolume.sun_volume(state)), ("sky_volume", lightvolume.sky_volume(state))):
+        sky_box = lightvolume.sky_volume(state)
+        for name, box in (("sun_volume", lightvolume.sun_volume(state)), ("sky_volume", sky_box)):
             self.bind(sh, volumes=False)
-            sh.image("volume_out", self.volumes[name])
+            sh.image("volume_out", self.volumes[name] if name == "sun_volume" else sky_depth)
             sh.uniform_float("volume_origin", (*box.origin, 0.0))
             for axis, edge in zip(("volume_u", "volume_v", "volume_w"), box.axes, strict=True):
                 sh.uniform_float(axis, (*edge, 0.0))
             groups = [-(-n // VOLUME_GROUP) for n in lightvolume.SIZE[:2]]
             gpu.compute.dispatch(sh, groups[0], groups[1], 1)
+        side = shader("sky_side", {})
+        side.bind()
+        side.uniform_sampler("sky_depth", sky_depth)
+        side.image("volume_out", self.volumes["sky_volume"])
+        side.uniform_float("side_scale", lightvolume.side_scale(sky_box))
+        gpu.compute.dispatch(side, groups[0], groups[1], 1)
         self._volume_key = key
         self.volume_fills += 1
 

@@ -68,6 +68,7 @@ _FLOATS: tuple[tuple[str, str, Callable[[CloudState], float]], ...] = (
     ("shell_bottom", "lowest altitude any cloud reaches (the field's min heights)", _shell(0)),
     ("shell_top", "highest altitude any cloud reaches (the field's max heights)", _shell(1)),
     ("field_inv_size", "1 / field size", lambda st: 1.0 / st.params["field_size"]),
+    ("sky_side_reach", "how far the sky volume's sideways depths reach (metres)", lightvolume.side_reach),
     ("draw_center_x", "the draw radius' center (the camera), x", lambda st: st.draw_center[0]),
     ("draw_center_y", "the draw radius' center, y", lambda st: st.draw_center[1]),
     ("draw_fade", "fade width at the draw radius", lambda st: 0.05 * st.params["layer_draw_radius"]),

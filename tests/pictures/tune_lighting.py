@@ -2,7 +2,7 @@
 
 Run from the repository root:
     .venv-5.3/bin/python tests/pictures/tune_lighting.py OUT_DIR [W H SAMPLES [EVALUATIONS]] [--presets A,B]
-        [--params NAME,NAME] [--lights DIR] [--supersampling N]
+        [--params NAME,NAME] [--lights DIR [--lights-for A,B]] [--supersampling N]
 (defaults 160 90 256 120, the README's parity size; SAMPLES is where Cycles starts: it adds samples
 until its own noise is at most 5 %, at 256 volume bounces, more than any preset needs to converge,
 docs/convergence.md)
@@ -21,7 +21,8 @@ DIR/presets/<preset>_sun.toml and <preset>_sky.toml, copies of the preset with t
 sun's strength at 0 (written when missing), and their converged references in DIR/<preset>_sun/ and
 DIR/<preset>_sky/ (made as above when missing: 1.5-6 minutes of Cycles each on the 2-core machine).
 Each counts in the objective as a preset of its own, so the sun's terms and the sky's are fitted to
-what each light does and not to how their errors cancel in the scene.
+what each light does and not to how their errors cancel in the scene. --lights-for limits the one-light
+references to those presets (the others count with their scene alone).
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ TUNED = {
     "lighting_ms_buildup": (0.0, 8.0, 0.8),
     "lighting_ambient": (0.3, 3.0, 0.2),
     "lighting_ambient_bottom": (0.0, 1.0, -0.2),
+    "lighting_side_light": (0.0, 8.0, 0.5),
 }
 BLOCK = 4  # pixels a side of the blocks the search's luminance error is measured on
 
@@ -110,6 +112,7 @@ def reference(name: str, out: Path, width: int, height: int, samples: int) -> di
 PRESETS: list[str] = []  # --presets: fit these only (default: every shipped preset)
 PARAMS: list[str] = []  # --params: free these only (default: all of TUNED)
 LIGHTS: Path | None = None  # --lights: the folder of the one-light presets and references
+LIGHTS_FOR: list[str] = []  # --lights-for: only these presets' one-light references (default: every one)
 # the viewport shots of the search (compare takes 4; 2 keeps a round of the nine presets under a minute;
 # --supersampling 1 keeps one with the one-light references, 27 shots, about as short)
 SUPERSAMPLING = 2
@@ -126,7 +129,7 @@ def prepare(out: Path, width: int, height: int, samples: int) -> dict:
     cases = []  # (label, preset file, folder of its reference)
     for name in PRESETS or list_presets():
         cases.append((name, find_preset(name), out))
-        for light in ("sun", "sky") if LIGHTS else ():
+        for light in ("sun", "sky") if LIGHTS and (not LIGHTS_FOR or name in LIGHTS_FOR) else ():
             path = LIGHTS / "presets" / f"{name}_{light}.toml"
             if not path.exists():
                 path.parent.mkdir(parents=True, exist_ok=True)
@@ -283,4 +286,6 @@ if __name__ == "__main__":
         SUPERSAMPLING = int(value)
     if (value := take_option(args, "--lights")) is not None:
         LIGHTS = Path(value)
+    if (value := take_option(args, "--lights-for")) is not None:
+        LIGHTS_FOR.extend(value.split(","))
     main(args[0] if args else "tune_lighting", *(int(a) for a in args[1:5]))
