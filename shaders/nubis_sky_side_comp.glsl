@@ -11,6 +11,14 @@
 const int NUBIS_SIDE_STEPS = 9;
 const int NUBIS_SIDE_TAPS = 8 * NUBIS_SIDE_STEPS;
 
+/* The offset in texels of step s outwards: 1, 2, 3, 4, 6, 8, 12, 16, 24, fine near the point, where the
+ * open side usually is; the last is lightvolume.SIDE_REACH_TEXELS. (A formula rather than an array
+ * constructor, which not every shading language Blender translates to takes.) */
+int nubis_side_offset(int s)
+{
+  return s < 2 ? s + 1 : (3 + (s - 2) % 2) << ((s - 2) / 2);
+}
+
 void main()
 {
   ivec3 size = imageSize(volume_out);
@@ -18,9 +26,6 @@ void main()
   if (column.x >= size.x || column.y >= size.y) {
     return;
   }
-  /* Offsets in texels of the steps outwards, fine near the point, where the open side usually is; the
-   * last is lightvolume.SIDE_REACH_TEXELS. */
-  const int offsets[NUBIS_SIDE_STEPS] = int[NUBIS_SIDE_STEPS](1, 2, 3, 4, 6, 8, 12, 16, 24);
   ivec2 taps[NUBIS_SIDE_TAPS];
   float weights[NUBIS_SIDE_TAPS]; /* the horizontal length each tap stands for, in depth slices; 0 outside */
   float before[NUBIS_SIDE_TAPS];  /* depth from the top at the slice above, and at this slice */
@@ -31,11 +36,11 @@ void main()
     int last = 0;
     for (int s = 0; s < NUBIS_SIDE_STEPS; s++) {
       int i = d * NUBIS_SIDE_STEPS + s;
-      taps[i] = column + dir * offsets[s];
+      taps[i] = column + dir * nubis_side_offset(s);
       bool inside = all(greaterThanEqual(taps[i], ivec2(0))) && all(lessThan(taps[i], size.xy));
       taps[i] = clamp(taps[i], ivec2(0), size.xy - 1);
-      weights[i] = inside ? float(offsets[s] - last) * step_len : 0.0;
-      last = offsets[s];
+      weights[i] = inside ? float(nubis_side_offset(s) - last) * step_len : 0.0;
+      last = nubis_side_offset(s);
       here[i] = texelFetch(sky_depth, ivec3(taps[i], 0), 0).r;
       before[i] = here[i];
     }
