@@ -19,12 +19,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-# Texels across the box (u, v) and depth slices along the direction, as half floats: 4 MB a volume. With
-# the noise texture set (10.3 MiB) that stays within the 20 MB GPU Pro 7 spent on all of its cloud
-# textures. 128 texels across left a superstorm's towers narrower than a texel (570 m in its comparison's
-# box): the interpolation lent their flanks the core's optical depth, and the real-time light read 11 %
-# darker than the reference march; 256 across, 3.6 % (docs/viewport.md#light-volumes). Half floats hold
-# optical depths to a few parts in ten thousand, far finer than the light can show.
+# Texels across the box (u, v) and depth slices along the direction, as half floats: 4 MB a channel, the
+# sun's volume one, the sky's two (12 MB; with the noise texture set's 10.3 MiB a little over the 20 MB GPU
+# Pro 7 spent on all of its cloud textures: docs/viewport.md#sideways says why). 128 texels across left a
+# superstorm's towers narrower than a texel (570 m in its comparison's box): the interpolation lent their
+# flanks the core's optical depth, and the real-time light read 11 % darker than the reference march; 256
+# across, 3.6 % (docs/viewport.md#light-volumes). Half floats hold optical depths to a few parts in ten
+# thousand, far finer than the light can show.
 SIZE = (256, 256, 32)
 FORMAT = "R16F"
 # The sky's volume holds a second channel, the optical depth sideways to the open sky.
