@@ -67,11 +67,40 @@ def test_volumes_see_the_whole_deck_that_the_long_tap_misses(make_scene):
 
 
 def _sky_volume(clouds) -> np.ndarray:
-    """The sky volume read back: (slices, rows, columns, 2), the depth from the top and the sideways depth."""
-    from nubis_addon.core import lightvolume
+    """The sky volume read back: (slices, rows, columns, 2), the depth from the top and the sideways depth.
+    Each slice is drawn into an offscreen by a fragment shader (texelFetch): Blender 4.5 reads only a 3D
+    texture's first slice back."""
+    import gpu
+    from gpu_extras.batch import batch_for_shader
 
-    data = np.array(clouds.volumes["sky_volume"].read().to_list(), dtype=np.float32)
-    return data.reshape(lightvolume.SIZE[2], lightvolume.SIZE[1], lightvolume.SIZE[0], 2)
+    from nubis_addon.core import lightvolume
+    from nubis_addon.render.engine import read_pixels
+
+    info = gpu.types.GPUShaderCreateInfo()
+    info.vertex_in(0, "VEC2", "pos")
+    info.sampler(0, "FLOAT_3D", "volume")
+    info.push_constant("INT", "slice")
+    info.fragment_out(0, "VEC4", "color")
+    info.vertex_source("void main() { gl_Position = vec4(pos, 0.0, 1.0); }")
+    info.fragment_source("void main() { color = texelFetch(volume, ivec3(ivec2(gl_FragCoord.xy), slice), 0); }")
+    shader = gpu.shader.create_from_info(info)
+    batch = batch_for_shader(shader, "TRIS", {"pos": [(-1.0, -1.0), (3.0, -1.0), (-1.0, 3.0)]})
+    w, h, depth = lightvolume.SIZE
+    slices = []
+    offscreen = gpu.types.GPUOffScreen(w, h, format="RGBA32F")
+    try:
+        with offscreen.bind():
+            fb = gpu.state.active_framebuffer_get()
+            for k in range(depth):
+                fb.clear(color=(0.0, 0.0, 0.0, 0.0))
+                shader.bind()
+                shader.uniform_sampler("volume", clouds.volumes["sky_volume"])
+                shader.uniform_int("slice", k)
+                batch.draw(shader)
+                slices.append(np.asarray(read_pixels(fb, w, h))[..., :2])
+    finally:
+        offscreen.free()
+    return np.stack(slices)
 
 
 def test_the_sky_volume_knows_a_towers_flank_from_a_decks_middle(make_scene):
