@@ -85,6 +85,26 @@ vec2 nubis_slab_sky_weights(float mu_v, float tau, float rate, float edge)
   return vec2(rate * b + edge * a, rate * (tau * a - b) + edge * a) / span;
 }
 
+/* How diffuse light that crosses a slab of vertical optical depth `tau` leaves it towards a viewer at
+ * cosine `mu_v`, relative to leaving evenly in all directions (which has the same flux): the light
+ * model's linear profile of the diffuse light through the slab (nubis_slab_sky_weights), lit from the face
+ * away from the viewer (`far`) or from the viewer's own. A thin layer seen at a grazing angle shows more
+ * of its light (a longer path through it), a thick one lit from the far face less (the light near the
+ * viewer's face is what is left of it). The flux over the hemisphere by 4-point Gauss-Legendre. */
+float nubis_slab_exit_shape(float mu_v, float tau, bool far)
+{
+  const vec4 mu = vec4(0.0694318, 0.3300095, 0.6699905, 0.9305682);
+  const vec4 weight = vec4(0.1739274, 0.3260726, 0.3260726, 0.1739274);
+  float rate = P.lighting_sky_occlusion, edge = P.lighting_diffusion_edge;
+  float flux = 0.0;
+  for (int i = 0; i < 4; i++) {
+    vec2 w = nubis_slab_sky_weights(mu[i], tau, rate, edge);
+    flux += (far ? w.x : w.y) * mu[i] * weight[i];
+  }
+  vec2 here = nubis_slab_sky_weights(mu_v, tau, rate, edge);
+  return flux > 0.0 ? (far ? here.x : here.y) / (2.0 * flux) : 1.0;
+}
+
 /* GPU Pro 7, S15: the cirrus layer, sampled once where the ray crosses its sphere
  * (docs/sources.md#cirrus-layer, docs/sources.md#cirrus-lighting), lit as the thin homogeneous slab
  * Cycles renders from the bake (nubis_slab_scattering). The sun's single scattering is exact, the World's
@@ -109,8 +129,8 @@ vec4 nubis_cirrus(vec3 origin, vec3 dir, vec2 pixel)
   float mu_v = dot(dir, up);
   float tau = tau_view * max(abs(mu_v), NUBIS_MIN_SLANT_COS);
   float alpha = 1.0 - exp(-tau_view);
-  vec3 light = P.sun_radiance.rgb * nubis_phase(dot(dir, P.sun_dir.xyz), 1.0) *
-               nubis_slab_scattering(mu_v, dot(P.sun_dir.xyz, up), tau);
+  vec3 sun = P.sun_radiance.rgb * exp(-nubis_layer_sun_depth(origin + dir * t, pixel));
+  vec3 light = sun * nubis_phase(dot(dir, P.sun_dir.xyz), 1.0) * nubis_slab_scattering(mu_v, dot(P.sun_dir.xyz, up), tau);
   /* The World's light scattered once, direction by direction (once per pixel, so the real-time view
    * affords the reference's directions): grazing views of thin cirrus see mostly the bright horizon
    * behind it through the forward lobe. */
@@ -132,7 +152,9 @@ vec4 nubis_cirrus(vec3 origin, vec3 dir, vec2 pixel)
   light += P.ambient.rgb * (below ? w.x : w.y) + P.ambient_below.rgb * (below ? w.y : w.x);
   /* The sun's light that scatters more than once in the layer: thin cirrus hardly, a thick anvil mostly
    * (a converged path tracer lights its underside white; docs/sources.md#cirrus-lighting). */
-  light += P.sun_radiance.rgb * nubis_slab_multiple_scattering(mu_v, dot(P.sun_dir.xyz, up), tau);
+  float mu_sun = dot(P.sun_dir.xyz, up);
+  light += sun * (nubis_slab_multiple_scattering(mu_v, mu_sun, tau) *
+                  nubis_slab_exit_shape(mu_v, tau, (mu_v > 0.0) == (mu_sun > 0.0)));
 #endif
   return vec4(light, alpha);
 }
