@@ -96,10 +96,16 @@ def probe_glow(gpu_inputs: CloudGPU, points: np.ndarray, fine_density: float = 0
 def probe_slab(gpu_inputs: CloudGPU, args: np.ndarray) -> np.ndarray:
     """A cirrus slab's light per unit of the sun's irradiance for each row (view cosine, sun cosine,
     vertical optical depth) of `args` (N, 3): (N, 2) holding its multiple and its single scattering."""
+    return probe_slab_shape(gpu_inputs, args)[:, :2]
+
+
+def probe_slab_shape(gpu_inputs: CloudGPU, args: np.ndarray) -> np.ndarray:
+    """probe_slab plus a third column, the angular shape of the slab's diffuse light towards the viewer
+    (nubis_slab_exit_shape); a fourth column in `args` of 1 lights the face away from the viewer."""
     a = np.asarray(args, dtype=np.float32)
     texels = np.zeros((len(a), 4), np.float32)
-    texels[:, :3] = a
-    return _run(gpu_inputs, texels, (_MODE_SLAB, 0.0, 0.0, 0.0))[:, :2]
+    texels[:, : a.shape[1]] = a
+    return _run(gpu_inputs, texels, (_MODE_SLAB, 0.0, 0.0, 0.0))[:, :3]
 
 
 def probe_diffusion(gpu_inputs: CloudGPU, args: np.ndarray, kappa: float) -> np.ndarray:

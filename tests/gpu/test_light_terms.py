@@ -89,6 +89,37 @@ def test_a_cirrus_slab_passes_the_sky_on_as_the_clouds_diffuse_it(clouds):
     assert thick[0] < 0.15 and thick[1] > 0.8 and thick[0] + thick[1] == pytest.approx(1.0, abs=1e-3)
 
 
+def test_a_cirrus_slab_sends_its_diffuse_sunlight_out_with_the_diffusion_profiles_shape(clouds, blender):
+    """The sun's light scattered more than once leaves the layer with the angular shape of the light
+    model's linear profile, its flux kept (docs/sources.md#cirrus-lighting): a thin layer seen at a grazing
+    angle shows more of it (its longer path), a thick one lit from the far face less (what reaches the
+    viewer's face is what is left of it). Leaving evenly, the first model lit a thick anvil's middle too
+    brightly and its thin edges too dimly against converged Cycles."""
+    from gpu_probe import probe_slab_shape
+
+    gpu_inputs, _g = clouds
+    p = blender.context.scene.nubis
+    rate, edge = p.lighting_sky_occlusion, p.lighting_diffusion_edge
+    mus = (np.arange(64) + 0.5) / 64
+    for far in (1.0, 0.0):
+        for tau in (0.02, 0.5, 4.0):
+            rows = np.array([(mu, 0.5, tau, far) for mu in mus])
+            shape = probe_slab_shape(gpu_inputs, rows)[:, 2].astype(np.float64)
+            # float64: the face's weight seen at each cosine (slant capped at 1 / 0.05), over twice its flux
+            m = 1.0 / np.maximum(mus, 0.05)
+            a = -np.expm1(-m * tau)
+            b = (a - m * tau * np.exp(-m * tau)) / m
+            w = (rate * b + edge * a) if far else (rate * (tau * a - b) + edge * a)
+            expected = w / (2.0 * np.sum(w * mus) / 64)
+            np.testing.assert_allclose(shape, expected, rtol=0.03)
+            # the flux of the light that leaves is kept: 2 x the integral of shape x mu is 1
+            assert 2.0 * np.sum(shape * mus) / 64 == pytest.approx(1.0, abs=0.03)
+            if tau == 0.02:
+                assert shape[6] > 2.0 * shape[-1] and shape[6] > 1.0  # grazing (mu 0.1) brighter than overhead
+            if tau == 4.0 and far:
+                assert shape[6] < 1.0 < shape[-1]  # a thick layer lit from above, seen from below at a grazing angle
+
+
 def _robin_slab(near, far, rate, edge, kappa):
     """phi'' = k^2 phi across the slab in transport depth, phi - edge phi' = 1 on the lit face and
     phi + edge phi' = 0 on the far one, at the point `near` from the lit face (float64)."""

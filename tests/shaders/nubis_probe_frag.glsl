@@ -8,8 +8,10 @@
  *      noise_hf (1) or noise_curl (2, t.xy), so a test can see how this GPU filters 8-bit textures;
  *   3: vec4(vortex-moved xy, the second ring's xy) for the world xy t.xy (GDC22's vortex);
  *   4: vec4(storm glow rgb, 0) at the world point t.xyz for a fine density t.w (GDC22's glow);
- *   5: vec4(nubis_slab_multiple_scattering(t.x, t.y, t.z), nubis_slab_scattering(t.x, t.y, t.z), 0, 0):
- *      a slab's light at view cosine t.x, sun cosine t.y, vertical optical depth t.z;
+ *   5: vec4(nubis_slab_multiple_scattering(t.x, t.y, t.z), nubis_slab_scattering(t.x, t.y, t.z),
+ *      nubis_slab_exit_shape(t.x, t.z, t.w > 0.5), 0): a slab's light at view cosine t.x, sun cosine t.y,
+ *      vertical optical depth t.z, and the angular shape of its diffuse light lit from the far face (t.w 1)
+ *      or the viewer's own (0);
  *   6: vec4(nubis_slab_diffusion(t.x, t.y, t.z, t.w, probe_mode.y), nubis_absorbing_decay(t.x, t.y), 0, 0);
  *   7: vec4(nubis_slab_sky_weights(t.x, t.y, t.z, t.w), nubis_slab_leave_unscattered(t.y), 0): a slab's
  *      weights of the far and the near face's diffuse light at view cosine t.x, vertical optical depth t.y. */
@@ -25,7 +27,8 @@ void main()
     return;
   }
   if (probe_mode.x > 4.5) {
-    color = vec4(nubis_slab_multiple_scattering(t.x, t.y, t.z), nubis_slab_scattering(t.x, t.y, t.z), 0.0, 0.0);
+    color = vec4(nubis_slab_multiple_scattering(t.x, t.y, t.z), nubis_slab_scattering(t.x, t.y, t.z),
+                 nubis_slab_exit_shape(t.x, t.z, t.w > 0.5), 0.0);
     return;
   }
   if (probe_mode.x > 3.5) {
