@@ -93,14 +93,15 @@ vec2 nubis_slab_sky_weights(float mu_v, float tau, float rate, float edge)
  * viewer's face is what is left of it). The flux over the hemisphere by 4-point Gauss-Legendre. */
 float nubis_slab_exit_shape(float mu_v, float tau, bool far)
 {
-  const vec4 mu = vec4(0.0694318, 0.3300095, 0.6699905, 0.9305682);
-  const vec4 weight = vec4(0.1739274, 0.3260726, 0.3260726, 0.1739274);
   float rate = P.lighting_sky_occlusion, edge = P.lighting_diffusion_edge;
-  float flux = 0.0;
-  for (int i = 0; i < 4; i++) {
-    vec2 w = nubis_slab_sky_weights(mu[i], tau, rate, edge);
-    flux += (far ? w.x : w.y) * mu[i] * weight[i];
-  }
+  /* The face's weight over the hemisphere: the four nodes written out (no indexed constant arrays). */
+  vec2 w0 = nubis_slab_sky_weights(0.0694318, tau, rate, edge);
+  vec2 w1 = nubis_slab_sky_weights(0.3300095, tau, rate, edge);
+  vec2 w2 = nubis_slab_sky_weights(0.6699905, tau, rate, edge);
+  vec2 w3 = nubis_slab_sky_weights(0.9305682, tau, rate, edge);
+  vec4 face = far ? vec4(w0.x, w1.x, w2.x, w3.x) : vec4(w0.y, w1.y, w2.y, w3.y);
+  float flux = dot(face, vec4(0.0694318, 0.3300095, 0.6699905, 0.9305682) *
+                             vec4(0.1739274, 0.3260726, 0.3260726, 0.1739274));
   vec2 here = nubis_slab_sky_weights(mu_v, tau, rate, edge);
   return flux > 0.0 ? (far ? here.x : here.y) / (2.0 * flux) : 1.0;
 }
@@ -129,7 +130,7 @@ vec4 nubis_cirrus(vec3 origin, vec3 dir, vec2 pixel)
   float mu_v = dot(dir, up);
   float tau = tau_view * max(abs(mu_v), NUBIS_MIN_SLANT_COS);
   float alpha = 1.0 - exp(-tau_view);
-  vec3 sun = P.sun_radiance.rgb * exp(-nubis_layer_sun_depth(origin + dir * t, pixel));
+  vec3 sun = P.sun_radiance.rgb;
   vec3 light = sun * nubis_phase(dot(dir, P.sun_dir.xyz), 1.0) * nubis_slab_scattering(mu_v, dot(P.sun_dir.xyz, up), tau);
   /* The World's light scattered once, direction by direction (once per pixel, so the real-time view
    * affords the reference's directions): grazing views of thin cirrus see mostly the bright horizon

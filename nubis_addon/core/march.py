@@ -84,7 +84,6 @@ def bayer_offset(index: int) -> tuple[int, int]:
 #   reference light   48 x (1 + 2n), and the sky: 12 x (1 + 16 x (1 + 2n)) (single scattering's, mode 1)
 #                     or the column up and down: 2 x 24 x (1 + 2n), and sideways: 8 x (1 + 4 x (1 + 2n))
 #                     (the full model's, mode 2)
-# and once per ray, a reference march's sun depth from the cirrus layer: 48 x (1 + 2n).
 LOOP_LIMIT = 65535
 _MARGIN = 512  # per-ray set-up, the octaves' phases, the cirrus
 
@@ -105,5 +104,4 @@ def iterations_per_step(light_taps: int, storms: int, reference: int) -> int:
 def max_steps(light_taps: int, storms: int, reference: int) -> int:
     """The most view steps a march can take within the loop limit, every step lit. Beyond it the march
     takes longer steps (the ray still ends where it should) rather than being cut short."""
-    once = _MARGIN + (48 * (1 + 2 * int(storms)) if reference else 0)
-    return max(8, (LOOP_LIMIT - once) // iterations_per_step(light_taps, storms, reference))
+    return max(8, (LOOP_LIMIT - _MARGIN) // iterations_per_step(light_taps, storms, reference))
