@@ -52,8 +52,8 @@ float nubis_slab_leave_unscattered(float tau)
  * gives the slab's diffuse reflection and transmission (Shettle and Weinman 1970); of the diffuse light
  * on the viewer's side, the share beyond single scattering (which nubis_slab_scattering gives exactly)
  * is (1 - p), p the chance that light scattered in the slab leaves it unscattered
- * (nubis_slab_leave_unscattered): second order in a thin layer, all of it in a thick one. The light
- * leaves evenly in all directions. */
+ * (nubis_slab_leave_unscattered): second order in a thin layer, all of it in a thick one. As if the
+ * light left evenly in all directions; nubis_cirrus gives it its angular shape (nubis_slab_exit_shape). */
 float nubis_slab_multiple_scattering(float mu_v, float mu_l, float tau)
 {
   if (mu_l <= 0.0 || tau <= 0.0) {
@@ -130,8 +130,8 @@ vec4 nubis_cirrus(vec3 origin, vec3 dir, vec2 pixel)
   float mu_v = dot(dir, up);
   float tau = tau_view * max(abs(mu_v), NUBIS_MIN_SLANT_COS);
   float alpha = 1.0 - exp(-tau_view);
-  vec3 sun = P.sun_radiance.rgb;
-  vec3 light = sun * nubis_phase(dot(dir, P.sun_dir.xyz), 1.0) * nubis_slab_scattering(mu_v, dot(P.sun_dir.xyz, up), tau);
+  float mu_sun = dot(P.sun_dir.xyz, up);
+  vec3 light = P.sun_radiance.rgb * nubis_phase(dot(dir, P.sun_dir.xyz), 1.0) * nubis_slab_scattering(mu_v, mu_sun, tau);
   /* The World's light scattered once, direction by direction (once per pixel, so the real-time view
    * affords the reference's directions): grazing views of thin cirrus see mostly the bright horizon
    * behind it through the forward lobe. */
@@ -153,8 +153,7 @@ vec4 nubis_cirrus(vec3 origin, vec3 dir, vec2 pixel)
   light += P.ambient.rgb * (below ? w.x : w.y) + P.ambient_below.rgb * (below ? w.y : w.x);
   /* The sun's light that scatters more than once in the layer: thin cirrus hardly, a thick anvil mostly
    * (a converged path tracer lights its underside white; docs/sources.md#cirrus-lighting). */
-  float mu_sun = dot(P.sun_dir.xyz, up);
-  light += sun * (nubis_slab_multiple_scattering(mu_v, mu_sun, tau) *
+  light += P.sun_radiance.rgb * (nubis_slab_multiple_scattering(mu_v, mu_sun, tau) *
                   nubis_slab_exit_shape(mu_v, tau, (mu_v > 0.0) == (mu_sun > 0.0)));
 #endif
   return vec4(light, alpha);
