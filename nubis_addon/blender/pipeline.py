@@ -12,9 +12,16 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from ..core import camera, imageio, interrupt, limits, march, metrics, vdbio
+from ..core import bakeplan, camera, imageio, interrupt, limits, march, metrics, vdbio
 from ..core import sky as skymath
-from ..core.bakeplan import BakePlan, camera_voxel_size, plan_bake, view_footprint
+from ..core.bakeplan import (
+    BakePlan,
+    camera_footprint_voxel,
+    camera_voxel_size,
+    measured_share,
+    plan_bake,
+    view_footprint,
+)
 from ..core.errors import NubisError
 from ..core.fsutil import check_output_dir, check_output_path
 from ..core.staging import output_set
@@ -225,10 +232,11 @@ def bake_plan(
     velocity: bool = False,
     thin_cirrus: bool = False,
     wait: bool = True,
+    active_share: float = 1.0,
 ) -> tuple[CloudState, BakePlan]:
     """The scene's cloud state at its current frame and the bake's plan (tiles, memory estimate:
     refused politely before any GPU work when it does not fit). `wait` False plans without capturing
-    the World's light (the plan does not depend on it)."""
+    the World's light (the plan does not depend on it); `active_share` as in plan_bake."""
     state = scene_io.state_from_scene(scene, wait=wait)
     region = None
     if camera_only:
@@ -237,7 +245,12 @@ def bake_plan(
         inv = np.array(scene_io.camera_inv_view_proj(scene, w, h))
         region = view_footprint(state, inv)
     plan = plan_bake(
-        state, voxel_size or scene.nubis.bake_voxel_size, region=region, velocity=velocity, thin_cirrus=thin_cirrus
+        state,
+        voxel_size or scene.nubis.bake_voxel_size,
+        region=region,
+        velocity=velocity,
+        thin_cirrus=thin_cirrus,
+        active_share=active_share,
     )
     state.cirrus_slab = plan.cirrus_slab
     return state, plan
@@ -264,6 +277,8 @@ def _bake_evaluator(scene, state: CloudState, plan: BakePlan):
     # Skies whose field can hold no glow or absorption read back the density alone.
     packed = plan.extra_grids == 0 and not plan.velocity
     sink = _grid_sink(grids, plan.velocity, fps, packed)
+    if plan.active_share < 1.0:
+        sink = _guarded_sink(sink, plan, packed)
 
     def evaluate(tiles, progress=None):
         gpu_bake.bake_tiles(clouds, plan, tiles, sink, progress, plan.velocity, packed)
@@ -285,13 +300,15 @@ def bake_steps(
     velocity: bool = False,
     thin_cirrus: bool = False,
     tiles_per_step: int = TILES_PER_STEP,
+    active_share: float = 1.0,
 ):
     """The bake in steps, for the interface: a generator yielding the fraction done after each group of
     tiles; the file is written (atomically) after the last, and the generator returns the BakeResult.
-    Closing it early cancels: nothing is written, an earlier file at `path` stays as it was."""
+    Closing it early cancels: nothing is written, an earlier file at `path` stays as it was.
+    `active_share` as in plan_bake (probe_share)."""
     path = check_output_path(path, (".vdb",))
     start = time.perf_counter()
-    state, plan = bake_plan(scene, voxel_size, camera_only, size, velocity, thin_cirrus)
+    state, plan = bake_plan(scene, voxel_size, camera_only, size, velocity, thin_cirrus, active_share=active_share)
     grids, evaluate = _bake_evaluator(scene, state, plan)
     tiles = plan.tiles
     step = max(1, int(tiles_per_step))
@@ -333,6 +350,51 @@ def bake_estimate(scene, voxel_size: float | None = None) -> tuple[int, int]:
         _state, plan = bake_plan(scene, voxel_size, s.bake_camera_only, None, s.bake_velocity, wait=False)
         _estimates[key] = (plan.evaluated_voxels, plan.bytes_estimate)
     return _estimates[key]
+
+
+def _active_voxels(block: np.ndarray, packed: bool) -> int:
+    """Cloudy voxels of a block bake_tiles hands over (the density: the block itself when packed)."""
+    return int(np.count_nonzero((block if packed else block[..., 0]) > vdbio.DEFAULT_TOLERANCE))
+
+
+def _guarded_sink(sink, plan: BakePlan, packed: bool):
+    """`sink`, stopping the bake once its trees would outgrow the memory limit: a plan that counted on a
+    measured active share (BakePlan.active_share) keeps the promise of the estimate this way. Nothing is
+    written then (the bake writes its file after the last tile)."""
+    active = 0
+
+    def guarded(ijk, block):
+        nonlocal active
+        active += _active_voxels(block, packed)
+        need = bakeplan.BASE_BYTES + active * plan.bytes_per_active_voxel
+        if need > bakeplan.DEFAULT_MEMORY_LIMIT:
+            raise bakeplan.BakeTooLarge(
+                f"the clouds fill more of the {plan.voxel_size:g} m bake than its probe measured (over "
+                f"{need / 1024**3:.1f} GB): give a larger voxel size (--voxel-size)",
+                plan.voxel_size * 1.25,
+            )
+        sink(ijk, block)
+
+    return guarded
+
+
+def probe_share(scene, voxel_size: float, size: tuple[int, int], thin_cirrus: bool = False) -> tuple[float, int]:
+    """(BakePlan.active_share measured_share allows, seconds) from a camera-only bake at `voxel_size`
+    that only counts its cloudy voxels: a fine bake the bound refuses may fit by what the clouds
+    really fill (core/bakeplan.py, SHARE_MARGIN)."""
+    start = time.perf_counter()
+    state, plan = bake_plan(scene, voxel_size, True, size, thin_cirrus=thin_cirrus)
+    clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
+    clouds.update(state, light=False)
+    packed = plan.extra_grids == 0
+    active = 0
+
+    def count(_ijk, block):
+        nonlocal active
+        active += _active_voxels(block, packed)
+
+    gpu_bake.bake_tiles(clouds, plan, plan.tiles, count, packed=packed)
+    return measured_share(active, plan.evaluated_voxels), time.perf_counter() - start
 
 
 def _grid_sink(grids, velocity: bool, fps: float, packed: bool = False):
@@ -383,13 +445,18 @@ def bake(
     half: bool = False,
     velocity: bool = False,
     thin_cirrus: bool = False,
+    active_share: float = 1.0,
 ) -> BakeResult:
     """Bake the viewport's density to an OpenVDB `density` grid in world space (atomic write): sparse
     and tiled, so memory follows the clouds rather than the box (docs/bake.md).
 
     `camera_only` bakes just the part of the sky the scene camera sees, which allows finer voxels;
-    `half` stores the float grids as half floats; `velocity` adds the `velocity` grid."""
-    return run_steps(bake_steps(scene, path, voxel_size, camera_only, size, half, velocity, thin_cirrus), progress)
+    `half` stores the float grids as half floats; `velocity` adds the `velocity` grid; `active_share`
+    plans the memory by a measured share of active voxels (probe_share), guarded while baking."""
+    steps = bake_steps(
+        scene, path, voxel_size, camera_only, size, half, velocity, thin_cirrus, active_share=active_share
+    )
+    return run_steps(steps, progress)
 
 
 def render_cycles(
@@ -528,15 +595,33 @@ def _compare(
     stages = 4 if mode == "full" and reference else 3
     timings = {}
     t = time.perf_counter()
+    share = 1.0
     if voxel_size is None:
         # The sparse bake's memory follows the clouds, so the voxels can be as fine as the camera needs.
         state = scene_io.state_from_scene(scene)
         inv = np.array(scene_io.camera_inv_view_proj(scene, width, height))
-        voxel_size = camera_voxel_size(state, inv, width, height, scene.nubis.bake_voxel_size)
-        voxel_size = max(voxel_size, voxel_floor)
+        start = scene.nubis.bake_voxel_size
+        voxel_size = max(camera_voxel_size(state, inv, width, height, start), voxel_floor)
+        wanted = max(camera_footprint_voxel(state, inv, width, height, start), voxel_floor)
+        if wanted < voxel_size:
+            # The memory bound (every evaluated voxel active) holds the bake coarser than the camera asks:
+            # what the clouds really fill, counted at the size that fits, may allow finer voxels. A coarse
+            # reference is not converged in its voxels: the superstorm's Cycles image moved 10 % per pixel
+            # from 34 m to 15 m (docs/bake.md#memory).
+            step(f"1/{stages} counting what the clouds fill of a {voxel_size:.3g} m bake")
+            probe, _seconds = probe_share(scene, voxel_size, (width, height), THIN_CIRRUS)
+            finer = max(camera_voxel_size(state, inv, width, height, start, active_share=probe), voxel_floor)
+            if finer < voxel_size:
+                voxel_size, share = finer, probe
     step(f"1/{stages} baking what the camera sees, {voxel_size:.3g} m voxels")
     baked = bake(
-        scene, stage(out / "clouds.vdb"), voxel_size, camera_only=True, size=(width, height), thin_cirrus=THIN_CIRRUS
+        scene,
+        stage(out / "clouds.vdb"),
+        voxel_size,
+        camera_only=True,
+        size=(width, height),
+        thin_cirrus=THIN_CIRRUS,
+        active_share=share,
     )
     timings["bake_s"] = time.perf_counter() - t
     # The viewport keeps only the baked clouds: sky light from beyond the box would otherwise be
@@ -613,6 +698,8 @@ def _compare(
         preset=scene.nubis.preset,
         voxel_size=baked.plan.voxel_size,
         bake_dims=list(baked.plan.dims),
+        # 1: the bake fitted the memory bound; below: it counted on this share, measured by a probe.
+        bake_active_share=baked.plan.active_share,
         clip_box=list(clip),
         seconds=timings,
     )

@@ -57,6 +57,9 @@ class BakePlan:
     tiles: tuple[Tile, ...] = ()
     velocity: bool = False  # a velocity grid is baked too
     extra_grids: int = 0  # float grids beside density the field can produce (absorption, glow)
+    # The share of the evaluated voxels the estimate counts as active: 1, the bound, unless a probe bake
+    # measured how much of them the clouds fill (measured_share).
+    active_share: float = 1.0
 
     @property
     def voxels(self) -> int:
@@ -68,9 +71,12 @@ class BakePlan:
         return sum(t.voxels for t in self.tiles)
 
     @property
+    def bytes_per_active_voxel(self) -> float:
+        return BYTES_PER_ACTIVE_VOXEL * (1 + self.extra_grids) + (BYTES_PER_VELOCITY_VOXEL if self.velocity else 0)
+
+    @property
     def bytes_estimate(self) -> int:
-        per = BYTES_PER_ACTIVE_VOXEL * (1 + self.extra_grids) + (BYTES_PER_VELOCITY_VOXEL if self.velocity else 0)
-        return int(BASE_BYTES + self.evaluated_voxels * per)
+        return int(BASE_BYTES + self.evaluated_voxels * self.active_share * self.bytes_per_active_voxel)
 
     def file_bytes_estimate(self, half: bool = False) -> int:
         """About the most bytes the baked file takes on disk (bytes_estimate is memory, not the file)."""
@@ -139,19 +145,23 @@ def plan_bake(
     velocity: bool = False,
     tile: int = TILE,
     thin_cirrus: bool = False,
+    active_share: float = 1.0,
 ) -> BakePlan:
     """The box holding every cloud the viewport can draw: the field, clipped to the draw radius (and to
     `region`, x0 x1 y0 y1, when given), and the shell's altitudes, lowered by the planet's curvature at
     the box's far corners; cut into tiles (plan_tiles). Refuses, naming a voxel size that fits, when
-    the estimated memory exceeds `memory_limit`."""
+    the estimated memory exceeds `memory_limit`. `active_share` is the share of the evaluated voxels the
+    estimate counts as active (BakePlan.active_share): 1 but after a probe (measured_share)."""
     if not (math.isfinite(voxel_size) and voxel_size > 0):
         raise NubisError(f"the voxel size must be a positive number of metres, not {voxel_size!r}")
-    plan, need = _plan(state, voxel_size, memory_limit, region, velocity, tile, thin_cirrus)
+    if not (0.0 < active_share <= 1.0):
+        raise NubisError(f"the active share of a bake must lie in (0, 1], not {active_share!r}")
+    plan, need = _plan(state, voxel_size, memory_limit, region, velocity, tile, thin_cirrus, active_share)
     if need is None:
         return plan
 
     def fits(v: float) -> bool:
-        return _plan(state, v, memory_limit, region, velocity, tile, thin_cirrus)[1] is None
+        return _plan(state, v, memory_limit, region, velocity, tile, thin_cirrus, active_share)[1] is None
 
     # A first guess from the estimate alone (memory as the cube of the voxel size, tiles as its square).
     tiles_over = math.ceil(plan.dims[0] / tile) * math.ceil(plan.dims[1] / tile) / MAX_TILES
@@ -172,7 +182,9 @@ class BakeTooLarge(NubisError):
         self.suggested = suggested
 
 
-def _plan(state, voxel_size, memory_limit, region, velocity, tile, thin_cirrus) -> tuple[BakePlan, float | None]:
+def _plan(
+    state, voxel_size, memory_limit, region, velocity, tile, thin_cirrus, active_share=1.0
+) -> tuple[BakePlan, float | None]:
     """The plan at this voxel size and None, or a plan without tiles and the bytes it would need (a
     coarse bound when the box alone has too many tiles) when it does not fit in `memory_limit`."""
     p = state.params
@@ -212,7 +224,9 @@ def _plan(state, voxel_size, memory_limit, region, velocity, tile, thin_cirrus) 
         # the box in cloud) for the message.
         return plan, BASE_BYTES + plan.voxels * 0.1 * BYTES_PER_ACTIVE_VOXEL
     tiles = tuple(plan_tiles(state, plan, tile))
-    plan = BakePlan(plan.origin, v, dims, slab, tiles, velocity=velocity, extra_grids=_extra_grids(state))
+    plan = BakePlan(
+        plan.origin, v, dims, slab, tiles, velocity=velocity, extra_grids=_extra_grids(state), active_share=active_share
+    )
     return plan, (plan.bytes_estimate if plan.bytes_estimate > memory_limit else None)
 
 
@@ -435,7 +449,7 @@ def nearest_cloud_distance(state: CloudState, inv_view_proj: np.ndarray, samples
     return best
 
 
-def camera_voxel_size(
+def camera_footprint_voxel(
     state: CloudState,
     inv_view_proj: np.ndarray,
     width: int,
@@ -443,20 +457,53 @@ def camera_voxel_size(
     start: float,
     finest: float = CAMERA_FINEST_VOXEL,
 ) -> float:
-    """The voxel size a camera needs: a pixel's footprint at the nearest cloud it sees over
-    CAMERA_VOXELS_PER_FOOTPRINT (no finer than `finest`, no coarser than `start`), or, when the
-    camera-only bake would not fit in memory at that size, the smallest size where it does (doubling
-    would overshoot: 15 m that does not fit would become 30 m where 20 m fits)."""
+    """The voxel size a camera asks for, memory aside: a pixel's footprint at the nearest cloud it sees
+    over CAMERA_VOXELS_PER_FOOTPRINT, no finer than `finest`, no coarser than `start`."""
     angle, size = pixel_footprint(inv_view_proj, width, height)
     near = nearest_cloud_distance(state, inv_view_proj)
     footprint = (near * angle + size) / CAMERA_VOXELS_PER_FOOTPRINT if math.isfinite(near) else start
-    voxel = min(max(finest, footprint), max(start, finest))
+    return min(max(finest, footprint), max(start, finest))
+
+
+def camera_voxel_size(
+    state: CloudState,
+    inv_view_proj: np.ndarray,
+    width: int,
+    height: int,
+    start: float,
+    finest: float = CAMERA_FINEST_VOXEL,
+    active_share: float = 1.0,
+) -> float:
+    """The voxel size a camera needs (camera_footprint_voxel) or, when the camera-only bake would not fit
+    in memory at that size, the smallest size where it does (doubling would overshoot: 15 m that does
+    not fit would become 30 m where 20 m fits). `active_share` as in plan_bake."""
+    voxel = camera_footprint_voxel(state, inv_view_proj, width, height, start, finest)
     region = view_footprint(state, inv_view_proj)
     try:
-        plan_bake(state, voxel, region=region)
+        plan_bake(state, voxel, region=region, active_share=active_share)
     except BakeTooLarge as err:
         return err.suggested  # the smallest size that fits (smallest_fitting_voxel)
     return voxel
+
+
+# The bound counts every voxel the tiles evaluate as active; the clouds fill far fewer. Measured on the
+# superstorm's camera-only bake (160x90), where the bound held the comparison to 34 m voxels: the density
+# grid's active voxels were 5.5 % of the evaluated ones at 34 m, 5.9 % at 24 m, 6.3 % at 15 m (finer
+# voxels resolve more of the thin edges), in leaves 80 % full; the bound said 34.4 GB at 15 m, the trees
+# held about 1.5 GB. A share measured by a probe bake at a coarser size, times this margin, covers
+# the growth towards finer voxels and the partly filled leaves (docs/bake.md#memory).
+SHARE_MARGIN = 1.5
+# A probe that finds almost no cloud still counts this share, so a bake never plans for nothing.
+SHARE_FLOOR = 0.01
+
+
+def measured_share(active: int, evaluated: int) -> float:
+    """The active share a bake may plan with (BakePlan.active_share), from a probe bake of the same
+    sky that found `active` cloudy voxels among `evaluated` ones: with SHARE_MARGIN, at least
+    SHARE_FLOOR, at most 1 (the bound)."""
+    if evaluated <= 0:
+        return 1.0
+    return min(1.0, max(SHARE_FLOOR, active / evaluated * SHARE_MARGIN))
 
 
 def comparison_voxel_size(

@@ -131,3 +131,29 @@ def test_names_no_file_can_have_are_said_not_raised(tmp_path):
         find_preset("/dev/zero")
     with pytest.raises(NubisError, match=r"the output '.*/x\\xff\.png' is not valid UTF-8: the image and volume"):
         check_output_path(os.fsdecode(os.fsencode(str(tmp_path)) + b"/x\xff.png"), (".png",))
+
+
+def test_a_measured_active_share_lets_a_bake_the_bound_refuses_fit_and_nothing_else_does():
+    """The bound counts every evaluated voxel as cloud; a probe's measured share (with its margin) plans
+    by what the clouds fill. The share scales the estimate, never lets the box alone or nonsense through."""
+    state = _state(layer_draw_radius=500_000.0, field_size=1_000_000.0)
+    with pytest.raises(bakeplan.BakeTooLarge) as refused:
+        plan_bake(state, 150.0)
+    bound = plan_bake(state, refused.value.suggested)
+    share = bakeplan.measured_share(active=bound.evaluated_voxels // 20, evaluated=bound.evaluated_voxels)
+    assert share == pytest.approx(0.05 * bakeplan.SHARE_MARGIN, rel=1e-6)
+    shared = plan_bake(state, refused.value.suggested, active_share=share)
+    assert shared.evaluated_voxels == bound.evaluated_voxels
+    assert shared.bytes_estimate - bakeplan.BASE_BYTES == pytest.approx(
+        (bound.bytes_estimate - bakeplan.BASE_BYTES) * share, rel=1e-6
+    )
+    finer = plan_bake(state, 150.0, active_share=share)  # refused by the bound, fits by the share
+    assert finer.active_share == share and finer.bytes_estimate <= bakeplan.DEFAULT_MEMORY_LIMIT
+    with pytest.raises(bakeplan.BakeTooLarge):  # a share cannot make an absurd size fit
+        plan_bake(state, 20.0, active_share=share)
+    assert bakeplan.measured_share(0, 1000) == bakeplan.SHARE_FLOOR
+    assert bakeplan.measured_share(900, 1000) == 1.0
+    assert bakeplan.measured_share(5, 0) == 1.0
+    for bad in (0.0, -0.1, 1.5, float("nan")):
+        with pytest.raises(NubisError, match="active share"):
+            plan_bake(state, 500.0, active_share=bad)

@@ -136,3 +136,33 @@ def test_a_killed_bake_leaves_the_old_file_untouched(make_scene, tmp_path):
     assert len(calls) == 2
     assert first.path.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["clouds.vdb"]
+
+
+def test_a_probe_counts_what_the_bake_writes_and_a_bake_past_its_measured_share_stops(
+    make_scene, tmp_path, monkeypatch
+):
+    """probe_share counts the cloudy voxels of a camera-only bake without building its trees: the same
+    count as the written grid. A bake planned by that share (not by the bound) stops once its trees
+    outgrow the memory limit, and leaves the earlier file as it was."""
+    from nubis_addon.blender import pipeline
+    from nubis_addon.core import bakeplan
+
+    scene = split_coverage_scene(make_scene)
+    size = (160, 90)
+    full = pipeline.bake(scene, tmp_path / "clouds.vdb", 400.0, camera_only=True, size=size)
+    assert full.active_voxels > 1000
+    share, seconds = pipeline.probe_share(scene, 400.0, size)
+    assert share == bakeplan.measured_share(full.active_voxels, full.plan.evaluated_voxels)
+    assert bakeplan.SHARE_FLOOR <= share < 1.0 and seconds > 0
+    before = full.path.read_bytes()
+    # The trees may hold half of what the clouds fill: the bake must stop on the way, not write.
+    limit = bakeplan.BASE_BYTES + full.active_voxels // 2 * full.plan.bytes_per_active_voxel
+    monkeypatch.setattr(bakeplan, "DEFAULT_MEMORY_LIMIT", int(limit))
+    with pytest.raises(bakeplan.BakeTooLarge, match="more of the 400 m bake than its probe measured"):
+        pipeline.bake(scene, full.path, 400.0, camera_only=True, size=size, active_share=bakeplan.SHARE_FLOOR)
+    assert full.path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["clouds.vdb"]
+    # Planned by the bound (share 1), the same limit is not checked while baking: the plan promised it.
+    monkeypatch.undo()
+    again = pipeline.bake(scene, full.path, 400.0, camera_only=True, size=size, active_share=share)
+    assert again.active_voxels == full.active_voxels and again.plan.active_share == share
