@@ -483,13 +483,18 @@ vec3 nubis_volume_coord(vec3 unit, vec3 size)
   return (clamp(unit, 0.0, 1.0) * (size - 1.0) + 0.5) / size;
 }
 
+/* p's unit coordinates in the sun's volume: z = 0 on the face towards the sun. */
+vec3 nubis_sun_volume_unit(vec3 p)
+{
+  return vec3(dot(P.sun_volume_x.xyz, p) + P.sun_volume_x.w,
+              dot(P.sun_volume_y.xyz, p) + P.sun_volume_y.w,
+              dot(P.sun_volume_z.xyz, p) + P.sun_volume_z.w);
+}
+
 /* The optical depth from p towards the sun until the cloud domain ends (sigma included). */
 float nubis_sun_volume_depth(vec3 p)
 {
-  vec3 unit = vec3(dot(P.sun_volume_x.xyz, p) + P.sun_volume_x.w,
-                   dot(P.sun_volume_y.xyz, p) + P.sun_volume_y.w,
-                   dot(P.sun_volume_z.xyz, p) + P.sun_volume_z.w);
-  return texture(sun_volume, nubis_volume_coord(unit, vec3(textureSize(sun_volume, 0)))).r;
+  return texture(sun_volume, nubis_volume_coord(nubis_sun_volume_unit(p), vec3(textureSize(sun_volume, 0)))).r;
 }
 
 /* The optical depth of cloud above p and below it, to the domain's top and floor, and sideways to the
@@ -587,6 +592,27 @@ NubisLightDepths nubis_light_depths(vec3 p, float view_alpha, float lod, vec2 pi
 #  endif
 #endif
   return l;
+}
+
+/* The clouds' optical depth towards the sun from a point of the cirrus layer (sigma included): a tower
+ * that reaches through the layer shadows it, as it shadows the baked slab in Cycles. The light volume
+ * where the real-time march has it (a sun ray that misses the box meets no cloud), the reference march
+ * otherwise; without either, none. One fetch per pixel. */
+float nubis_layer_sun_depth(vec3 p, vec2 pixel)
+{
+#if NUBIS_REFERENCE
+  float plain;
+  return nubis_reference_depth(p, P.sun_dir.xyz, NUBIS_REFERENCE_SUN_SAMPLES, nubis_reference_jitter(pixel), plain) *
+         P.density_sigma;
+#elif NUBIS_LIGHT_VOLUME
+  vec3 unit = nubis_sun_volume_unit(p);
+  if (any(lessThan(unit, vec3(0.0))) || any(greaterThan(unit.xy, vec2(1.0)))) {
+    return 0.0;
+  }
+  return nubis_sun_volume_depth(p);
+#else
+  return 0.0;
+#endif
 }
 
 /* Light scattered towards the eye per unit of scattering at a point inside the cloud, without the

@@ -131,7 +131,8 @@ vec4 nubis_cirrus(vec3 origin, vec3 dir, vec2 pixel)
   float tau = tau_view * max(abs(mu_v), NUBIS_MIN_SLANT_COS);
   float alpha = 1.0 - exp(-tau_view);
   float mu_sun = dot(P.sun_dir.xyz, up);
-  vec3 light = P.sun_radiance.rgb * nubis_phase(dot(dir, P.sun_dir.xyz), 1.0) * nubis_slab_scattering(mu_v, mu_sun, tau);
+  vec3 sun = P.sun_radiance.rgb * exp(-nubis_layer_sun_depth(origin + dir * t, pixel));
+  vec3 light = sun * nubis_phase(dot(dir, P.sun_dir.xyz), 1.0) * nubis_slab_scattering(mu_v, mu_sun, tau);
   /* The World's light scattered once, direction by direction (once per pixel, so the real-time view
    * affords the reference's directions): grazing views of thin cirrus see mostly the bright horizon
    * behind it through the forward lobe. */
@@ -153,7 +154,7 @@ vec4 nubis_cirrus(vec3 origin, vec3 dir, vec2 pixel)
   light += P.ambient.rgb * (below ? w.x : w.y) + P.ambient_below.rgb * (below ? w.y : w.x);
   /* The sun's light that scatters more than once in the layer: thin cirrus hardly, a thick anvil mostly
    * (a converged path tracer lights its underside white; docs/sources.md#cirrus-lighting). */
-  light += P.sun_radiance.rgb * (nubis_slab_multiple_scattering(mu_v, mu_sun, tau) *
+  light += sun * (nubis_slab_multiple_scattering(mu_v, mu_sun, tau) *
                   nubis_slab_exit_shape(mu_v, tau, (mu_v > 0.0) == (mu_sun > 0.0)));
 #endif
   return vec4(light, alpha);
