@@ -16,8 +16,8 @@ from ..core import bakeplan, camera, imageio, interrupt, limits, march, metrics,
 from ..core import sky as skymath
 from ..core.bakeplan import (
     BakePlan,
+    camera_fitting_voxel,
     camera_footprint_voxel,
-    camera_voxel_size,
     measured_share,
     plan_bake,
     view_footprint,
@@ -600,9 +600,8 @@ def _compare(
         # The sparse bake's memory follows the clouds, so the voxels can be as fine as the camera needs.
         state = scene_io.state_from_scene(scene)
         inv = np.array(scene_io.camera_inv_view_proj(scene, width, height))
-        start = scene.nubis.bake_voxel_size
-        voxel_size = max(camera_voxel_size(state, inv, width, height, start), voxel_floor)
-        wanted = max(camera_footprint_voxel(state, inv, width, height, start), voxel_floor)
+        wanted = max(camera_footprint_voxel(state, inv, width, height, scene.nubis.bake_voxel_size), voxel_floor)
+        voxel_size = max(camera_fitting_voxel(state, inv, wanted), voxel_floor)
         if wanted < voxel_size:
             # The memory bound (every evaluated voxel active) holds the bake coarser than the camera asks:
             # what the clouds really fill, counted at the size that fits, may allow finer voxels. A coarse
@@ -610,7 +609,7 @@ def _compare(
             # from 34 m to 15 m (docs/bake.md#memory).
             step(f"1/{stages} counting what the clouds fill of a {voxel_size:.3g} m bake")
             probe, _seconds = probe_share(scene, voxel_size, (width, height), THIN_CIRRUS)
-            finer = max(camera_voxel_size(state, inv, width, height, start, active_share=probe), voxel_floor)
+            finer = max(camera_fitting_voxel(state, inv, wanted, active_share=probe), voxel_floor)
             if finer < voxel_size:
                 voxel_size, share = finer, probe
     step(f"1/{stages} baking what the camera sees, {voxel_size:.3g} m voxels")

@@ -465,22 +465,14 @@ def camera_footprint_voxel(
     return min(max(finest, footprint), max(start, finest))
 
 
-def camera_voxel_size(
-    state: CloudState,
-    inv_view_proj: np.ndarray,
-    width: int,
-    height: int,
-    start: float,
-    finest: float = CAMERA_FINEST_VOXEL,
-    active_share: float = 1.0,
+def camera_fitting_voxel(
+    state: CloudState, inv_view_proj: np.ndarray, voxel: float, active_share: float = 1.0
 ) -> float:
-    """The voxel size a camera needs (camera_footprint_voxel) or, when the camera-only bake would not fit
-    in memory at that size, the smallest size where it does (doubling would overshoot: 15 m that does
-    not fit would become 30 m where 20 m fits). `active_share` as in plan_bake."""
-    voxel = camera_footprint_voxel(state, inv_view_proj, width, height, start, finest)
-    region = view_footprint(state, inv_view_proj)
+    """`voxel` (camera_footprint_voxel) or, when the camera-only bake would not fit in memory at that
+    size, the smallest size where it does (doubling would overshoot: 15 m that does not fit would become
+    30 m where 20 m fits). `active_share` as in plan_bake."""
     try:
-        plan_bake(state, voxel, region=region, active_share=active_share)
+        plan_bake(state, voxel, region=view_footprint(state, inv_view_proj), active_share=active_share)
     except BakeTooLarge as err:
         return err.suggested  # the smallest size that fits (smallest_fitting_voxel)
     return voxel
