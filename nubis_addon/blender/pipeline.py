@@ -366,7 +366,7 @@ def _guarded_sink(sink, plan: BakePlan, packed: bool):
     def guarded(ijk, block):
         nonlocal active
         active += _active_voxels(block, packed)
-        need = bakeplan.BASE_BYTES + active * plan.bytes_per_active_voxel
+        need = bakeplan.BASE_BYTES + active * plan.bytes_per_active_voxel / bakeplan.LEAF_FILL
         if need > bakeplan.DEFAULT_MEMORY_LIMIT:
             raise bakeplan.BakeTooLarge(
                 f"the clouds fill more of the {plan.voxel_size:g} m bake than its probe measured (over "

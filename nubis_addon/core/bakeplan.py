@@ -487,6 +487,9 @@ def camera_fitting_voxel(
 SHARE_MARGIN = 1.5
 # A probe that finds almost no cloud still counts this share, so a bake never plans for nothing.
 SHARE_FLOOR = 0.01
+# How full the trees' leaves are (measured above): a bake that counts its active voxels as it goes
+# divides by this for the bytes its trees hold.
+LEAF_FILL = 0.8
 
 
 def measured_share(active: int, evaluated: int) -> float:

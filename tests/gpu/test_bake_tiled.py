@@ -156,7 +156,7 @@ def test_a_probe_counts_what_the_bake_writes_and_a_bake_past_its_measured_share_
     assert bakeplan.SHARE_FLOOR <= share < 1.0 and seconds > 0
     before = full.path.read_bytes()
     # The trees may hold half of what the clouds fill: the bake must stop on the way, not write.
-    limit = bakeplan.BASE_BYTES + full.active_voxels // 2 * full.plan.bytes_per_active_voxel
+    limit = bakeplan.BASE_BYTES + full.active_voxels // 2 * full.plan.bytes_per_active_voxel / bakeplan.LEAF_FILL
     monkeypatch.setattr(bakeplan, "DEFAULT_MEMORY_LIMIT", int(limit))
     with pytest.raises(bakeplan.BakeTooLarge, match="more of the 400 m bake than its probe measured"):
         pipeline.bake(scene, full.path, 400.0, camera_only=True, size=size, active_share=bakeplan.SHARE_FLOOR)
