@@ -378,7 +378,7 @@ def _guarded_sink(sink, plan: BakePlan, packed: bool):
     return guarded
 
 
-def probe_share(scene, voxel_size: float, size: tuple[int, int], thin_cirrus: bool = False) -> tuple[float, int]:
+def probe_share(scene, voxel_size: float, size: tuple[int, int], thin_cirrus: bool = False) -> tuple[float, float]:
     """(BakePlan.active_share measured_share allows, seconds) from a camera-only bake at `voxel_size`
     that only counts its cloudy voxels: a fine bake the bound refuses may fit by what the clouds
     really fill (core/bakeplan.py, SHARE_MARGIN)."""
@@ -595,7 +595,7 @@ def _compare(
     stages = 4 if mode == "full" and reference else 3
     timings = {}
     t = time.perf_counter()
-    share = 1.0
+    share, safe = 1.0, None
     if voxel_size is None:
         # The sparse bake's memory follows the clouds, so the voxels can be as fine as the camera needs.
         state = scene_io.state_from_scene(scene)
@@ -611,17 +611,29 @@ def _compare(
             probe, _seconds = probe_share(scene, voxel_size, (width, height), THIN_CIRRUS)
             finer = max(camera_fitting_voxel(state, inv, wanted, active_share=probe), voxel_floor)
             if finer < voxel_size:
-                voxel_size, share = finer, probe
+                voxel_size, share, safe = finer, probe, voxel_size
     step(f"1/{stages} baking what the camera sees, {voxel_size:.3g} m voxels")
-    baked = bake(
-        scene,
-        stage(out / "clouds.vdb"),
-        voxel_size,
-        camera_only=True,
-        size=(width, height),
-        thin_cirrus=THIN_CIRRUS,
-        active_share=share,
-    )
+
+    def bake_at(voxel: float, active_share: float) -> BakeResult:
+        return bake(
+            scene,
+            stage(out / "clouds.vdb"),
+            voxel,
+            camera_only=True,
+            size=(width, height),
+            thin_cirrus=THIN_CIRRUS,
+            active_share=active_share,
+        )
+
+    try:
+        baked = bake_at(voxel_size, share)
+    except bakeplan.BakeTooLarge:
+        if safe is None:
+            raise
+        # The clouds filled more than the probe measured (its bake stopped before its trees outgrew the
+        # memory): the size the bound allows instead.
+        step(f"1/{stages} the clouds fill more than measured: baking at {safe:.3g} m voxels")
+        baked = bake_at(safe, 1.0)
     timings["bake_s"] = time.perf_counter() - t
     # The viewport keeps only the baked clouds: sky light from beyond the box would otherwise be
     # shadowed by clouds Cycles never sees.

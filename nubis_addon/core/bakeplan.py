@@ -140,7 +140,7 @@ def view_footprint(state: CloudState, inv_view_proj: np.ndarray, samples: int = 
 def plan_bake(
     state: CloudState,
     voxel_size: float,
-    memory_limit: int = DEFAULT_MEMORY_LIMIT,
+    memory_limit: int | None = None,
     region: tuple[float, float, float, float] | None = None,
     velocity: bool = False,
     tile: int = TILE,
@@ -150,12 +150,15 @@ def plan_bake(
     """The box holding every cloud the viewport can draw: the field, clipped to the draw radius (and to
     `region`, x0 x1 y0 y1, when given), and the shell's altitudes, lowered by the planet's curvature at
     the box's far corners; cut into tiles (plan_tiles). Refuses, naming a voxel size that fits, when
-    the estimated memory exceeds `memory_limit`. `active_share` is the share of the evaluated voxels the
-    estimate counts as active (BakePlan.active_share): 1 but after a probe (measured_share)."""
+    the estimated memory exceeds `memory_limit` (DEFAULT_MEMORY_LIMIT when None). `active_share` is the
+    share of the evaluated voxels the estimate counts as active (BakePlan.active_share): 1 but after a
+    probe (measured_share)."""
     if not (math.isfinite(voxel_size) and voxel_size > 0):
         raise NubisError(f"the voxel size must be a positive number of metres, not {voxel_size!r}")
     if not (0.0 < active_share <= 1.0):
         raise NubisError(f"the active share of a bake must lie in (0, 1], not {active_share!r}")
+    if memory_limit is None:
+        memory_limit = DEFAULT_MEMORY_LIMIT
     plan, need = _plan(state, voxel_size, memory_limit, region, velocity, tile, thin_cirrus, active_share)
     if need is None:
         return plan

@@ -46,7 +46,8 @@ def _compare(blender, out, **kw):
     edit = kw.pop("edit", None)
     if edit:
         edit(scene)
-    return pipeline.compare(scene, out, 32, 18, mode="single", voxel_size=40.0, reference=False, **kw)
+    voxel = kw.pop("voxel_size", 40.0)
+    return pipeline.compare(scene, out, 32, 18, mode="single", voxel_size=voxel, reference=False, **kw)
 
 
 @pytest.fixture(scope="module")
@@ -87,3 +88,44 @@ def test_an_unchanged_scene_reuses_the_reference_and_an_edit_cycles_sees_does_no
     assert moved["cycles_reference"]["key"] != m["cycles_reference"]["key"]
     saved = json.loads((out / "metrics.json").read_text(encoding="utf-8"))
     assert saved["cycles_reference"]["key"] == moved["cycles_reference"]["key"]
+
+
+def test_a_memory_bound_comparison_bakes_finer_by_what_the_clouds_fill_and_falls_back_when_they_fill_more(
+    tmp_path, blender, monkeypatch
+):
+    """Where the bound (every evaluated voxel cloud) refuses the voxels the camera asks for, compare counts
+    what the clouds fill with a probe and bakes at the camera's size; if the clouds then fill more than
+    the probe said, the guarded bake stops and compare bakes at the size the bound allows."""
+    from nubis_addon.blender import scene_io
+    from nubis_addon.core import bakeplan
+
+    seen = {}
+
+    def limit_to(bytes_of):
+        def edit(scene):
+            state = scene_io.state_from_scene(scene)
+            inv = np.array(scene_io.camera_inv_view_proj(scene, 32, 18))
+            wanted = bakeplan.camera_footprint_voxel(state, inv, 32, 18, scene.nubis.bake_voxel_size)
+            region = bakeplan.view_footprint(state, inv)
+            plan = bakeplan.plan_bake(state, wanted, memory_limit=2**62, region=region)  # the bound, unlimited
+            seen["wanted"] = wanted
+            monkeypatch.setattr(bakeplan, "DEFAULT_MEMORY_LIMIT", int(bakeplan.BASE_BYTES + bytes_of(plan)))
+
+        return edit
+
+    # Half the bound's bytes at the camera's size: the bound refuses it, what the clouds fill does not.
+    half = limit_to(lambda plan: plan.evaluated_voxels * plan.bytes_per_active_voxel / 2)
+    said = []
+    m = _compare(blender, tmp_path / "fine", samples=4, voxel_size=None, edit=half, step=said.append)
+    assert any("counting what the clouds fill" in s for s in said)
+    assert not any("fill more than measured" in s for s in said)
+    assert m["voxel_size"] == pytest.approx(seen["wanted"])
+    assert 0.0 < m["bake_active_share"] < 0.5
+    # A probe that under-counts: the plan fits, the clouds' 2000 voxels' worth of memory does not.
+    monkeypatch.setattr(bakeplan, "SHARE_MARGIN", 1e-6)
+    monkeypatch.setattr(bakeplan, "SHARE_FLOOR", 1e-9)
+    tiny = limit_to(lambda plan: 2000 * plan.bytes_per_active_voxel)
+    said.clear()
+    m = _compare(blender, tmp_path / "fallback", samples=4, voxel_size=None, edit=tiny, step=said.append)
+    assert any("fill more than measured" in s for s in said), said
+    assert m["voxel_size"] > seen["wanted"] and m["bake_active_share"] == 1.0
