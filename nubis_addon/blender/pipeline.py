@@ -378,11 +378,10 @@ def _guarded_sink(sink, plan: BakePlan, packed: bool):
     return guarded
 
 
-def probe_share(scene, voxel_size: float, size: tuple[int, int], thin_cirrus: bool = False) -> tuple[float, float]:
-    """(BakePlan.active_share measured_share allows, seconds) from a camera-only bake at `voxel_size`
-    that only counts its cloudy voxels: a fine bake the bound refuses may fit by what the clouds
-    really fill (core/bakeplan.py, SHARE_MARGIN)."""
-    start = time.perf_counter()
+def probe_share(scene, voxel_size: float, size: tuple[int, int], thin_cirrus: bool = False) -> float:
+    """The BakePlan.active_share measured_share allows, from a camera-only bake at `voxel_size` that only
+    counts its cloudy voxels: a fine bake the bound refuses may fit by what the clouds really fill
+    (core/bakeplan.py, SHARE_MARGIN)."""
     state, plan = bake_plan(scene, voxel_size, True, size, thin_cirrus=thin_cirrus)
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
     clouds.update(state, light=False)
@@ -394,7 +393,7 @@ def probe_share(scene, voxel_size: float, size: tuple[int, int], thin_cirrus: bo
         active += _active_voxels(block, packed)
 
     gpu_bake.bake_tiles(clouds, plan, plan.tiles, count, packed=packed)
-    return measured_share(active, plan.evaluated_voxels), time.perf_counter() - start
+    return measured_share(active, plan.evaluated_voxels)
 
 
 def _grid_sink(grids, velocity: bool, fps: float, packed: bool = False):
@@ -608,7 +607,7 @@ def _compare(
             # reference is not converged in its voxels: the superstorm's Cycles image moved 10 % per pixel
             # from 34 m to 15 m (docs/bake.md#memory).
             step(f"1/{stages} counting what the clouds fill of a {voxel_size:.3g} m bake")
-            probe, _seconds = probe_share(scene, voxel_size, (width, height), THIN_CIRRUS)
+            probe = probe_share(scene, voxel_size, (width, height), THIN_CIRRUS)
             finer = max(camera_fitting_voxel(state, inv, wanted, active_share=probe), voxel_floor)
             if finer < voxel_size:
                 voxel_size, share, safe = finer, probe, voxel_size
