@@ -13,7 +13,7 @@ from ..core.errors import NubisError
 from ..core.fsutil import not_a_file
 from ..core.presets import load_preset
 from ..render.gpu_context import ensure_gpu_context
-from . import farm, pipeline, preview, registration, scene_io, scene_render
+from . import farm, pipeline, preview, registration, scene_io, scene_render, snapshot
 
 PROG = "nubis"
 # compare --draft bakes voxels no finer than this (metres): at half the scene's size the camera-footprint
@@ -157,7 +157,7 @@ def _bake_sequence(args, scene, out: Path, voxel, log: Path, label: str) -> str:
     frames = sequence.parse_frames(args.frames) if args.frames else [scene.frame_current]
     if len(frames) > 1:  # the disk the whole set takes, before any frame is baked
         with console.quiet(log):
-            _state, plan = pipeline.bake_plan(scene, voxel, args.camera_only, None, args.velocity, wait=False)
+            _state, plan = snapshot.bake_plan(scene, voxel, args.camera_only, None, args.velocity, wait=False)
         note = sequence.check_disk_space(out, frames, plan.file_bytes_estimate(args.half), args.half)
         if note:
             console.current().line(note)

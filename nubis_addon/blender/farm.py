@@ -27,7 +27,7 @@ from ..core.fsutil import check_output_path, sync_to_disk
 from ..core.presets import load_preset
 from ..core.staging import output_set
 from ..render.gpu_context import ensure_gpu_context
-from . import pipeline, scene_io
+from . import pipeline, scene_io, snapshot
 from .registration import ensure_registered
 
 Progress = Callable[[float], None]
@@ -151,7 +151,8 @@ def _write(path: Path, final: Path, data: bytes) -> None:
 
 def _bake_tiles_distributed(client, engine, scene, source, frame, options, staged, progress):
     start = time.perf_counter()
-    state, plan = pipeline.bake_plan(scene, options.voxel_size, options.camera_only, options.size, options.velocity)
+    snap = snapshot.take(scene, options.voxel_size, options.camera_only, options.size, options.velocity)
+    plan = snap.plan
     busy = [n for n, t in enumerate(plan.tiles) if t.spans]
     workers = max(1, sum(client.nthreads().values()))
     # A few tasks per worker evens out the load and keeps a retried task short.
@@ -199,7 +200,7 @@ def _bake_tiles_distributed(client, engine, scene, source, frame, options, stage
     names = tuple(
         n for n in ("density", "glow", "absorption", "velocity") if n == "density" or merged.active_voxels(n) > 0
     )
-    merged.write(staged, pipeline.bake_metadata(scene, state, plan, names), half=options.half)
+    merged.write(staged, snap.metadata(names), half=options.half)
     return pipeline.BakeResult(staged, plan, merged.active_voxels("density"), time.perf_counter() - start, names, frame)
 
 
@@ -293,10 +294,11 @@ def worker_bake_tiles(
     """Some tiles of one frame, baked on this worker: a partial VDB (no metadata) of their voxels."""
     options = _options(options)
     scene = _worker_scene(source, frame)
-    state, plan = pipeline.bake_plan(scene, options.voxel_size, options.camera_only, options.size, options.velocity)
+    snap = snapshot.take(scene, options.voxel_size, options.camera_only, options.size, options.velocity)
+    plan = snap.plan
     if tuple(plan.dims) != tuple(dims):
         raise NubisError(f"this worker planned a {plan.dims} bake, not {tuple(dims)}: it reads a different scene")
-    grids = pipeline.bake_grids(scene, state, plan, [plan.tiles[n] for n in ids])
+    grids = pipeline.bake_grids(snap, [plan.tiles[n] for n in ids])
     with tempfile.TemporaryDirectory(prefix="nubis-worker-") as tmp:
         path = grids.write(Path(tmp) / "part.vdb", keep=())
         return path.read_bytes()

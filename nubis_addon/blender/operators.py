@@ -14,7 +14,7 @@ from ..core import noise, presets, quality, storms, userpresets
 from ..core.errors import NubisError
 from ..core.limits import MAX_LAYERS
 from ..core.state import MAX_STORMS
-from . import cycles_setup, pipeline, preview, runtime, scene_io, status, viewport
+from . import cycles_setup, preview, runtime, scene_io, status, viewport, work
 
 _PRESET_ITEMS: dict = {}  # id(entries) -> items: Blender keeps pointers to these strings
 
@@ -373,12 +373,14 @@ def _default_bake_path(name: str) -> str:
 class ModalSteps:
     """Long work the artist can cancel: it runs a group of tiles per timer tick (pipeline.bake_steps,
     pipeline.render_shot_steps), the status bar shows its progress, Esc stops it and nothing is written.
-    In background mode (scripts, the tests) it runs to its end at once."""
+    It reads the scene once, when it starts (blender/snapshot.py), so the artist keeps working meanwhile;
+    one runs at a time, and opening another file or quitting cancels it (blender/work.py). In background
+    mode (scripts, the tests) it runs to its end at once."""
 
     doing = "baking"
     cancelled = "Bake cancelled: no file was written, earlier bakes are untouched"
     _timer = None
-    _jobs = None
+    _work = None
 
     def jobs(self, context):
         """(label, stepped bake) pairs, run in order."""
@@ -388,69 +390,75 @@ class ModalSteps:
         raise NotImplementedError
 
     def execute(self, context):
+        running = work.current()
+        if running is not None:  # before the scene is read: a refused start costs nothing
+            self.report({"ERROR"}, work.refusal(running))
+            return {"CANCELLED"}
         try:
-            self._jobs = list(self.jobs(context))
+            self._work = work.Work(self.doing, list(self.jobs(context)))
         except NubisError as err:
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}
-        self._results = []
         if bpy.app.background:
             try:
-                for _label, steps in self._jobs:
-                    self._results.append(pipeline.run_steps(steps))
-                message = self.finished(context, self._results)
+                message = self.finished(context, self._work.run())
             except NubisError as err:
                 self.report({"ERROR"}, str(err))
                 return {"CANCELLED"}
             self.report({"INFO"}, message)
             return {"FINISHED"}
+        work.start(self._work)
         wm = context.window_manager
-        self._timer = wm.event_timer_add(0.01, window=context.window)
+        self._timer = timer = wm.event_timer_add(0.01, window=context.window)
         wm.modal_handler_add(self)
         wm.progress_begin(0, 100)
+        self._work.on_cancel = lambda: _end_progress(timer)
         return {"RUNNING_MODAL"}
 
     def _end(self, context) -> None:
-        wm = context.window_manager
-        if self._timer is not None:
-            wm.event_timer_remove(self._timer)
-            self._timer = None
-        wm.progress_end()
-        context.workspace.status_text_set(None)
-        for _label, steps in self._jobs or ():
-            steps.close()  # a cancelled bake writes nothing
+        work.finish(self._work)
+        _end_progress(self._timer)
+        self._timer = None
+        self._work.close()  # a cancelled bake writes nothing
 
     def modal(self, context, event):
+        if self._work.cancelled:  # stopped from outside (blender/work.py), which cleaned up and said why
+            return {"CANCELLED"}
         if event.type == "ESC":
             self._end(context)
             self.report({"WARNING"}, self.cancelled)
             return {"CANCELLED"}
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
-        label, steps = self._jobs[0]
+        label = self._work.label
         try:
-            fraction = next(steps)
-        except StopIteration as done:
-            self._results.append(done.value)
-            self._jobs.pop(0)
-            fraction = 1.0
+            overall = self._work.step()
         except NubisError as err:
             self._end(context)
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}
-        total = len(self._results) + len(self._jobs)
-        overall = (len(self._results) + (0.0 if fraction >= 1.0 else fraction)) / max(total, 1)
         context.window_manager.progress_update(int(overall * 100))
         context.workspace.status_text_set(f"Nubis: {self.doing} {label}, {overall * 100:.0f}% (Esc cancels)")
-        if self._jobs:
+        if not self._work.done:
             return {"RUNNING_MODAL"}
         self._end(context)
         try:
-            self.report({"INFO"}, self.finished(context, self._results))
+            self.report({"INFO"}, self.finished(context, self._work.results))
         except NubisError as err:
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}
         return {"FINISHED"}
+
+
+def _end_progress(timer) -> None:
+    """Take the work's timer, progress bar and status text down (from its operator, or from work.cancel)."""
+    context = bpy.context
+    wm = context.window_manager
+    if timer is not None:
+        wm.event_timer_remove(timer)
+    wm.progress_end()
+    if context.workspace is not None:
+        context.workspace.status_text_set(None)
 
 
 class NUBIS_OT_render_image(NeedsCloudscape, ModalSteps, bpy.types.Operator):
@@ -463,9 +471,7 @@ class NUBIS_OT_render_image(NeedsCloudscape, ModalSteps, bpy.types.Operator):
     cancelled = "Render cancelled: the image 'Nubis Render' is untouched"
 
     def jobs(self, context):
-        scene = context.scene
-        w, h = pipeline.resolution(scene, None, None)
-        return [(f"{w}x{h}", pipeline.render_shot_steps(pipeline.viewport_shot(scene, w, h)))]
+        return work.render_jobs(context.scene)
 
     def finished(self, context, results) -> str:
         rgba = results[0]
@@ -483,7 +489,7 @@ class NUBIS_OT_bake_vdb(NeedsCloudscape, ModalSteps, bpy.types.Operator):
 
     bl_idname = "nubis.bake_vdb"
     bl_label = "Bake OpenVDB"
-    bl_options = {"REGISTER"}
+    bl_options = {"REGISTER", "UNDO"}  # Ctrl-Z takes the imported Volume away; the file stays on disk
 
     filepath: StringProperty(subtype="FILE_PATH", default="", options={"PATH_SUPPORTS_BLEND_RELATIVE"})
     filter_glob: StringProperty(default="*.vdb", options={"HIDDEN"})
@@ -498,17 +504,9 @@ class NUBIS_OT_bake_vdb(NeedsCloudscape, ModalSteps, bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
     def jobs(self, context):
-        path = _absolute(self.filepath or _default_bake_path("nubis_clouds.vdb"))
-        s = context.scene.nubis
-        steps = pipeline.bake_steps(
-            context.scene,
-            path,
-            self.voxel_size or None,
-            camera_only=s.bake_camera_only,
-            half=s.bake_half,
-            velocity=s.bake_velocity,
+        return work.bake_jobs(
+            context.scene, _absolute(self.filepath or _default_bake_path("nubis_clouds.vdb")), self.voxel_size or None
         )
-        return [(os.path.basename(path), steps)]
 
     def finished(self, context, results) -> str:
         result = results[0]
@@ -522,7 +520,7 @@ class NUBIS_OT_bake_frames(NeedsCloudscape, ModalSteps, bpy.types.Operator):
 
     bl_idname = "nubis.bake_frames"
     bl_label = "Bake Sequence"
-    bl_options = {"REGISTER"}
+    bl_options = {"REGISTER", "UNDO"}
 
     directory: StringProperty(subtype="DIR_PATH", default="", options={"PATH_SUPPORTS_BLEND_RELATIVE"})
     step: IntProperty(name="Frame Step", default=1, min=1, description="Bake every Nth frame of the range")
@@ -536,27 +534,15 @@ class NUBIS_OT_bake_frames(NeedsCloudscape, ModalSteps, bpy.types.Operator):
     def jobs(self, context):
         scene = context.scene
         folder = _absolute(self.directory or _default_bake_path("nubis_vdb"))
-        os.makedirs(folder, exist_ok=True)
-        frames = list(range(scene.frame_start, scene.frame_end + 1, self.step))
-        self._frames, self._folder = frames, folder
-        s = scene.nubis
-        for frame in frames:
-            yield (
-                f"frame {frame}",
-                self._frame_steps(scene, frame, os.path.join(folder, f"clouds_{frame:04d}.vdb"), s),
-            )
-
-    @staticmethod
-    def _frame_steps(scene, frame, path, s):
-        current = scene.frame_current
-        scene.frame_set(frame)
         try:
-            result = yield from pipeline.bake_steps(
-                scene, path, camera_only=s.bake_camera_only, half=s.bake_half, velocity=s.bake_velocity
-            )
-        finally:
-            scene.frame_set(current)
-        return result
+            os.makedirs(folder, exist_ok=True)
+        except OSError as err:
+            raise NubisError(
+                f"cannot create the folder '{folder}' ({err.strerror}): choose a writable folder"
+            ) from None
+        self._frames = list(range(scene.frame_start, scene.frame_end + 1, self.step))
+        self._folder = folder
+        return work.sequence_jobs(scene, folder, self._frames)
 
     def finished(self, context, results) -> str:
         first = results[0].path
@@ -706,6 +692,7 @@ class NUBIS_OT_preset_add(NeedsCloudscape, NubisOperator, bpy.types.Operator):
 
     bl_idname = "nubis.preset_add"
     bl_label = "Add Preset"
+    bl_options = {"REGISTER", "UNDO"}  # it names the scene's preset
 
     name: StringProperty(name="Name", description="The preset's name in the menu", maxlen=userpresets.MAX_NAME)
     preset_description: StringProperty(name="Description", description="One sentence on the preset: its tooltip")

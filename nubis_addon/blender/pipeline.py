@@ -19,8 +19,6 @@ from ..core.bakeplan import (
     camera_fitting_voxel,
     camera_footprint_voxel,
     measured_share,
-    plan_bake,
-    view_footprint,
 )
 from ..core.errors import NubisError
 from ..core.fsutil import check_output_dir, check_output_path
@@ -28,8 +26,9 @@ from ..core.staging import output_set
 from ..core.state import MAX_STORMS, CloudState
 from ..render import bake as gpu_bake
 from ..render import engine
-from . import cycles_setup, runtime, scene_io, sky
+from . import cycles_setup, runtime, scene_io, sky, snapshot
 from . import reference as cycles_reference
+from .snapshot import BakeSnapshot
 
 Progress = Callable[[float], None]
 
@@ -151,22 +150,28 @@ def render_shot(
     replace the viewport's grain with a converged image; `first_pass` starts later in the jitter
     sequence, so renders of disjoint passes are independent estimates of the same image. `progress`
     gets the fraction done after each tile."""
-    return run_steps(render_shot_steps(shot, passes, first_pass), progress)
+    # Run to its end here, between two looks at the interface: the shared GPU inputs (and the light
+    # volumes they already hold) serve it; a stepped render gets its own (render_shot_steps).
+    return run_steps(_render_run(shot, runtime.cloud_gpu(shot.noise_seed), max(1, passes), first_pass), progress)
 
 
 def render_shot_steps(shot: ViewportShot, passes: int = 1, first_pass: int = 0):
     """render_shot as a generator yielding the fraction done after each tile, for the interface's modal
-    Render Clouds; it returns the image. Closing it early frees the GPU's image and returns nothing."""
-    clouds = runtime.cloud_gpu(shot.noise_seed)
-    passes = max(1, passes)
+    Render Clouds; it returns the image. The shot is the snapshot (viewport_shot reads the scene once), and
+    its GPU inputs are the render's own, made now (CloudGPU.fork): the 3D viewport's redraws meanwhile do
+    not reach them. Closing it early frees the GPU's image and returns nothing."""
+    clouds = runtime.cloud_gpu(shot.noise_seed).fork()
+    return _render_run(shot, clouds, max(1, passes), first_pass)
+
+
+def _render_run(shot: ViewportShot, clouds, passes: int, first_pass: int):
     total = None
     for k, i in enumerate(range(first_pass, first_pass + passes)):
         shot.state.jitter_pass = i
+        clouds.update(shot.state)
         tiles = engine.render_offscreen_steps(clouds, shot.inv_view_proj, shot.eye, shot.width, shot.height)
         try:
             while True:
-                # The 3D viewport shares these GPU inputs and may have drawn its own view since the last tile.
-                clouds.update(shot.state)
                 try:
                     fraction = next(tiles)
                 except StopIteration as done:
@@ -224,59 +229,26 @@ class BakeResult:
     frame: int = 0
 
 
-def bake_plan(
-    scene,
-    voxel_size: float | None = None,
-    camera_only: bool = False,
-    size: tuple[int, int] | None = None,
-    velocity: bool = False,
-    thin_cirrus: bool = False,
-    wait: bool = True,
-    active_share: float = 1.0,
-) -> tuple[CloudState, BakePlan]:
-    """The scene's cloud state at its current frame and the bake's plan (tiles, memory estimate:
-    refused politely before any GPU work when it does not fit). `wait` False plans without capturing
-    the World's light (the plan does not depend on it); `active_share` as in plan_bake."""
-    state = scene_io.state_from_scene(scene, wait=wait)
-    region = None
-    if camera_only:
-        # The camera's aspect only: a camera-only bake renders no image, so the image size limit does not apply.
-        w, h = size or (scene.render.resolution_x, scene.render.resolution_y)
-        inv = np.array(scene_io.camera_inv_view_proj(scene, w, h))
-        region = view_footprint(state, inv)
-    plan = plan_bake(
-        state,
-        voxel_size or scene.nubis.bake_voxel_size,
-        region=region,
-        velocity=velocity,
-        thin_cirrus=thin_cirrus,
-        active_share=active_share,
-    )
-    state.cirrus_slab = plan.cirrus_slab
-    return state, plan
-
-
-def bake_grids(scene, state: CloudState, plan: BakePlan, tiles=None, progress: Progress | None = None):
-    """Evaluate the plan's tiles (or `tiles`) on the GPU into sparse grids: density, and where the
+def bake_grids(snap: BakeSnapshot, tiles=None, progress: Progress | None = None):
+    """Evaluate the snapshot's tiles (or `tiles`) on the GPU into sparse grids: density, and where the
     sky has them absorption and glow; with the plan's `velocity` a Vec3 `velocity` grid in metres per
     second of animation, from the motion vectors' own model (the wind's scroll and the storms' turn
     over one frame, times the frame rate)."""
-    grids, evaluate = _bake_evaluator(scene, state, plan)
-    evaluate(plan.tiles if tiles is None else tiles, progress)
+    grids, evaluate = _bake_evaluator(snap)
+    evaluate(snap.plan.tiles if tiles is None else tiles, progress)
     return grids
 
 
-def _bake_evaluator(scene, state: CloudState, plan: BakePlan):
-    """The grids a bake fills and the function that evaluates a group of its tiles into them."""
-    fps = scene_io.scene_fps(scene)
-    state.motion_dt = scene.nubis.wind_time_scale / fps  # one frame of wind time
-    clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
-    clouds.update(state, light=False)  # densities only: no light volumes to fill
+def _bake_evaluator(snap: BakeSnapshot):
+    """The grids a bake fills and the function that evaluates a group of its tiles into them, on GPU
+    inputs of the bake's own (uploaded from the snapshot once: the viewport's redraws cannot reach them)."""
+    plan = snap.plan
+    clouds = snap.gpu_inputs()
     grids = vdbio.SparseGrids(plan.voxel_size, plan.origin)
     grids.grid("density")
     # Skies whose field can hold no glow or absorption read back the density alone.
     packed = plan.extra_grids == 0 and not plan.velocity
-    sink = _grid_sink(grids, plan.velocity, fps, packed)
+    sink = _grid_sink(grids, plan.velocity, snap.fps, packed)
     if plan.active_share < 1.0:
         sink = _guarded_sink(sink, plan, packed)
 
@@ -302,16 +274,28 @@ def bake_steps(
     tiles_per_step: int = TILES_PER_STEP,
     active_share: float = 1.0,
 ):
-    """The bake in steps, for the interface: a generator yielding the fraction done after each group of
-    tiles; the file is written (atomically) after the last, and the generator returns the BakeResult.
-    Closing it early cancels: nothing is written, an earlier file at `path` stays as it was.
-    `active_share` as in plan_bake (probe_share)."""
+    """The bake in steps, for the interface: the scene is read now, into a snapshot (blender/snapshot.py),
+    and the generator returned yields the fraction done after each group of tiles, evaluated from that
+    snapshot whatever the scene, the timeline or the viewport do meanwhile; the file is written
+    (atomically) after the last, and the generator returns the BakeResult. Closing it early cancels:
+    nothing is written, an earlier file at `path` stays as it was. `active_share` as in plan_bake."""
+    path = check_output_path(path, (".vdb",))
+    snap = snapshot.take(scene, voxel_size, camera_only, size, velocity, thin_cirrus, active_share=active_share)
+    return snapshot_steps(snap, path, half, tiles_per_step)
+
+
+def snapshot_steps(
+    snap: BakeSnapshot, path: str | os.PathLike, half: bool = False, tiles_per_step: int = TILES_PER_STEP
+):
+    """A snapshot's bake in steps (bake_steps; Bake Sequence runs one per frame): reads no Blender data."""
     path = check_output_path(path, (".vdb",))
     start = time.perf_counter()
-    state, plan = bake_plan(scene, voxel_size, camera_only, size, velocity, thin_cirrus, active_share=active_share)
-    grids, evaluate = _bake_evaluator(scene, state, plan)
-    tiles = plan.tiles
-    step = max(1, int(tiles_per_step))
+    grids, evaluate = _bake_evaluator(snap)
+    return _bake_run(snap, grids, evaluate, path, half, max(1, int(tiles_per_step)), start)
+
+
+def _bake_run(snap: BakeSnapshot, grids, evaluate, path: Path, half: bool, step: int, start: float):
+    tiles = snap.plan.tiles
     for i in range(0, len(tiles), step):
         evaluate(tiles[i : i + step])
         yield min(1.0, (i + step) / len(tiles))
@@ -320,9 +304,9 @@ def bake_steps(
         for n in ("density", "glow", "absorption", "velocity")
         if n in grids.grids and (n == "density" or grids.active_voxels(n) > 0)
     )
-    grids.write(path, bake_metadata(scene, state, plan, names), half=half)
+    grids.write(path, snap.metadata(names), half=half)
     active = grids.active_voxels("density")
-    return BakeResult(path, plan, active, time.perf_counter() - start, names, scene.frame_current)
+    return BakeResult(path, snap.plan, active, time.perf_counter() - start, names, snap.frame)
 
 
 run_steps = engine.run_steps  # a stepped bake or render to its end: its BakeResult or image
@@ -347,7 +331,7 @@ def bake_estimate(scene, voxel_size: float | None = None) -> tuple[int, int]:
     )
     if key not in _estimates:
         _estimates.clear()
-        _state, plan = bake_plan(scene, voxel_size, s.bake_camera_only, None, s.bake_velocity, wait=False)
+        _state, plan = snapshot.bake_plan(scene, voxel_size, s.bake_camera_only, None, s.bake_velocity, wait=False)
         _estimates[key] = (plan.evaluated_voxels, plan.bytes_estimate)
     return _estimates[key]
 
@@ -382,9 +366,9 @@ def probe_share(scene, voxel_size: float, size: tuple[int, int], thin_cirrus: bo
     """The BakePlan.active_share measured_share allows, from a camera-only bake at `voxel_size` that only
     counts its cloudy voxels: a fine bake the bound refuses may fit by what the clouds really fill
     (core/bakeplan.py, SHARE_MARGIN)."""
-    state, plan = bake_plan(scene, voxel_size, True, size, thin_cirrus=thin_cirrus)
-    clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
-    clouds.update(state, light=False)
+    snap = snapshot.take(scene, voxel_size, True, size, thin_cirrus=thin_cirrus)
+    plan = snap.plan
+    clouds = snap.gpu_inputs()
     packed = plan.extra_grids == 0
     active = 0
 
@@ -412,26 +396,6 @@ def _grid_sink(grids, velocity: bool, fps: float, packed: bool = False):
             grids.add("velocity", np.where(active, block[..., 4:7] * fps, 0.0).astype(np.float32), ijk)
 
     return sink
-
-
-def bake_metadata(scene, state: CloudState, plan: BakePlan, grids: tuple[str, ...]) -> dict:
-    """What pipelines read from the file: units, frame, preset, the density scale (extinction per
-    metre at density 1), the grids and their meaning (docs/bake.md)."""
-    meta = {
-        "nubis_sigma": float(scene.nubis.density_sigma),
-        "nubis_density_scale": float(scene.nubis.density_sigma),
-        "nubis_voxel_size": float(plan.voxel_size),
-        "nubis_time": float(state.time),
-        "nubis_preset": scene.nubis.preset,
-        "nubis_units": "metres",
-        "nubis_frame": int(scene.frame_current),
-        "nubis_fps": float(scene_io.scene_fps(scene)),
-        "nubis_grids": ",".join(grids),
-        "nubis_grid_classes": ",".join(f"{g}:{'vector' if g == 'velocity' else 'fog volume'}" for g in grids),
-    }
-    if "velocity" in grids:
-        meta["nubis_velocity_units"] = "metres per second"
-    return meta
 
 
 def bake(

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import events, operators, panels, preferences, properties, runtime, scene_render, sky, viewport
+from . import events, operators, panels, preferences, properties, runtime, scene_render, sky, viewport, work
 
 _registered = [False]
 
@@ -20,12 +20,14 @@ def register() -> None:
     viewport.register()
     sky.register()
     scene_render.register()
+    work.register()
     _registered[0] = True
 
 
 def unregister() -> None:
     if not _registered[0]:
         return
+    work.unregister()
     scene_render.unregister()
     sky.unregister()
     viewport.unregister()

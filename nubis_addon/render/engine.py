@@ -186,8 +186,9 @@ def fullscreen_batch(name: str, defines: dict[str, object]) -> gpu.types.GPUBatc
 class CloudGPU:
     """GPU inputs of the cloud shaders, updated from a CloudState."""
 
-    def __init__(self, noise_set: noise.NoiseSet):
-        self.noise = NoiseTextures(noise_set)
+    def __init__(self, noise_set: noise.NoiseSet | NoiseTextures):
+        # The noise textures never change once made: a fork shares them (fork()).
+        self.noise = noise_set if isinstance(noise_set, NoiseTextures) else NoiseTextures(noise_set)
         self._field_arrays: tuple = ()
         self.field_a = self.field_b = self.field_c = None
         self._sky_key = None
@@ -202,6 +203,12 @@ class CloudGPU:
         self._volume_key = None
         self._no_volume = None
         self.volume_fills = 0  # how often the volumes were filled (tests, the benchmark)
+
+    def fork(self) -> CloudGPU:
+        """GPU inputs of their own over the same noise textures: a bake or a render that runs while the
+        3D viewport keeps drawing uploads its snapshot here once, and the viewport's uploads to the shared
+        inputs cannot reach it (blender/snapshot.py). Costs the field, sky and light-volume textures only."""
+        return CloudGPU(self.noise)
 
     @property
     def storms(self) -> bool:

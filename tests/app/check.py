@@ -22,6 +22,7 @@ EXPECTED = {
         "render_cycles",
         "animation",
         "bake",
+        "bake_disturbed",
         "render_clouds",
         "save",
     ],

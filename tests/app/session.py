@@ -734,6 +734,76 @@ def s_bake(step: Step):
         bpy.data.objects.remove(vol)  # the reopened file renders its clouds through F12, not the VDB
 
 
+def _core_module(name: str):
+    return sys.modules.get(f"{EXT}.nubis_addon.core.{name}")
+
+
+def s_bake_disturbed(step: Step):
+    """Bake VDB runs while the artist works: the timeline jumps to its end (Shift-Right, a real key) and the
+    Erosion slider moves while it bakes; the file equals a bake of the starting state made afterwards, its
+    metadata names the starting frame, and Ctrl-Z takes the imported Volume away and leaves the file."""
+    pipeline, snapshot = ext_module("pipeline"), ext_module("snapshot")
+    vdbio = _core_module("vdbio")
+    scene = bpy.context.scene
+    start_frame, erosion = scene.frame_current, scene.nubis.density_erosion
+    # One tile per timer step, as the issue's case; voxels small enough for two dozen steps.
+    keep_step, pipeline.TILES_PER_STEP = pipeline.TILES_PER_STEP, 1
+    voxel = next(
+        (v for v in (240.0, 200.0, 160.0) if len(snapshot.bake_plan(scene, v, wait=False)[1].tiles) >= 24), 120.0
+    )
+    step.note(f"baking at {voxel:g} m: {len(snapshot.bake_plan(scene, voxel, wait=False)[1].tiles)} tiles")
+    folder = os.path.join(OUT, "bake")
+    os.makedirs(folder, exist_ok=True)
+    path, ref = os.path.join(folder, "disturbed.vdb"), os.path.join(folder, "start_state.vdb")
+    mouse_over_view()
+    with override():
+        started = bpy.ops.nubis.bake_vdb("EXEC_DEFAULT", filepath=path, voxel_size=voxel)
+    step.check(started == {"RUNNING_MODAL"}, f"Bake VDB returned {started} (modal)")
+    yield 0.2
+    mouse_over_view()
+    key("shift+Right")  # the timeline to its last frame
+    yield 0.2
+    scene.nubis.density_erosion = erosion + 0.4  # what a slider drag sets, with its update callbacks
+    moved_while = _modal_running("nubis.bake_vdb")
+    step.check(
+        moved_while and scene.frame_current != start_frame,
+        f"the frame ({start_frame} -> {scene.frame_current}) and Erosion moved while the bake ran",
+    )
+    shot(step, "05_bake_while_editing", "view")
+    t = time.monotonic()
+    while _modal_running("nubis.bake_vdb") and time.monotonic() - t < 900:
+        yield 1.0
+    pipeline.TILES_PER_STEP = keep_step
+    vol = bpy.data.objects.get("Nubis Clouds VDB")
+    step.check(os.path.exists(path) and vol is not None, f"the bake ended in {time.monotonic() - t:.0f} s")
+    # The starting state, baked again the way the command line bakes (to its end, nothing in between).
+    scene.frame_set(start_frame)
+    scene.nubis.density_erosion = erosion
+    pipeline.bake(scene, ref, voxel_size=voxel)
+    a, lo_a = vdbio.read_grid_array(path, "density")
+    b, lo_b = vdbio.read_grid_array(ref, "density")
+    same = lo_a == lo_b and a.shape == b.shape
+    diff = float(abs(a - b).max()) if same else float("inf")
+    na, nb = vdbio.read_grid_info(path)["density"].active_voxels, vdbio.read_grid_info(ref)["density"].active_voxels
+    step.check(
+        same and na == nb and diff <= 1e-6,
+        f"the disturbed bake equals the start state's: {na} vs {nb} voxels, max diff {diff:g}",
+    )
+    meta = _core_module("bundled").openvdb().readAll(path)[1]
+    step.check(int(meta["nubis_frame"]) == start_frame, f"its metadata names frame {meta['nubis_frame']}")
+    mouse_over_view()
+    key("ctrl+z")
+    yield 2.0
+    shot(step, "05_bake_undone", "view")
+    step.check(
+        bpy.data.objects.get("Nubis Clouds VDB") is None and os.path.exists(path),
+        "Ctrl-Z took the imported Volume away and left the file on disk",
+    )
+    scene = bpy.context.scene
+    scene.frame_set(start_frame)
+    scene.nubis.density_erosion = erosion
+
+
 def _modal_running(idname: str) -> bool:
     ops = getattr(window(), "modal_operators", None)  # Window.modal_operators: Blender 4.2 and later
     module, name = idname.split(".")
@@ -812,6 +882,7 @@ MAIN = [
     s_render_cycles,
     s_animation,
     s_bake,
+    s_bake_disturbed,
     s_render_clouds,
     s_save,
 ]
