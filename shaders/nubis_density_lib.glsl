@@ -219,7 +219,7 @@ struct NubisDensity {
  * then detail erosion. `cheap` stops after the coverage step (GPU Pro 7's cheap sample: one 3D fetch;
  * docs/sources.md#coarse-sample). `lod` is a whole mip level: 0 reads the full-resolution noise, 1 the half-resolution
  * copies, 2 the quarter-resolution base shape (the detail noise has two levels). */
-NubisDensity nubis_density(vec3 p, bool cheap, float lod)
+NubisDensity nubis_field_density(vec3 p, bool cheap, float lod)
 {
 #if NUBIS_FETCH_STATS
   nubis_density_calls++;
@@ -367,6 +367,26 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
   /* GPU Pro 7: erosion strength 0.2 (P.density_erosion); the remap never raises a value, so fine <= coarse. */
   float eroded = clamp01(remap(with_coverage, hf_modifier * P.density_erosion, 1.0, 0.0, 1.0));
   d.fine = eroded * multiplier;
+  return d;
+}
+
+/* The clouds' density at p: the data field's, and the artists' VDB clouds added to it (their extinctions
+ * add; nubis_vdb_lib.glsl). A VDB cloud's sample is as cheap as a cheap sample, so the coarse value holds
+ * it too, and the coarse-to-fine march finds it as it finds the field's clouds. */
+NubisDensity nubis_density(vec3 p, bool cheap, float lod)
+{
+  NubisDensity d = nubis_field_density(p, cheap, lod);
+#if NUBIS_VDB
+  float h;
+  float v = nubis_vdb_density(p, h);
+  if (v > 0.0) {
+    if (d.coarse <= 0.0) {
+      d.h = h;
+    }
+    d.fine += v;
+    d.coarse += v;
+  }
+#endif
   return d;
 }
 

@@ -187,6 +187,60 @@ float nubis_view_lod(float t, float dither)
   return min(floor(level + dither), NUBIS_COARSEST_LOD);
 }
 
+#if NUBIS_VDB
+/* The view ray's steps with VDB clouds on it: the march's own steps before and after the clouds' boxes,
+ * and steps of about a voxel (P.vdb_step) through them, within the loop limit (P.max_view_steps). */
+struct NubisSteps {
+  float t0, tv0, tv1;
+  float dta, dtv, dtb;
+  int na, nv, nb;
+};
+
+NubisSteps nubis_vdb_steps(vec3 origin, vec3 dir, float t0, float t1, int steps, float dt)
+{
+  NubisSteps s;
+  s.t0 = t0;
+  s.tv0 = t1;
+  s.tv1 = t1;
+  s.na = steps;
+  s.nv = 0;
+  s.nb = 0;
+  s.dta = dt;
+  s.dtv = dt;
+  s.dtb = dt;
+  vec2 span = nubis_vdb_span(origin, dir);
+  float a = clamp(span.x, t0, t1), b = clamp(span.y, t0, t1);
+  if (b <= a) {
+    return s;
+  }
+  s.tv0 = a;
+  s.tv1 = b;
+  s.na = a > t0 ? max(1, int(ceil((a - t0) / dt))) : 0;
+  s.nb = t1 > b ? max(1, int(ceil((t1 - b) / dt))) : 0;
+  int room = max(1, int(P.max_view_steps) - s.na - s.nb);
+  s.nv = clamp(int(ceil((b - a) / P.vdb_step)), 1, room);
+  s.dta = s.na > 0 ? (a - t0) / float(s.na) : dt;
+  s.dtv = (b - a) / float(s.nv);
+  s.dtb = s.nb > 0 ? (t1 - b) / float(s.nb) : dt;
+  return s;
+}
+
+/* Step i's distance along the ray (at its jittered offset) and its length. */
+float nubis_step_t(NubisSteps s, int i, float jitter, out float dt)
+{
+  if (i < s.na) {
+    dt = s.dta;
+    return s.t0 + (float(i) + jitter) * s.dta;
+  }
+  if (i < s.na + s.nv) {
+    dt = s.dtv;
+    return s.tv0 + (float(i - s.na) + jitter) * s.dtv;
+  }
+  dt = s.dtb;
+  return s.tv1 + (float(i - s.na - s.nv) + jitter) * s.dtb;
+}
+#endif
+
 /* The view-ray march (GPU Pro 7, S15, Hillaire 2016; docs/sources.md#integration): premultiplied radiance and alpha. `cloud_depth` returns the
  * transmittance-weighted distance of what the ray saw (GDC22's cloud distance), 0 where it
  * saw nothing; `flash_mask` each storm's lightning at unit intensity, integrated like the radiance
@@ -257,6 +311,10 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out v
    * docs/platform-notes.md#shader-loop-limit): longer steps, never a ray cut short. */
   steps = min(steps, int(P.max_view_steps));
   float dt = seg / float(steps);
+#if NUBIS_VDB
+  NubisSteps plan = nubis_vdb_steps(origin, dir, t0, t1, steps, dt);
+  steps = plan.na + plan.nv + plan.nb;
+#endif
   /* Per-pixel start offset, hiding step banding as fine grain; each accumulation pass (options.z)
    * shifts it by the golden ratio so N passes cover the step evenly. */
   float jitter = P.jitter > 0.5 ? fract(nubis_pixel_hash(pixel) + NUBIS_GOLDEN_RATIO_FRACT * P.jitter_pass) : 0.5;
@@ -276,7 +334,13 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out v
     if (i >= steps) {
       break;
     }
+#if NUBIS_VDB
+    float step_dt;
+    float t = nubis_step_t(plan, i, jitter, step_dt);
+#else
+    float step_dt = dt;
     float t = t0 + (float(i) + jitter) * dt;
+#endif
     vec3 p = origin + dir * t;
     float lod = nubis_view_lod(t, dither);
 #if NUBIS_FETCH_STATS
@@ -312,7 +376,7 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out v
     empty_fine = 0;
     float absorb = nubis_extinction_factor(p, d.precipitation);
     float sigma = d.fine * P.density_sigma * absorb;
-    float step_t = exp(-sigma * dt);
+    float step_t = exp(-sigma * step_dt);
     vec3 s = nubis_in_scattering(p, dir, d, ray, 1.0 - transmittance, absorb, lod, pixel);
     /* Energy-conserving step (Hillaire 2016): the exact integral of constant in-scattering over
      * the step, instead of a Riemann sum that brightens with larger steps; the albedo is 1 but

@@ -88,20 +88,21 @@ LOOP_LIMIT = 65535
 _MARGIN = 512  # per-ray set-up, the octaves' phases, the cirrus
 
 
-def iterations_per_step(light_taps: int, storms: int, reference: int) -> int:
-    """`reference` is the light mode: 0 real time, 1 or 2 a reference march (core/state.py)."""
+def iterations_per_step(light_taps: int, storms: int, reference: int, vdb: int = 0) -> int:
+    """`reference` is the light mode: 0 real time, 1 or 2 a reference march (core/state.py); `vdb` the VDB
+    clouds drawn, each density sample turning through them once (shaders/nubis_vdb_lib.glsl)."""
     n = int(storms)
-    per_sample = 1 + 2 * n
+    per_sample = 1 + 2 * n + int(vdb)
     if reference == 2:
         light = (48 + 2 * 24) * per_sample + 8 * (1 + 4 * per_sample)
     elif reference:
         light = 48 * per_sample + 12 * (1 + 16 * per_sample)
     else:
         light = int(light_taps) * per_sample
-    return (1 + n) + (8 + 4 * n + light)
+    return (1 + n + int(vdb)) + (8 + 4 * n + light)
 
 
-def max_steps(light_taps: int, storms: int, reference: int) -> int:
+def max_steps(light_taps: int, storms: int, reference: int, vdb: int = 0) -> int:
     """The most view steps a march can take within the loop limit, every step lit. Beyond it the march
     takes longer steps (the ray still ends where it should) rather than being cut short."""
-    return max(8, (LOOP_LIMIT - _MARGIN) // iterations_per_step(light_taps, storms, reference))
+    return max(8, (LOOP_LIMIT - _MARGIN) // iterations_per_step(light_taps, storms, reference, vdb))

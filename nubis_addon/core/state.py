@@ -70,6 +70,8 @@ class CloudState:
     # metres (orthographic). 0 reads the full-resolution noise everywhere, as the bake does.
     pixel_angle: float = 0.0
     pixel_size: float = 0.0
+    # Artists' OpenVDB clouds drawn with the sky (core/vdbcloud.py Placement), at most vdbcloud.MAX_CLOUDS.
+    vdb_clouds: tuple = ()
 
     def has_cirrus(self) -> bool:
         return self.field_c is not None and self.params["cirrus_coverage"] > 0 and float(self.field_c[..., 0].max()) > 0
@@ -77,12 +79,17 @@ class CloudState:
     def shell(self) -> tuple[float, float]:
         """Lowest and highest altitude a cloud can occupy, from the min/max height channels (GDC22)."""
         bottom, top = self.params["layer_bottom"], self.params["layer_top"]
-        if self.field_b is None:
-            return bottom, top
-        thickness = top - bottom
-        lo = float(np.min(self.field_b[..., 1]))
-        hi = float(np.max(self.field_b[..., 2]))
-        return bottom + min(lo, 0.0) * thickness, bottom + max(hi, 1.0) * thickness
+        if self.field_b is not None:
+            thickness = top - bottom
+            lo = float(np.min(self.field_b[..., 1]))
+            hi = float(np.max(self.field_b[..., 2]))
+            bottom, top = bottom + min(lo, 0.0) * thickness, bottom + max(hi, 1.0) * thickness
+        for placed in self.vdb_clouds:
+            # The VDB clouds' boxes too (heights as altitudes: a cloud within tens of kilometres of the
+            # origin stands within metres of the planet's curve).
+            lo_box, hi_box = placed.world_box()
+            bottom, top = min(bottom, float(lo_box[2])), max(top, float(hi_box[2]))
+        return bottom, top
 
 
 def sun_vector(elevation_deg: float, azimuth_deg: float) -> tuple[float, float, float]:

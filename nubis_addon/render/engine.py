@@ -15,7 +15,7 @@ from ..core import lightvolume, noise, sky
 from ..core.errors import NubisError
 from ..core.schema import defaults
 from ..core.state import CloudState
-from . import uniforms
+from . import uniforms, vdbclouds
 from .sources import CLOUD_LIBS, assemble, read_shader
 from .textures import NoiseTextures, field_texture, sky_texture
 
@@ -36,9 +36,19 @@ CLOUD_SAMPLERS = (
 )
 VOLUMES = ("sun_volume", "sky_volume")
 # The libraries the optical-depth volumes are filled with (the density and the absorption).
-VOLUME_LIBS = CLOUD_LIBS[:3]
+VOLUME_LIBS = CLOUD_LIBS[:4]
 # The permutation switches every stage is compiled with (0 or 1); see shaders/nubis_common_lib.glsl.
-SWITCHES = ("NUBIS_STORMS", "NUBIS_REFERENCE", "NUBIS_NAIVE", "NUBIS_CIRRUS", "NUBIS_FETCH_STATS", "NUBIS_LIGHT_VOLUME")
+SWITCHES = (
+    "NUBIS_STORMS",
+    "NUBIS_REFERENCE",
+    "NUBIS_NAIVE",
+    "NUBIS_CIRRUS",
+    "NUBIS_FETCH_STATS",
+    "NUBIS_LIGHT_VOLUME",
+    "NUBIS_VDB",
+)
+# The VDB clouds' textures, bound only in the NUBIS_VDB permutation (render/vdbclouds.py).
+VDB_SAMPLERS = (("FLOAT_3D", "vdb_index"), ("FLOAT_3D", "vdb_atlas"))
 
 
 @dataclass(frozen=True)
@@ -113,7 +123,7 @@ def _create_info(name: str, defines: dict[str, object]) -> GPUShaderCreateInfo:
     info.uniform_buf(0, "NubisParams", "P")
     for slot, (struct, block) in enumerate(stage.blocks, start=1):
         info.uniform_buf(slot, struct, block)
-    samplers = (CLOUD_SAMPLERS if stage.cloud_inputs else ()) + stage.samplers
+    samplers = (_cloud_samplers(defines) if stage.cloud_inputs else ()) + stage.samplers
     for slot, (kind, sampler) in enumerate(samplers):
         info.sampler(slot, kind, sampler)
     for kind, constant in stage.push_constants:
@@ -127,6 +137,10 @@ def _create_info(name: str, defines: dict[str, object]) -> GPUShaderCreateInfo:
     return info
 
 
+def _cloud_samplers(defines: dict[str, object]) -> tuple[tuple[str, str], ...]:
+    return CLOUD_SAMPLERS + (VDB_SAMPLERS if int(defines.get("NUBIS_VDB", 0)) else ())
+
+
 def _volume_create_info(defines: dict[str, object]) -> GPUShaderCreateInfo:
     """The compute stage that fills an optical-depth volume (shaders/nubis_light_volume_comp.glsl)."""
     info = GPUShaderCreateInfo()
@@ -135,7 +149,7 @@ def _volume_create_info(defines: dict[str, object]) -> GPUShaderCreateInfo:
     info.define("NUBIS_VOLUME_STEPS", str(lightvolume.STEPS_PER_SLICE))
     info.typedef_source(uniforms.struct_source() + read_shader("nubis_params.glsl"))
     info.uniform_buf(0, "NubisParams", "P")
-    for slot, (kind, sampler) in enumerate(CLOUD_SAMPLERS):
+    for slot, (kind, sampler) in enumerate(_cloud_samplers(defines)):
         info.sampler(slot, kind, sampler)
     info.image(0, lightvolume.FORMAT, "FLOAT_3D", "volume_out", qualifiers={"WRITE"})
     for name in ("volume_origin", "volume_u", "volume_v", "volume_w"):
@@ -203,6 +217,7 @@ class CloudGPU:
         self._volume_key = None
         self._no_volume = None
         self.volume_fills = 0  # how often the volumes were filled (tests, the benchmark)
+        self.vdb = vdbclouds.VdbTextures()
 
     def fork(self) -> CloudGPU:
         """GPU inputs of their own over the same noise textures: a bake or a render that runs while the
@@ -230,10 +245,12 @@ class CloudGPU:
             self._sky_key, self._sky_array = sky_key, env
         self.ubo_bytes = uniforms.pack(state).tobytes()
         self.ubo = gpu.types.GPUUniformBuf(self.ubo_bytes)
+        self.vdb.update(state.vdb_clouds)
         self.switches.update(
             NUBIS_STORMS=int(bool(state.storms)),
             NUBIS_REFERENCE=int(state.light_mode),
             NUBIS_CIRRUS=int(state.has_cirrus()),
+            NUBIS_VDB=int(bool(state.vdb_clouds)),
         )
         if self._no_volume is None:  # bound in place of the volumes while they are filled or skipped
             self._no_volume = gpu.types.GPUTexture((1, 1, 1), format="R32F")
@@ -261,9 +278,10 @@ class CloudGPU:
             sky_env=None,
             draw_center=lightvolume.key_centre(state),
         )
-        density_switches = {k: self.switches[k] for k in ("NUBIS_STORMS", "NUBIS_CIRRUS")}
+        density_switches = {k: self.switches[k] for k in ("NUBIS_STORMS", "NUBIS_CIRRUS", "NUBIS_VDB")}
         key = (
             tuple(id(a) for a in self._field_arrays),
+            self.vdb.key,
             uniforms.pack(still).tobytes(),
             tuple(sorted(self.noise.defines.items())),
             tuple(sorted(density_switches.items())),
@@ -313,6 +331,9 @@ class CloudGPU:
         for _kind, name in CLOUD_SAMPLERS:
             tex = textures.get(name) or self.noise.textures[name.removeprefix("noise_")]
             sh.uniform_sampler(name, tex)
+        if self.switches["NUBIS_VDB"]:
+            sh.uniform_sampler("vdb_index", self.vdb.index)
+            sh.uniform_sampler("vdb_atlas", self.vdb.atlas)
 
 
 def draw_clouds(gpu_inputs: CloudGPU, inv_view_proj, eye, **switches: int) -> None:

@@ -10,6 +10,7 @@ SHADER_DIR = Path(__file__).resolve().parents[2] / "shaders"
 # Library files in dependency order; every stage that samples clouds gets all of them.
 CLOUD_LIBS = (
     "nubis_common_lib.glsl",
+    "nubis_vdb_lib.glsl",
     "nubis_density_lib.glsl",
     "nubis_lighting_lib.glsl",
     "nubis_motion_lib.glsl",

@@ -15,7 +15,7 @@ from functools import cache
 
 import numpy as np
 
-from ..core import lightvolume, march, schema, storms
+from ..core import bricks, lightvolume, march, schema, storms, vdbcloud
 from ..core.errors import NubisError
 from ..core.state import MAX_STORMS, CloudState, wind_vector
 
@@ -43,6 +43,7 @@ _VEC4: tuple[tuple[str, str, Callable[[CloudState], tuple]], ...] = (
         for name, volume in (("sun", lightvolume.sun_volume), ("sky", lightvolume.sky_volume))
         for axis, fn in (("x", _volume_row(volume, 0)), ("y", _volume_row(volume, 1)), ("z", _volume_row(volume, 2)))
     ),
+    ("vdb_atlas", "the VDB clouds' brick atlas: bricks per side x, y, z, -", lambda st: _vdb_layout(st)[0]),
     (
         "clip_box",
         "x0, y0, x1, y1: no clouds outside (a comparison clips to the baked box); x1 < x0: off",
@@ -92,7 +93,32 @@ _FLOATS: tuple[tuple[str, str, Callable[[CloudState], float]], ...] = (
         lambda st: march.CONE_STEPS * st.params["march_light_step"],
     ),
     ("max_view_steps", "most view steps within the shader loop limit", lambda st: float(state_max_steps(st))),
+    ("vdb_count", "VDB clouds drawn (<= NUBIS_MAX_VDB)", lambda st: float(len(st.vdb_clouds))),
+    ("vdb_step", "the view march's step through the VDB clouds (metres)", lambda st: _vdb_step(st)),
 )
+
+
+# The view march's step through a VDB cloud, in its voxels (the finest cloud's).
+VDB_STEP_VOXELS = 1.0
+
+
+def _vdb_step(st: CloudState) -> float:
+    return VDB_STEP_VOXELS * min((p.voxel_size for p in st.vdb_clouds), default=1.0)
+
+
+def _vdb_rows(row: int):
+    return lambda st: [tuple(p.world_to_leaf_index()[row]) for p in st.vdb_clouds]
+
+
+def _vdb_layout(st: CloudState) -> tuple[tuple, list[int], list[int]]:
+    """(bricks per side, -), each cloud's first z in the index texture, each cloud's first brick: as
+    render/vdbclouds.py lays them out."""
+    if not st.vdb_clouds:
+        return (1.0, 1.0, 1.0, 0.0), [], []
+    counts = [p.cloud.bricks.count for p in st.vdb_clouds]
+    per_side = bricks.atlas_shape(max(sum(counts), 1))
+    firsts = [sum(counts[:i]) for i in range(len(counts))]
+    return (*map(float, per_side), 0.0), vdbcloud.index_layout(st.vdb_clouds), firsts
 
 
 def _storm_rows(fn):
@@ -119,6 +145,30 @@ _ARRAYS: tuple[tuple[str, int, str, Callable[[CloudState], list]], ...] = (
         MAX_STORMS,
         "flash offset x, y from the center, ground discharge (0/1), vortex time (wrapped)",
         _storm_rows(lambda st, s: (s.flash_x, s.flash_y, s.flash_ground, _storm_time(_vortex_time(st, s), s.spin))),
+    ),
+    *(
+        (f"vdb_index_{axis}", vdbcloud.MAX_CLOUDS, f"world to the VDB cloud's leaf-relative index {axis}", fn)
+        for axis, fn in (("x", _vdb_rows(0)), ("y", _vdb_rows(1)), ("z", _vdb_rows(2)))
+    ),
+    (
+        "vdb_leaves",
+        vdbcloud.MAX_CLOUDS,
+        "the VDB cloud's index: leaves x, y, z, its first z in the index texture",
+        lambda st: [
+            (*p.cloud.bricks.index.shape[::-1], z) for p, z in zip(st.vdb_clouds, _vdb_layout(st)[1], strict=True)
+        ],
+    ),
+    (
+        "vdb_box_lo",
+        vdbcloud.MAX_CLOUDS,
+        "the VDB cloud's world box, low corner; density per value (multiplier / density sigma)",
+        lambda st: [(*p.world_box()[0], p.multiplier / st.params["density_sigma"]) for p in st.vdb_clouds],
+    ),
+    (
+        "vdb_box_hi",
+        vdbcloud.MAX_CLOUDS,
+        "the VDB cloud's world box, high corner; its first brick in the atlas",
+        lambda st: [(*p.world_box()[1], first) for p, first in zip(st.vdb_clouds, _vdb_layout(st)[2], strict=True)],
     ),
     (
         "light_taps",
@@ -151,10 +201,18 @@ def struct_source() -> str:
     lines = ["/* Generated from core/schema.py by render/uniforms.py: one member per setting, by its key. */"]
     lines.append(f"#define NUBIS_MAX_STORMS {MAX_STORMS}")
     lines.append(f"#define NUBIS_MAX_LIGHT_TAPS {march.MAX_LIGHT_TAPS}")
-    sizes = {MAX_STORMS: "NUBIS_MAX_STORMS", march.MAX_LIGHT_TAPS: "NUBIS_MAX_LIGHT_TAPS"}
+    lines.append(f"#define NUBIS_MAX_VDB {vdbcloud.MAX_CLOUDS}")
+
+    def size_name(name: str) -> str:
+        return (
+            "NUBIS_MAX_VDB"
+            if name.startswith("vdb_")
+            else {"light_taps": "NUBIS_MAX_LIGHT_TAPS"}.get(name, "NUBIS_MAX_STORMS")
+        )
+
     lines.append("struct NubisParams {")
     for name, typ, n in struct_members():
-        decl = f"{typ} {name}[{sizes[n]}];" if n else f"{typ} {name};"
+        decl = f"{typ} {name}[{size_name(name)}];" if n else f"{typ} {name};"
         lines.append(f"  {decl:<40} /* {docs.get(name, 'padding to whole vec4s')} */")
     lines.append("};")
     return "\n".join(lines) + "\n"
@@ -196,7 +254,7 @@ def pack(state: CloudState) -> np.ndarray:
 def state_max_steps(state: CloudState) -> int:
     """The view steps this state's march may take within the shader loop limit (core/march.py)."""
     p = state.params
-    return march.max_steps(p["march_light_samples"], len(state.storms), state.light_mode)
+    return march.max_steps(p["march_light_samples"], len(state.storms), state.light_mode, len(state.vdb_clouds))
 
 
 def _vortex_time(state: CloudState, storm) -> float:

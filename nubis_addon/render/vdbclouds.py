@@ -1,0 +1,86 @@
+"""The VDB clouds on the GPU: every cloud's bricks in one 3D atlas, every cloud's leaf index in one 3D
+index texture (core/bricks.py, shaders/nubis_vdb_lib.glsl).
+
+The textures hold the clouds' voxels only; where each cloud stands (its object's transform, its density
+multiplier) travels in the uniform block (render/uniforms.py), so moving a cloud uploads nothing. The
+textures are made again only when the set of clouds or their bricks change (a file reloaded, a grid
+chosen), which the identity of their brick arrays tells exactly.
+"""
+
+from __future__ import annotations
+
+import gpu
+import numpy as np
+
+from ..core import bricks
+from ..core.errors import NubisError
+from ..core.sequence import human_bytes
+
+ATLAS_FORMAT = "R16F"  # half floats: a density needs no more (Nubis³ compresses further)
+INDEX_FORMAT = "R32F"  # brick numbers, exact up to 2^24
+
+
+def _texture(arr: np.ndarray, fmt: str) -> gpu.types.GPUTexture:
+    data = np.ascontiguousarray(arr, np.float32)
+    size = tuple(reversed(data.shape))  # (W, H, D)
+    if max(size) > bricks.MAX_ATLAS_SIDE:
+        raise NubisError(
+            f"a VDB cloud's {'index' if fmt == INDEX_FORMAT else 'atlas'} would be {size[0]}x{size[1]}x{size[2]} "
+            f"texels, over the {bricks.MAX_ATLAS_SIDE} per side a GPU texture may have: use fewer or coarser clouds"
+        )
+    buf = gpu.types.Buffer("FLOAT", data.size, data.ravel())
+    return gpu.types.GPUTexture(size, format=fmt, data=buf)
+
+
+def combined_index(placements, firsts: list[int]) -> np.ndarray:
+    """Every cloud's leaf index stacked along z (core/vdbcloud.py, index_layout), brick numbers as they
+    are within each cloud (the shader adds the cloud's first brick), -1 where a leaf is empty."""
+    shapes = [p.cloud.bricks.index.shape for p in placements]
+    out = np.full((sum(s[0] for s in shapes), max(s[1] for s in shapes), max(s[2] for s in shapes)), -1.0, np.float32)
+    z = 0
+    for p, (lz, ly, lx) in zip(placements, shapes, strict=True):
+        out[z : z + lz, :ly, :lx] = p.cloud.bricks.index
+        z += lz
+    return out
+
+
+def gpu_bytes(placements) -> int:
+    """What the clouds' textures take on the GPU (half-float atlas, float index)."""
+    if not placements:
+        return 0
+    count = sum(p.cloud.bricks.count for p in placements)
+    bx, by, bz = bricks.atlas_shape(max(count, 1))
+    shapes = [p.cloud.bricks.index.shape for p in placements]
+    index = sum(s[0] for s in shapes) * max(s[1] for s in shapes) * max(s[2] for s in shapes)
+    return bx * by * bz * bricks.BRICK**3 * 2 + index * 4
+
+
+class VdbTextures:
+    """The clouds' atlas and index textures, made again when the clouds' bricks change."""
+
+    def __init__(self) -> None:
+        self.key: tuple = ()
+        self.atlas = None
+        self.index = None
+        self.bytes = 0
+
+    def update(self, placements) -> None:
+        key = tuple(id(p.cloud.bricks) for p in placements)
+        if key == self.key and (self.atlas is not None or not placements):
+            return
+        self.atlas = self.index = None
+        self.bytes = 0
+        self.key = key
+        if not placements:
+            return
+        need = gpu_bytes(placements)
+        if need > bricks.DEFAULT_GPU_LIMIT:
+            self.key = ()
+            raise NubisError(
+                f"the VDB clouds need {human_bytes(need)} on the GPU together, over the "
+                f"{human_bytes(bricks.DEFAULT_GPU_LIMIT)} they may take: draw fewer of them, or coarser ones"
+            )
+        atlas, _per_side, firsts = bricks.layout([p.cloud.bricks.data for p in placements])
+        self.atlas = _texture(atlas, ATLAS_FORMAT)
+        self.index = _texture(combined_index(placements, firsts), INDEX_FORMAT)
+        self.bytes = need
