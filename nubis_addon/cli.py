@@ -30,7 +30,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from .core import console as terminal
-from .core import distributed, interrupt, limits, sequence
+from .core import distributed, interrupt, limits, sequence, vdbcloud
 from .core.console import Console
 from .core.errors import NubisError
 from .core.fsutil import check_output_dir, check_output_path, check_utf8_name
@@ -57,6 +57,18 @@ def build_parser() -> argparse.ArgumentParser:
         if frame:
             p.add_argument("--frame", type=int, help="frame to render (wind time)")
 
+    def vdb(p: argparse.ArgumentParser) -> None:
+        p.add_argument(
+            "--vdb",
+            action="append",
+            metavar="FILE",
+            help="draw this OpenVDB cloud (repeatable; its float grid 'density', extinction per metre) with the "
+            "preset's sky, sun and camera; the procedural clouds are off unless --with-cloudscape",
+        )
+        p.add_argument(
+            "--with-cloudscape", action="store_true", help="with --vdb: keep the preset's procedural clouds too"
+        )
+
     def size(p: argparse.ArgumentParser) -> None:
         p.add_argument("--width", type=int, help="image width in pixels (default: the scene's)")
         p.add_argument("--height", type=int, help="image height in pixels (default: the scene's)")
@@ -66,6 +78,7 @@ def build_parser() -> argparse.ArgumentParser:
     size(p)
     p.add_argument("--passes", type=int, default=1, help="average N jittered passes for a grain-free image")
     p.add_argument("--motion", help="also write motion vectors (dx, dy pixels per frame, distance, alpha) to an EXR")
+    vdb(p)
     p = sub.add_parser("bake", help="bake the cloud density to an OpenVDB file")
     common(p)
     p.add_argument("--voxel-size", type=float, help="voxel edge in metres (default: the scene's bake setting)")
@@ -94,6 +107,7 @@ def build_parser() -> argparse.ArgumentParser:
             "converge, 256: docs/convergence.md)",
         )
         if name == "compare":
+            vdb(p)
             p.add_argument(
                 "--mode",
                 choices=("single", "full"),
@@ -124,7 +138,7 @@ def build_parser() -> argparse.ArgumentParser:
                 help="keep the Cycles image of an earlier comparison in --out when the bake and everything Cycles "
                 "sees are unchanged (after a viewport-only edit): the viewport is rendered again, Cycles is not",
             )
-    _realtime_commands(sub, common, size)
+    _realtime_commands(sub, common, size, vdb)
     p = sub.add_parser("panorama", help="write an equirectangular HDR of the clouds and the sky (a World environment)")
     common(p)
     p.add_argument(
@@ -133,7 +147,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _realtime_commands(sub, common, size) -> None:
+def _realtime_commands(sub, common, size, vdb) -> None:
     """The real-time viewport headless (docs/viewport.md): `preview` and `benchmark`."""
     levels = tuple(qualities())
     p = sub.add_parser("preview", help="replay the 3D viewport's temporal draw path from the scene camera")
@@ -149,6 +163,7 @@ def _realtime_commands(sub, common, size) -> None:
     p = sub.add_parser("benchmark", help="time the viewport's redraw against the naive march and EEVEE")
     common(p, frame=False)
     size(p)
+    vdb(p)
     p.add_argument("--quality", choices=levels, help="quality level (default: the scene's settings)")
 
 
@@ -333,6 +348,13 @@ def check_arguments(args) -> None:
     ):
         limits.check_int(f"--{name}", getattr(args, name, None), lo, hi)
     limits.check_voxel_size("--voxel-size", getattr(args, "voxel_size", None))
+    files = getattr(args, "vdb", None) or []
+    if len(files) > vdbcloud.MAX_CLOUDS:
+        raise NubisError(f"--vdb names {len(files)} files: at most {vdbcloud.MAX_CLOUDS} VDB clouds are drawn at once")
+    for path in files:
+        vdbcloud.choose_grid(path)  # a missing file, not a VDB, no float grid: said before any work
+    if getattr(args, "with_cloudscape", False) and not files:
+        raise NubisError("--with-cloudscape goes with --vdb: the procedural clouds are on without it")
     limits.check_noise_target("--noise-target", getattr(args, "noise_target", None))
 
 

@@ -13,7 +13,7 @@ from ..core.errors import NubisError
 from ..core.fsutil import not_a_file
 from ..core.presets import load_preset
 from ..render.gpu_context import ensure_gpu_context
-from . import farm, pipeline, preview, registration, scene_io, scene_render, snapshot
+from . import farm, pipeline, preview, registration, scene_io, scene_render, snapshot, vdbclouds
 
 PROG = "nubis"
 # compare --draft bakes voxels no finer than this (metres): at half the scene's size the camera-footprint
@@ -64,6 +64,18 @@ def load_scene(args, in_blender: bool):
     return scene
 
 
+def _add_vdb_clouds(scene, paths, with_cloudscape: bool) -> None:
+    """--vdb: the files as Nubis clouds; the preset's procedural clouds off unless --with-cloudscape (its
+    sky, sun and camera stay)."""
+    vdbclouds.add_files(scene, paths)
+    if not with_cloudscape:
+        s = scene.nubis
+        s.density_cover = 0.0
+        s.cirrus_coverage = 0.0
+        s.storms.clear()
+        scene_io.generate_fields(scene)
+
+
 def execute(args, in_blender: bool, log: Path, out: Path) -> str:
     """Run one checked command writing to `out`; Blender's own output goes to `log`."""
     start = time.perf_counter()
@@ -72,6 +84,8 @@ def execute(args, in_blender: bool, log: Path, out: Path) -> str:
     with console.quiet(log):
         interrupt.track_blender_tempdir()
         scene = load_scene(args, in_blender)
+        if getattr(args, "vdb", None) and cmd != "benchmark":  # the benchmark times the sky without them first
+            _add_vdb_clouds(scene, args.vdb, args.with_cloudscape)
         if getattr(args, "frame", None) is not None:
             scene.frame_set(args.frame)
         pipeline.check_scene(scene)
@@ -194,8 +208,21 @@ def _realtime(cmd: str, args, scene, out: Path, w: int, h: int, log: Path, label
             f"median redraw {median:.1f} ms{naive}, in {time.perf_counter() - start:.1f} s -> {out}"
         )
     with console.quiet(log):
-        result = preview.benchmark(scene, out, w, h, args.quality)
+        if args.vdb:
+            # The preset's own cloudscape on the same view first, then with the VDB clouds: one run, one machine.
+            baseline = preview.benchmark(scene, out / "cloudscape", w, h, args.quality, eevee=False)
+            _add_vdb_clouds(scene, args.vdb, args.with_cloudscape)
+            result = preview.benchmark(scene, out, w, h, args.quality, eevee=False, baseline=baseline)
+        else:
+            result = preview.benchmark(scene, out, w, h, args.quality)
     print(preview.table(result))
+    if args.vdb:
+        return (
+            f"benchmarked {label} with {len(args.vdb)} VDB cloud(s) at {w}x{h} ({result['quality']}): redraw "
+            f"{result['redraw_ms']:.1f} ms, {result['redraw_ms'] / result['baseline_redraw_ms']:.2f}x the "
+            f"cloudscape's {result['baseline_redraw_ms']:.1f} ms; VDB clouds on the GPU "
+            f"{sequence.human_bytes(result['vdb_gpu_bytes'])} in {time.perf_counter() - start:.1f} s -> {out}"
+        )
     return (
         f"benchmarked {label} at {w}x{h} ({result['quality']}): naive {result['naive_ms']:.0f} ms, redraw "
         f"{result['redraw_ms']:.1f} ms ({result['naive_over_redraw']:.1f}x), EEVEE {result['eevee_ms']:.0f} ms "

@@ -23,17 +23,25 @@ def _grid_times(nt, grid: str, factor: float):
     return attr, scale
 
 
-def build_material(settings, with_glow: bool = False, with_absorption: bool = False) -> bpy.types.Material:
+def build_material(
+    settings,
+    with_glow: bool = False,
+    with_absorption: bool = False,
+    grid: str = "density",
+    scale: float | None = None,
+    name: str = MATERIAL_NAME,
+) -> bpy.types.Material:
     """Scattering = density x sigma (the viewport's own); the viewport's two phase lobes as a mix of
     two Volume Scatter closures, which share one extinction and mix their phases (or Cycles' Mie
     phase as an option); rain's absorption grid as Volume Absorption; the storms' glow grid as
-    emission."""
-    mat = bpy.data.materials.get(MATERIAL_NAME) or bpy.data.materials.new(MATERIAL_NAME)
+    emission. An artist's VDB cloud (blender/vdbclouds.py) reads its own `grid` times its Density
+    (`scale`) under its own `name`."""
+    mat = bpy.data.materials.get(name) or bpy.data.materials.new(name)
     if mat.node_tree is None:  # materials made before 5.0 may lack a node tree
         mat.use_nodes = True
     nt = mat.node_tree
     nt.nodes.clear()
-    attr, scale = _grid_times(nt, "density", settings.density_sigma)
+    attr, scale = _grid_times(nt, grid, settings.density_sigma if scale is None else scale)
     if settings.lighting_cycles_mie:
         # Cycles' Mie phase for water droplets: physically richer than the viewport's lobes, so the
         # comparison then measures the phase model too.

@@ -26,7 +26,7 @@ from ..core.staging import output_set
 from ..core.state import MAX_STORMS, CloudState
 from ..render import bake as gpu_bake
 from ..render import engine
-from . import cycles_setup, runtime, scene_io, sky, snapshot
+from . import cycles_setup, runtime, scene_io, sky, snapshot, vdbclouds
 from . import reference as cycles_reference
 from .snapshot import BakeSnapshot
 
@@ -273,6 +273,7 @@ def bake_steps(
     thin_cirrus: bool = False,
     tiles_per_step: int = TILES_PER_STEP,
     active_share: float = 1.0,
+    vdb: bool = True,
 ):
     """The bake in steps, for the interface: the scene is read now, into a snapshot (blender/snapshot.py),
     and the generator returned yields the fraction done after each group of tiles, evaluated from that
@@ -280,7 +281,9 @@ def bake_steps(
     (atomically) after the last, and the generator returns the BakeResult. Closing it early cancels:
     nothing is written, an earlier file at `path` stays as it was. `active_share` as in plan_bake."""
     path = check_output_path(path, (".vdb",))
-    snap = snapshot.take(scene, voxel_size, camera_only, size, velocity, thin_cirrus, active_share=active_share)
+    snap = snapshot.take(
+        scene, voxel_size, camera_only, size, velocity, thin_cirrus, active_share=active_share, vdb=vdb
+    )
     return snapshot_steps(snap, path, half, tiles_per_step)
 
 
@@ -409,6 +412,7 @@ def bake(
     velocity: bool = False,
     thin_cirrus: bool = False,
     active_share: float = 1.0,
+    vdb: bool = True,
 ) -> BakeResult:
     """Bake the viewport's density to an OpenVDB `density` grid in world space (atomic write): sparse
     and tiled, so memory follows the clouds rather than the box (docs/bake.md).
@@ -417,7 +421,7 @@ def bake(
     `half` stores the float grids as half floats; `velocity` adds the `velocity` grid; `active_share`
     plans the memory by a measured share of active voxels (probe_share), guarded while baking."""
     steps = bake_steps(
-        scene, path, voxel_size, camera_only, size, half, velocity, thin_cirrus, active_share=active_share
+        scene, path, voxel_size, camera_only, size, half, velocity, thin_cirrus, active_share=active_share, vdb=vdb
     )
     return run_steps(steps, progress)
 
@@ -436,12 +440,12 @@ def render_cycles(
     with interrupt.temporary_dir("nubis-cycles-") as tmp:
         if vdb_path is None:
             vdb_path = str(Path(tmp) / "clouds.vdb")
-            bake(scene, vdb_path, voxel_size)
+            bake(scene, vdb_path, voxel_size, vdb=False)  # the VDB clouds render from their own files
         cycles_setup.import_volume(scene, vdb_path)
         exr = Path(tmp) / "cycles.exr"
         cycles_setup.configure_render(scene, width, height, samples, bounces, exact_samples)
         scene.render.filepath = str(exr)
-        with runtime.own_render():
+        with runtime.own_render(), vdbclouds.native(scene):
             bpy.ops.render.render(write_still=True, scene=scene.name)
         if not exr.is_file():
             raise NubisError("Cycles wrote no image: check the console for Cycles errors")
@@ -586,6 +590,7 @@ def _compare(
             size=(width, height),
             thin_cirrus=THIN_CIRRUS,
             active_share=active_share,
+            vdb=False,  # Cycles renders the VDB clouds' own files (vdbclouds.native)
         )
 
     try:

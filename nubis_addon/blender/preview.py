@@ -247,10 +247,18 @@ def render_eevee(scene, width: int, height: int, vdb_path: str, samples: int = 1
 
 
 def benchmark(
-    scene, out_dir, width: int, height: int, quality_name: str | None = None, eevee: bool = True, rounds: int = 3
+    scene,
+    out_dir,
+    width: int,
+    height: int,
+    quality_name: str | None = None,
+    eevee: bool = True,
+    rounds: int = 3,
+    baseline: dict | None = None,
 ) -> dict:
     """Naive march, temporal redraws and EEVEE on the same view in one run; writes benchmark.json,
-    naive.png and converged.png (after 16 redraws)."""
+    naive.png and converged.png (after 16 redraws). `baseline`: an earlier benchmark of the same view in
+    this run (the procedural cloudscape before VDB clouds were added), whose redraw the result names."""
     out = check_output_dir(out_dir)
     q = apply_quality(scene, quality_name)
     s = scene.nubis
@@ -326,6 +334,16 @@ def benchmark(
         "redraw_ms_all": [round(x, 3) for x in redraws],
         "fetches": stats,
     }
+    if state.vdb_clouds:
+        # GPU memory of the VDB clouds' bricks against their dense boxes at the same half floats.
+        result["vdb_gpu_bytes"] = clouds.vdb.bytes
+        result["vdb_active_voxels"] = sum(p.cloud.active_voxels for p in state.vdb_clouds)
+        result["vdb_dense_box_bytes"] = sum(
+            2 * int(np.prod(np.subtract(p.cloud.bounds[1], p.cloud.bounds[0]) + 1)) for p in state.vdb_clouds
+        )
+    if baseline is not None:
+        result["baseline_redraw_ms"] = baseline["redraw_ms"]
+        result["baseline_preset"] = baseline["preset"]
     result["naive_over_redraw"] = result["naive_ms"] / result["redraw_ms"]
     c2f, nv = stats["coarse_to_fine"]["fetches_3d_per_pixel"], stats["naive"]["fetches_3d_per_pixel"]
     result["fetch_saving"] = 1.0 - c2f / nv if nv else 0.0
@@ -406,6 +424,17 @@ def table(result: dict) -> str:
         ("  saving", f"{result['fetch_saving'] * 100:.0f}%"),
         ("converged (16 redraws) vs naive, PSNR", f"{result['converged_psnr_db']:.1f} dB"),
     ]
+    if "vdb_gpu_bytes" in result:
+        rows += [
+            ("VDB clouds on the GPU (brick atlas and index)", sequence.human_bytes(result["vdb_gpu_bytes"])),
+            ("  their dense boxes at half floats", sequence.human_bytes(result["vdb_dense_box_bytes"])),
+            ("  bricks / dense box", f"{result['vdb_gpu_bytes'] / result['vdb_dense_box_bytes']:.2f}"),
+        ]
+    if "baseline_redraw_ms" in result:
+        rows += [
+            ("the default cloudscape's redraw, same view and run", f"{result['baseline_redraw_ms']:.1f} ms"),
+            ("  redraw with the VDB clouds / default", f"{result['redraw_ms'] / result['baseline_redraw_ms']:.2f}x"),
+        ]
     width = max(len(r[0]) for r in rows)
     head = f"{result['preset']} at {result['width']}x{result['height']}, quality {result['quality']}"
     head += f", {result['renderer']}"

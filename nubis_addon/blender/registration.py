@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import events, operators, panels, preferences, properties, runtime, scene_render, sky, viewport, work
+from . import events, operators, panels, preferences, properties, runtime, scene_render, sky, vdbclouds, viewport, work
 
 _registered = [False]
 
@@ -16,6 +16,7 @@ def register() -> None:
     events.register()
     operators.register()
     panels.register()
+    vdbclouds.register()  # its sidebar panel is a child of the main one
     preferences.register()
     viewport.register()
     sky.register()
@@ -32,6 +33,7 @@ def unregister() -> None:
     sky.unregister()
     viewport.unregister()
     preferences.unregister()
+    vdbclouds.unregister()
     panels.unregister()
     operators.unregister()
     events.unregister()

@@ -19,7 +19,7 @@ from ..core.errors import NubisError
 from ..core.fsutil import not_a_file
 from ..core.presets import Preset
 from ..core.state import MAX_STORMS, CloudState, StormLight, sun_vector, wind_vector
-from . import sky
+from . import sky, vdbclouds
 
 FIELD_IMAGES = {
     "a": ("field_a", "Nubis Field A"),
@@ -717,6 +717,7 @@ def state_from_scene(scene, camera_location=None, fields: tuple | None = None, w
         draw_center=(float(camera_location[0]), float(camera_location[1])),
         time=time,
         storms=storm_lights(settings, scene, time),
+        vdb_clouds=vdbclouds.placements(scene, strict=wait),
     )
 
 

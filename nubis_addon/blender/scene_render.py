@@ -34,7 +34,7 @@ from ..core.errors import NubisError
 from ..core.fsutil import check_output_path
 from ..core.staging import output_set
 from ..render import engine
-from . import cycles_setup, handlers, mainthread, pipeline, runtime, scene_io, sky
+from . import cycles_setup, handlers, mainthread, pipeline, runtime, scene_io, sky, vdbclouds
 
 RENDER_WORLD = "Nubis Render World"
 CAMERA_IMAGE = "Nubis Camera Clouds"
@@ -328,10 +328,12 @@ def attach(scene) -> None:
         _swapped[scene.name] = scene.world.name if scene.world is not None else ""
     name = _swapped[scene.name]
     scene.world = render_world(bpy.data.worlds.get(name) if name else None)
+    vdbclouds.step_aside(scene)  # the VDB clouds are in the clouds' image: not rendered twice
 
 
 def detach(scene) -> None:
-    """Give the scene its own World back."""
+    """Give the scene its own World back (and its VDB clouds' render visibility)."""
+    vdbclouds.step_back(scene)
     name = _swapped.pop(scene.name, None)
     if name is None:
         return

@@ -84,11 +84,15 @@ def bake_plan(
     thin_cirrus: bool = False,
     wait: bool = True,
     active_share: float = 1.0,
+    vdb: bool = True,
 ) -> tuple[CloudState, BakePlan]:
     """The scene's cloud state at its current frame and the bake's plan (tiles, memory estimate:
     refused politely before any GPU work when it does not fit). `wait` False plans without capturing
-    the World's light (the plan does not depend on it); `active_share` as in plan_bake."""
+    the World's light (the plan does not depend on it); `active_share` as in plan_bake; `vdb` False
+    leaves the VDB clouds out (a comparison's Cycles renders their own files: vdbclouds.native)."""
     state = scene_io.state_from_scene(scene, wait=wait)
+    if not vdb:
+        state.vdb_clouds = ()
     region = None
     if camera_only:
         # The camera's aspect only: a camera-only bake renders no image, so the image size limit does not apply.
@@ -115,11 +119,14 @@ def take(
     velocity: bool = False,
     thin_cirrus: bool = False,
     active_share: float = 1.0,
+    vdb: bool = True,
 ) -> BakeSnapshot:
     """The bake of the scene's current frame, as it is now (planned and refused here when it does not fit)."""
     s = scene.nubis
     noise = runtime.cloud_gpu(s.noise_seed).noise  # made or loaded now: a seed change later makes a new set
-    state, plan = bake_plan(scene, voxel_size, camera_only, size, velocity, thin_cirrus, active_share=active_share)
+    state, plan = bake_plan(
+        scene, voxel_size, camera_only, size, velocity, thin_cirrus, active_share=active_share, vdb=vdb
+    )
     fps = scene_io.scene_fps(scene)
     state.motion_dt = s.wind_time_scale / fps  # one frame of wind time, for the velocity grid
     return BakeSnapshot(

@@ -336,6 +336,8 @@ def plan_tiles(state: CloudState, plan: BakePlan, tile: int = TILE) -> list[Tile
     dcx, dcy = state.draw_center
     clip = state.clip_box
     margin_z = v + 4.0  # a voxel, and the shader's float32 altitude near a 6371 km sphere
+    # The artists' VDB clouds (core/vdbcloud.py): their world boxes, with the half voxel a sample reads.
+    vdb_boxes = [placed.world_box() for placed in state.vdb_clouds]
     tiles = []
     for j0 in range(0, ny, tile):
         for i0 in range(0, nx, tile):
@@ -343,6 +345,15 @@ def plan_tiles(state: CloudState, plan: BakePlan, tile: int = TILE) -> list[Tile
             xa, xb = ox + i0 * v, ox + (i0 + tx - 1) * v
             ya, yb = oy + j0 * v, oy + (j0 + ty - 1) * v
             tiles.append(Tile(i0, j0, tx, ty, ()))
+            vdb_spans = []
+            for lo_box, hi_box in vdb_boxes:
+                if xb >= lo_box[0] - v and xa <= hi_box[0] + v and yb >= lo_box[1] - v and ya <= hi_box[1] + v:
+                    k0 = max(math.floor((lo_box[2] - v - oz) / v), 0)
+                    k1 = min(math.ceil((hi_box[2] + v - oz) / v) + 1, nz)
+                    if k1 > k0:
+                        vdb_spans.append((k0, k1))
+            if vdb_spans:
+                tiles[-1] = Tile(i0, j0, tx, ty, _merge(vdb_spans))
             # Nearest point of the tile to the draw centre: clouds exist only inside the radius.
             near = math.hypot(max(xa - dcx, 0.0, dcx - xb), max(ya - dcy, 0.0, dcy - yb))
             if near >= radius or xb < fx - fs / 2 or xa > fx + fs / 2 or yb < fy - fs / 2 or ya > fy + fs / 2:
@@ -376,7 +387,7 @@ def plan_tiles(state: CloudState, plan: BakePlan, tile: int = TILE) -> list[Tile
             if cirrus is not None and cirrus[window].any():
                 c = p["cirrus_altitude"]
                 altitudes.append((c - plan.cirrus_slab / 2, c + plan.cirrus_slab / 2))
-            spans = []
+            spans = list(vdb_spans)
             for lo, hi in altitudes:
                 k0 = max(math.floor((_z_at(lo, rmax, planet) - margin_z - oz) / v), 0)
                 k1 = min(math.ceil((_z_at(hi, rmin, planet) + margin_z - oz) / v) + 1, nz)

@@ -295,8 +295,8 @@ class CloudGPU:
         # the fill only (4 MB).
         sky_depth = gpu.types.GPUTexture(lightvolume.SIZE, format=lightvolume.FORMAT)
         defines = self.defines(NUBIS_REFERENCE=0, NUBIS_NAIVE=0, NUBIS_FETCH_STATS=0)
-        sh = shader("light_volume", defines)
         sky_box = lightvolume.sky_volume(state)
+        sh = shader("light_volume", defines)
         for name, box in (("sun_volume", lightvolume.sun_volume(state)), ("sky_volume", sky_box)):
             self.bind(sh, volumes=False)
             sh.image("volume_out", self.volumes[name] if name == "sun_volume" else sky_depth)
@@ -319,8 +319,8 @@ class CloudGPU:
         return {"NUBIS_COARSE_STRIDE": 2, **self.noise.defines, **self.switches, **switches}
 
     def bind(self, sh: gpu.types.GPUShader, cloud_inputs: bool = True, volumes: bool = True) -> None:
-        """Bind the uniform block and the cloud samplers; `volumes` False binds an empty texture for the
-        optical-depth volumes (while they are being filled)."""
+        """Bind the uniform block and the cloud samplers (the VDB clouds' in their permutation); `volumes`
+        False binds an empty texture for the optical-depth volumes (while they are being filled)."""
         sh.bind()
         sh.uniform_block("P", self.ubo)
         if not cloud_inputs:

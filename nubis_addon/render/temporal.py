@@ -149,7 +149,11 @@ class TemporalViewport:
             time=0.0,
             storms=tuple(dataclasses.replace(s, flash=0.0) for s in state.storms),
         )
-        return (uniforms.pack(quiet).tobytes(), tuple(id(a) for a in (state.field_a, state.field_b, state.field_c)))
+        return (
+            uniforms.pack(quiet).tobytes(),
+            tuple(id(a) for a in (state.field_a, state.field_b, state.field_c)),
+            tuple(id(p.cloud.bricks) for p in state.vdb_clouds),
+        )
 
     # ---- one redraw ---------------------------------------------------------------------------------------
     def redraw(

@@ -1,0 +1,281 @@
+"""Any Volume object as a Nubis cloud: File > Import > OpenVDB (or a VDB sequence, the extension's own
+bake, a Mesh to Volume result), then Nubis Cloud on in the Volume's properties or the sidebar.
+
+A marked Volume is drawn by the real-time renderer with the procedural clouds (core/vdbcloud.py,
+render/vdbclouds.py): the same light model, its object's transform live, its frame's file for a
+sequence. Its values are extinction per metre as Blender's Principled Volume reads them at Density 1,
+times the Density here. Blender's own drawing of it steps aside: the viewport shows its bounds only, and
+final renders draw it through the extension's path (blender/scene_render.py), never both at once.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from collections import OrderedDict
+
+import bpy
+from bpy.props import BoolProperty, FloatProperty, PointerProperty, StringProperty
+
+from ..core import vdbcloud
+from ..core.errors import NubisError
+from ..core.sequence import human_bytes
+from ..render import vdbclouds as gpu_side
+from . import status
+
+# Clouds read from disk, by (path, modification time, size, grid): a few, as Blender's own volume cache.
+_CACHE_ENTRIES = 8
+_cache: OrderedDict = OrderedDict()
+_problems: dict[str, str] = {}  # object name -> why it is not drawn (the sidebar shows it)
+
+
+def _redraw(_self=None, _context=None) -> None:
+    for window in getattr(bpy.context.window_manager, "windows", ()):
+        for area in window.screen.areas:
+            if area.type in ("VIEW_3D", "PROPERTIES"):
+                area.tag_redraw()
+
+
+def _on_toggle(self, context) -> None:
+    """Marked: Blender's grey volume preview gives way to the bounds; unmarked: back to the preview."""
+    volume = self.id_data
+    for obj in bpy.data.objects:
+        if obj.data == volume:
+            obj.display_type = "BOUNDS" if self.enabled else "TEXTURED"
+    _redraw()
+
+
+class NubisVolumeCloud(bpy.types.PropertyGroup):
+    enabled: BoolProperty(
+        name="Nubis Cloud",
+        description="Draw this volume with the Nubis clouds: the same light, in the viewport and in final renders",
+        default=False,
+        update=_on_toggle,
+    )
+    grid: StringProperty(
+        name="Grid",
+        description="The float grid to draw (empty: 'density', or the file's only float grid)",
+        default="",
+        update=_redraw,
+    )
+    density: FloatProperty(
+        name="Density",
+        description="Multiplier on the grid's values, read as extinction per metre (Principled Volume's Density)",
+        default=1.0,
+        min=0.0,
+        soft_max=10.0,
+        update=_redraw,
+    )
+
+
+def marked(scene) -> list:
+    """The scene's Volume objects marked as Nubis clouds and shown in renders, in a stable order (at most
+    vdbcloud.MAX_CLOUDS)."""
+    out = [
+        obj
+        for obj in sorted(scene.objects, key=lambda o: o.name)
+        if obj.type == "VOLUME" and obj.data.nubis_cloud.enabled and (not obj.hide_render or obj.name in _stepped_aside)
+    ]
+    return out[: vdbcloud.MAX_CLOUDS]
+
+
+# ---- final renders: one path for each cloud ------------------------------------------------------------
+
+_stepped_aside: set[str] = set()  # marked Volumes hidden from a final render while the extension draws them
+
+
+def step_aside(scene) -> None:
+    """Before a final render that draws the clouds through the extension's path (blender/scene_render.py):
+    the marked Volumes are hidden from Blender's own volume render for the frame, so each cloud is
+    rendered once."""
+    for obj in marked(scene):
+        if not obj.hide_render:
+            obj.hide_render = True
+            _stepped_aside.add(obj.name)
+
+
+def step_back(scene) -> None:
+    """After the frame: the Volumes render as the artist left them."""
+    for name in list(_stepped_aside):
+        obj = scene.objects.get(name) or bpy.data.objects.get(name)
+        if obj is not None:
+            obj.hide_render = False
+        _stepped_aside.discard(name)
+
+
+@contextlib.contextmanager
+def native(scene):
+    """Around a Cycles render of the comparison: the marked Volumes render natively, each with the clouds'
+    material reading its grid times its Density (blender/cycles_setup.py), so Cycles sees the same file
+    with the same material as the viewport; their own materials are put back after."""
+    from . import cycles_setup
+
+    kept = []
+    try:
+        for obj in marked(scene):
+            settings = obj.data.nubis_cloud
+            grid = vdbcloud.choose_grid(volume_file(obj), settings.grid.strip())
+            mat = cycles_setup.build_material(
+                scene.nubis, grid=grid, scale=float(settings.density), name=f"Nubis VDB Cloud {obj.data.name}"
+            )
+            kept.append((obj.data, list(obj.data.materials)))
+            obj.data.materials.clear()
+            obj.data.materials.append(mat)
+        yield
+    finally:
+        for volume, materials in kept:
+            volume.materials.clear()
+            for m in materials:
+                volume.materials.append(m)
+
+
+def volume_file(obj) -> str:
+    """The file the Volume reads at the scene's current frame (a sequence's frame file)."""
+    volume = obj.data
+    path = ""
+    try:
+        path = volume.grids.frame_filepath
+    except AttributeError:
+        pass
+    return bpy.path.abspath(path or volume.filepath, library=volume.library)
+
+
+def read(path: str, grid: str) -> vdbcloud.VdbCloud:
+    """The packed cloud of a file, read once per change of the file on disk."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        raise NubisError(
+            f"the VDB '{path}' is not there (moved or deleted?): point the Volume at the file again"
+        ) from None
+    key = (path, st.st_mtime_ns, st.st_size, grid)
+    if key in _cache:
+        _cache.move_to_end(key)
+        return _cache[key]
+    cloud = vdbcloud.read_cloud(path, grid)
+    _cache[key] = cloud
+    while len(_cache) > _CACHE_ENTRIES:
+        _cache.popitem(last=False)
+    return cloud
+
+
+def placements(scene, strict: bool = True) -> tuple:
+    """Where the marked clouds stand now. `strict` (renders, bakes) raises the first cloud's problem; the
+    viewport's draw leaves the cloud out and shows why in the sidebar."""
+    out = []
+    _problems.clear()
+    for obj in marked(scene):
+        settings = obj.data.nubis_cloud
+        try:
+            cloud = read(volume_file(obj), settings.grid.strip())
+        except NubisError as err:
+            if strict:
+                raise NubisError(f"the Nubis cloud '{obj.name}': {err}") from None
+            _problems[obj.name] = str(err)
+            status.set_error(f"the Nubis cloud '{obj.name}' is not drawn: {err}")
+            continue
+        out.append(vdbcloud.Placement(cloud, [list(r) for r in obj.matrix_world], float(settings.density)))
+    return tuple(out)
+
+
+def add_files(scene, paths) -> list:
+    """The command line's --vdb: each file as a Volume object marked as a Nubis cloud, at the file's own
+    transform."""
+    objects = []
+    for path in paths:
+        path = os.path.abspath(os.path.expanduser(str(path)))
+        vdbcloud.choose_grid(path)
+        name = os.path.splitext(os.path.basename(path))[0] or "VDB Cloud"
+        volume = bpy.data.volumes.new(name)
+        volume.filepath = path
+        obj = bpy.data.objects.new(name, volume)
+        scene.collection.objects.link(obj)
+        volume.nubis_cloud.enabled = True
+        objects.append(obj)
+    return objects
+
+
+def problem(obj) -> str:
+    return _problems.get(obj.name, "")
+
+
+def gpu_bytes(scene) -> int:
+    """What the scene's VDB clouds take on the GPU (0 when one cannot be read: the sidebar says why)."""
+    try:
+        return gpu_side.gpu_bytes(placements(scene, strict=False))
+    except NubisError:
+        return 0
+
+
+def draw_cloud_settings(layout, volume) -> None:
+    settings = volume.nubis_cloud
+    layout.use_property_split = True
+    layout.prop(settings, "enabled")
+    col = layout.column()
+    col.active = settings.enabled
+    col.prop_search(settings, "grid", volume, "grids", text="Grid")
+    col.prop(settings, "density")
+
+
+class NUBIS_PT_volume_cloud(bpy.types.Panel):
+    """In the Volume's data properties: draw it as a Nubis cloud."""
+
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "data"
+    bl_label = "Nubis Cloud"
+
+    @classmethod
+    def poll(cls, context):
+        return getattr(context, "volume", None) is not None
+
+    def draw(self, context):
+        draw_cloud_settings(self.layout, context.volume)
+        obj = context.object
+        if obj is not None and problem(obj):
+            self.layout.label(text=problem(obj), icon="ERROR")
+
+
+class NUBIS_PT_vdb_clouds(bpy.types.Panel):
+    """The sidebar's list of the scene's VDB clouds, with the active Volume's settings."""
+
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Nubis"
+    bl_parent_id = "NUBIS_PT_main"
+    bl_label = "VDB Clouds"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    @classmethod
+    def poll(cls, context):
+        return getattr(getattr(context.scene, "nubis", None), "field_a", None) is not None
+
+    def draw(self, context):
+        layout = self.layout
+        obj = context.object
+        if obj is not None and obj.type == "VOLUME":
+            draw_cloud_settings(layout, obj.data)
+        else:
+            layout.label(text="Select a Volume (File > Import > OpenVDB)", icon="INFO")
+        clouds = marked(context.scene)
+        for cloud in clouds:
+            row = layout.row()
+            row.label(text=cloud.name, icon="ERROR" if problem(cloud) else "OUTLINER_OB_VOLUME")
+        if clouds:
+            layout.label(text=f"GPU memory: {human_bytes(gpu_bytes(context.scene))}")
+
+
+_CLASSES = (NubisVolumeCloud, NUBIS_PT_volume_cloud, NUBIS_PT_vdb_clouds)
+
+
+def register() -> None:
+    for cls in _CLASSES:
+        bpy.utils.register_class(cls)
+    bpy.types.Volume.nubis_cloud = PointerProperty(type=NubisVolumeCloud)
+
+
+def unregister() -> None:
+    del bpy.types.Volume.nubis_cloud
+    for cls in reversed(_CLASSES):
+        bpy.utils.unregister_class(cls)
+    _cache.clear()

@@ -1,0 +1,75 @@
+"""VDB clouds made outside the extension, for the tests and the pictures: a cumulus written with OpenVDB's
+own Python module (Blender's bundle), as a simulation or modelling tool would hand it over.
+
+The cloud is a cauliflower of overlapping spheres on a flat base, eroded at its edges by a few octaves of
+value noise; 50 m voxels, about 3 km across and 2 km tall, its values extinction per metre (0.04 in its
+core), with a transform of its own: a rotation about the vertical and a translation that puts it about
+5 km in front of the default preset's camera, between 1.4 and 3.5 km up.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+# In front of the default preset's camera (at (0, -6000, 2), looking north-west and up): its base centre.
+DEFAULT_VIEW_BASE = (-1500.0, -2000.0, 1400.0)
+
+
+def _value_noise(shape, cells: int, rng) -> np.ndarray:
+    """Smooth noise in [0, 1]: a random lattice of `cells` per side, trilinearly interpolated."""
+    lattice = rng.random((cells + 1,) * 3)
+    coords = [np.linspace(0, cells, n, endpoint=False) for n in shape]
+    z, y, x = np.meshgrid(*coords, indexing="ij")
+    i, j, k = (np.minimum(a.astype(int), cells - 1) for a in (z, y, x))
+    fz, fy, fx = z - i, y - j, x - k
+    fz, fy, fx = (f * f * (3 - 2 * f) for f in (fz, fy, fx))
+    out = np.zeros(shape)
+    for dz in (0, 1):
+        for dy in (0, 1):
+            for dx in (0, 1):
+                w = (fz if dz else 1 - fz) * (fy if dy else 1 - fy) * (fx if dx else 1 - fx)
+                out += w * lattice[i + dz, j + dy, k + dx]
+    return out
+
+
+def cumulus(n_xy: int = 64, n_z: int = 44, seed: int = 7, peak: float = 0.04) -> np.ndarray:
+    """The cloud's extinction per metre, indexed [z, y, x]."""
+    rng = np.random.default_rng(seed)
+    z, y, x = np.mgrid[0:n_z, 0:n_xy, 0:n_xy].astype(np.float64)
+    shape = np.full(z.shape, -1e9)
+    centre = n_xy / 2
+    for _ in range(34):
+        cx, cy = rng.normal(centre, n_xy * 0.14, 2)
+        cz = rng.uniform(8, n_z * 0.6)
+        r = rng.uniform(9, 15) * (1.0 - 0.4 * cz / n_z)
+        d = r - np.sqrt((x - cx) ** 2 + (y - cy) ** 2 + ((z - cz) * 1.1) ** 2)
+        shape = np.maximum(shape, d)
+    noise = sum(_value_noise(z.shape, c, rng) * a for c, a in ((4, 0.55), (9, 0.3), (18, 0.15)))
+    field = shape + (noise - 0.5) * 7.0
+    base = np.clip((z - 2.0) / 3.0, 0.0, 1.0)  # a flat, slightly soft base
+    density = np.clip(field / 4.0, 0.0, 1.0) * base
+    return (density * peak).astype(np.float32)
+
+
+def write_cumulus(path: Path, base=DEFAULT_VIEW_BASE, voxel: float = 50.0, turn: float = 0.5, **kw) -> Path:
+    """The cumulus as a .vdb (grid 'density'), its base centred on `base`, turned by `turn` radians."""
+    from nubis_addon.core import bundled
+
+    vdb = bundled.openvdb()
+    dense = cumulus(**kw)
+    nz, ny, nx = dense.shape
+    grid = vdb.FloatGrid()
+    grid.copyFromArray(np.ascontiguousarray(dense.transpose(2, 1, 0)), tolerance=1e-5)
+    grid.name = "density"
+    grid.gridClass = vdb.GridClass.FOG_VOLUME
+    c, s = np.cos(turn), np.sin(turn)
+    # Index (i, j, k) -> world: rotate the index box about its base centre, then move it to `base`.
+    half = np.array([nx / 2, ny / 2, 0.0]) * voxel
+    origin = np.array(base, np.float64) - np.array([c * half[0] - s * half[1], s * half[0] + c * half[1], 0.0])
+    grid.transform = vdb.createLinearTransform(
+        [[voxel * c, voxel * s, 0, 0], [-voxel * s, voxel * c, 0, 0], [0, 0, voxel, 0], [*origin, 1.0]]
+    )
+    vdb.write(str(path), grids=[grid])
+    return Path(path)
