@@ -17,6 +17,12 @@ import numpy as np
 DEFAULT_VIEW_BASE = (-1500.0, -2000.0, 1400.0)
 
 
+def _openvdb():
+    from nubis_addon.core import bundled
+
+    return bundled.openvdb()
+
+
 def _value_noise(shape, cells: int, rng) -> np.ndarray:
     """Smooth noise in [0, 1]: a random lattice of `cells` per side, trilinearly interpolated."""
     lattice = rng.random((cells + 1,) * 3)
@@ -53,11 +59,10 @@ def cumulus(n_xy: int = 64, n_z: int = 44, seed: int = 7, peak: float = 0.04) ->
     return (density * peak).astype(np.float32)
 
 
-def write_cumulus(path: Path, base=DEFAULT_VIEW_BASE, voxel: float = 50.0, turn: float = 0.5, **kw) -> Path:
-    """The cumulus as a .vdb (grid 'density'), its base centred on `base`, turned by `turn` radians."""
-    from nubis_addon.core import bundled
-
-    vdb = bundled.openvdb()
+def write_cumulus(path: Path, base=DEFAULT_VIEW_BASE, voxel: float = 50.0, turn: float = 0.5, vdb=None, **kw) -> Path:
+    """The cumulus as a .vdb (grid 'density'), its base centred on `base`, turned by `turn` radians;
+    `vdb` the openvdb module (Blender's bundled one by default)."""
+    vdb = vdb or _openvdb()
     dense = cumulus(**kw)
     nz, ny, nx = dense.shape
     grid = vdb.FloatGrid()
@@ -73,3 +78,57 @@ def write_cumulus(path: Path, base=DEFAULT_VIEW_BASE, voxel: float = 50.0, turn:
     )
     vdb.write(str(path), grids=[grid])
     return Path(path)
+
+
+def ball(n=40, value=0.02) -> np.ndarray:
+    z, y, x = np.mgrid[0:n, 0:n, 0:n]
+    r = np.sqrt((x - n / 2) ** 2 + (y - n / 2) ** 2 + (z - n / 2) ** 2)
+    return (np.clip((n * 0.35 - r) / 4, 0, 1) * value).astype(np.float32)
+
+
+def write_grid(path, dense_zyx, rows=None, name="density", extra=(), nan_at=None):
+    vdb = _openvdb()
+    g = vdb.FloatGrid()
+    g.copyFromArray(np.ascontiguousarray(dense_zyx.transpose(2, 1, 0)), tolerance=0.0)
+    if nan_at is not None:  # copyFromArray drops NaN (it compares values with the background)
+        g.getAccessor().setValueOn(nan_at, float("nan"))
+    g.name = name
+    g.transform = vdb.createLinearTransform(rows or [[50, 0, 0, 0], [0, 50, 0, 0], [0, 0, 50, 0], [0, 0, 0, 1]])
+    vdb.write(str(path), grids=[g, *extra])
+    return path
+
+
+BAD_KINDS = ("not a vdb", "missing", "no float grid", "empty", "negative", "nan", "non-uniform", "sheared")
+
+
+def bad_vdb(tmp_path, kind):
+    """A file of one kind of trouble and the words its refusal holds."""
+    dense = ball()
+    if kind == "not a vdb":
+        p = tmp_path / "cloud.vdb"
+        p.write_text("this is a text file, not a VDB\n")
+        return p, "is not an OpenVDB file this Blender reads"
+    if kind == "missing":
+        return tmp_path / "gone.vdb", "is not there"
+    if kind == "no float grid":
+        vdb = _openvdb()
+        vec = vdb.Vec3SGrid()
+        vec.name = "velocity"
+        vec.copyFromArray(np.ones((4, 4, 4, 3), np.float32))
+        p = tmp_path / "vec.vdb"
+        vdb.write(str(p), grids=[vec])
+        return p, "has no float grid to draw as a cloud"
+    if kind == "empty":
+        return write_grid(tmp_path / "empty.vdb", np.zeros((8, 8, 8), np.float32)), "is empty"
+    if kind == "negative":
+        dense[20, 20, 20] = -0.5
+        return write_grid(tmp_path / "neg.vdb", dense), "negative values"
+    if kind == "nan":
+        return write_grid(tmp_path / "nan.vdb", dense, nan_at=(20, 20, 20)), "NaN or infinite"
+    if kind == "non-uniform":
+        rows = [[50, 0, 0, 0], [0, 50, 0, 0], [0, 0, 80, 0], [0, 0, 0, 1]]
+        return write_grid(tmp_path / "stretch.vdb", dense, rows), "non-uniform voxels"
+    if kind == "sheared":
+        rows = [[50, 0, 0, 0], [30, 40, 0, 0], [0, 0, 50, 0], [0, 0, 0, 1]]  # equal lengths, not square
+        return write_grid(tmp_path / "shear.vdb", dense, rows), "sheared transform"
+    raise AssertionError(kind)

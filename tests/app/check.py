@@ -24,6 +24,7 @@ EXPECTED = {
         "bake",
         "bake_disturbed",
         "render_clouds",
+        "vdb_cloud",
         "save",
     ],
     "reopen": ["startup", "reopen"],

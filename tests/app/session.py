@@ -848,6 +848,52 @@ def s_render_clouds(step: Step):
     scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = keep
 
 
+def s_vdb_cloud(step: Step):
+    """File > Import > OpenVDB of a cloud made outside the extension, marked as a Nubis cloud: the viewport
+    draws it lit with the sky, moving the object moves it, and F12 in EEVEE and Cycles shows it."""
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "src", "tests"))
+    import vdb_helpers
+
+    path = os.path.join(OUT, "vdb", "cumulus.vdb")
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    vdb_helpers.write_cumulus(path, vdb=_core_module("bundled").openvdb())
+    scene = bpy.context.scene
+    keep_cover = scene.nubis.density_cover
+    scene.nubis.density_cover = 0.0  # the imported cloud alone in the sky, so the pictures show it
+    with override():
+        step.note(f"object.volume_import (File > Import > OpenVDB) -> {bpy.ops.object.volume_import(filepath=path)}")
+    obj = bpy.context.view_layer.objects.active
+    step.check(obj is not None and obj.type == "VOLUME", f"imported {getattr(obj, 'name', None)} as a Volume")
+    yield max(ARGS.converge / 2, 8.0)
+    without = shot(step, "07_vdb_imported", "view")
+    obj.data.nubis_cloud.enabled = True
+    yield 3.0
+    yield from _converge()
+    marked = shot(step, "07_vdb_nubis_cloud", "view")
+    d = mae(marked, without)
+    step.check(d >= VIEW_MIN_MAE, f"marked as a Nubis cloud, the viewport draws it (MAE {d:.4f} against unmarked)")
+    step.check(obj.display_type == "BOUNDS", "Blender's grey volume preview gave way to its bounds")
+    obj.location.x += 1500.0
+    yield 3.0
+    yield from _converge()
+    moved = shot(step, "07_vdb_moved", "view")
+    d = mae(moved, marked)
+    step.check(d >= VIEW_MIN_MAE, f"moving the object moves the cloud (MAE {d:.4f})")
+    obj.location.x -= 1500.0
+    for engine in (eevee(), "CYCLES"):
+        small_render(scene, engine)
+        tag = "cycles" if engine == "CYCLES" else "eevee"
+        obj.hide_render = True
+        off = render_script(step, f"vdb_{tag}_without")
+        obj.hide_render = False
+        path_f12 = yield from render_ui(step, f"vdb_{tag}_f12", "key")
+        has_clouds(step, path_f12, off, f"F12 in {engine} with the VDB cloud")
+        step.check(not obj.hide_render, f"{engine}: the Volume renders as the artist left it after F12")
+    bpy.data.objects.remove(obj)
+    scene.nubis.density_cover = keep_cover
+    yield 2.0
+
+
 def s_save(step: Step):
     path = os.path.join(OUT, "scene.blend")
     with override():
@@ -884,6 +930,7 @@ MAIN = [
     s_bake,
     s_bake_disturbed,
     s_render_clouds,
+    s_vdb_cloud,
     s_save,
 ]
 REOPEN = [s_startup, s_reopen]

@@ -5,27 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from vdb_helpers import BAD_KINDS, bad_vdb
+from vdb_helpers import ball as _ball
+from vdb_helpers import write_grid as _write
 
 from nubis_addon.core import bricks, bundled, vdbcloud
 from nubis_addon.core.errors import NubisError
-
-
-def _ball(n=40, value=0.02) -> np.ndarray:
-    z, y, x = np.mgrid[0:n, 0:n, 0:n]
-    r = np.sqrt((x - n / 2) ** 2 + (y - n / 2) ** 2 + (z - n / 2) ** 2)
-    return (np.clip((n * 0.35 - r) / 4, 0, 1) * value).astype(np.float32)
-
-
-def _write(path, dense_zyx, rows=None, name="density", extra=(), nan_at=None):
-    vdb = bundled.openvdb()
-    g = vdb.FloatGrid()
-    g.copyFromArray(np.ascontiguousarray(dense_zyx.transpose(2, 1, 0)), tolerance=0.0)
-    if nan_at is not None:  # copyFromArray drops NaN (it compares values with the background)
-        g.getAccessor().setValueOn(nan_at, float("nan"))
-    g.name = name
-    g.transform = vdb.createLinearTransform(rows or [[50, 0, 0, 0], [0, 50, 0, 0], [0, 0, 50, 0], [0, 0, 0, 1]])
-    vdb.write(str(path), grids=[g, *extra])
-    return path
 
 
 def test_a_rotated_cloud_is_packed_exactly_and_placed_by_its_transform(tmp_path):
@@ -66,43 +51,9 @@ def test_the_grid_is_chosen_by_name_density_or_the_only_float_grid(tmp_path):
         vdbcloud.choose_grid(path, "heat")
 
 
-def _bad(tmp_path, kind):
-    dense = _ball()
-    if kind == "not a vdb":
-        p = tmp_path / "cloud.vdb"
-        p.write_text("this is a text file, not a VDB\n")
-        return p, "is not an OpenVDB file this Blender reads"
-    if kind == "missing":
-        return tmp_path / "gone.vdb", "is not there"
-    if kind == "no float grid":
-        vdb = bundled.openvdb()
-        vec = vdb.Vec3SGrid()
-        vec.name = "velocity"
-        vec.copyFromArray(np.ones((4, 4, 4, 3), np.float32))
-        p = tmp_path / "vec.vdb"
-        vdb.write(str(p), grids=[vec])
-        return p, "has no float grid to draw as a cloud"
-    if kind == "empty":
-        return _write(tmp_path / "empty.vdb", np.zeros((8, 8, 8), np.float32)), "is empty"
-    if kind == "negative":
-        dense[20, 20, 20] = -0.5
-        return _write(tmp_path / "neg.vdb", dense), "negative values"
-    if kind == "nan":
-        return _write(tmp_path / "nan.vdb", dense, nan_at=(20, 20, 20)), "NaN or infinite"
-    if kind == "non-uniform":
-        rows = [[50, 0, 0, 0], [0, 50, 0, 0], [0, 0, 80, 0], [0, 0, 0, 1]]
-        return _write(tmp_path / "stretch.vdb", dense, rows), "non-uniform voxels"
-    if kind == "sheared":
-        rows = [[50, 0, 0, 0], [30, 40, 0, 0], [0, 0, 50, 0], [0, 0, 0, 1]]  # equal lengths, not square
-        return _write(tmp_path / "shear.vdb", dense, rows), "sheared transform"
-    raise AssertionError(kind)
-
-
-@pytest.mark.parametrize(
-    "kind", ["not a vdb", "missing", "no float grid", "empty", "negative", "nan", "non-uniform", "sheared"]
-)
+@pytest.mark.parametrize("kind", BAD_KINDS)
 def test_a_bad_file_gets_one_sentence(tmp_path, kind):
-    path, words = _bad(tmp_path, kind)
+    path, words = bad_vdb(tmp_path, kind)
     with pytest.raises(NubisError, match=words) as err:
         vdbcloud.read_cloud(path)
     assert str(path) in str(err.value) and "\n" not in str(err.value)
