@@ -189,7 +189,8 @@ float nubis_view_lod(float t, float dither)
 
 #if NUBIS_VDB
 /* The view ray's steps with VDB clouds on it: the march's own steps before and after the clouds' boxes,
- * and steps of about a voxel (P.vdb_step) through them, within the loop limit (P.max_view_steps). */
+ * and steps of about a voxel (P.vdb_step) through them, at most the march's own count (P.march_steps_max)
+ * and within the loop limit (P.max_view_steps). */
 struct NubisSteps {
   float t0, tv0, tv1;
   float dta, dtv, dtb;
@@ -217,7 +218,9 @@ NubisSteps nubis_vdb_steps(vec3 origin, vec3 dir, float t0, float t1, int steps,
   s.tv1 = b;
   s.na = a > t0 ? max(1, int(ceil((a - t0) / dt))) : 0;
   s.nb = t1 > b ? max(1, int(ceil((t1 - b) / dt))) : 0;
-  int room = max(1, int(P.max_view_steps) - s.na - s.nb);
+  /* At most the march's own step count through the boxes: a VDB the size of the sky (a bake of the whole
+   * view) is marched like the field's clouds, not at every voxel. */
+  int room = max(1, min(int(P.max_view_steps) - s.na - s.nb, int(P.march_steps_max)));
   s.nv = clamp(int(ceil((b - a) / P.vdb_step)), 1, room);
   s.dta = s.na > 0 ? (a - t0) / float(s.na) : dt;
   s.dtv = (b - a) / float(s.nv);

@@ -114,9 +114,12 @@ def native(scene):
     try:
         for obj in marked(scene):
             settings = obj.data.nubis_cloud
-            grid = vdbcloud.choose_grid(volume_file(obj), settings.grid.strip())
+            cloud = read(volume_file(obj), settings.grid.strip())
             mat = cycles_setup.build_material(
-                scene.nubis, grid=grid, scale=float(settings.density), name=f"Nubis VDB Cloud {obj.data.name}"
+                scene.nubis,
+                grid=cloud.grid,
+                scale=float(settings.density) * cloud.value_scale,
+                name=f"Nubis VDB Cloud {obj.data.name}",
             )
             kept.append((obj.data, list(obj.data.materials)))
             obj.data.materials.clear()

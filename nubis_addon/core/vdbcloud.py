@@ -40,6 +40,9 @@ class VdbCloud:
     active_voxels: int
     value_max: float
     bounds: tuple[tuple[int, int, int], tuple[int, int, int]]
+    # Extinction per metre per unit of value: 1, or the `nubis_density_scale` a Nubis bake writes (its
+    # values are densities, docs/bake.md), so the extension's own bakes read back as they were drawn.
+    value_scale: float = 1.0
 
     @property
     def gpu_bytes(self) -> int:
@@ -197,7 +200,16 @@ def read_cloud(
     if packed.gpu_bytes > limit:
         raise NubisError(_too_large(path, name, packed.gpu_bytes, limit))
     voxel = float(np.linalg.norm(m[:3, 0]))
-    return VdbCloud(path, name, packed, m, voxel, active, vmax, (lo, hi))
+    return VdbCloud(path, name, packed, m, voxel, active, vmax, (lo, hi), _value_scale(path))
+
+
+def _value_scale(path: str) -> float:
+    try:
+        meta = dict(bundled.openvdb().readMetadata(path))
+        scale = float(meta.get("nubis_density_scale", 1.0))
+    except (OSError, RuntimeError, ValueError, TypeError):
+        return 1.0
+    return scale if np.isfinite(scale) and scale > 0 else 1.0
 
 
 def _too_large(path: str, name: str, need: int, limit: int) -> str:
@@ -220,6 +232,11 @@ class Placement:
     cloud: VdbCloud
     object_to_world: np.ndarray
     multiplier: float = 1.0
+
+    @property
+    def extinction_scale(self) -> float:
+        """Extinction per metre per unit of the grid's value: the Density times the file's own scale."""
+        return self.multiplier * self.cloud.value_scale
 
     @property
     def index_to_world(self) -> np.ndarray:

@@ -161,8 +161,8 @@ _ARRAYS: tuple[tuple[str, int, str, Callable[[CloudState], list]], ...] = (
     (
         "vdb_box_lo",
         vdbcloud.MAX_CLOUDS,
-        "the VDB cloud's world box, low corner; density per value (multiplier / density sigma)",
-        lambda st: [(*p.world_box()[0], p.multiplier / st.params["density_sigma"]) for p in st.vdb_clouds],
+        "the VDB cloud's world box, low corner; density per value (extinction scale / density sigma)",
+        lambda st: [(*p.world_box()[0], p.extinction_scale / st.params["density_sigma"]) for p in st.vdb_clouds],
     ),
     (
         "vdb_box_hi",

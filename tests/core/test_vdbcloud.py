@@ -41,6 +41,19 @@ def test_gpu_memory_follows_the_active_voxels_not_the_box(tmp_path):
     assert cloud.bricks.index.size * 4 < 0.01 * dense.nbytes
 
 
+def test_a_nubis_bake_reads_back_in_its_own_density_scale(tmp_path):
+    """A Nubis bake's values are densities; its `nubis_density_scale` turns them into extinction."""
+    vdb = bundled.openvdb()
+    g = vdb.FloatGrid()
+    g.copyFromArray(np.ascontiguousarray(_ball().transpose(2, 1, 0)))
+    g.name = "density"
+    vdb.write(str(tmp_path / "bake.vdb"), grids=[g], metadata={"nubis_density_scale": 0.08})
+    assert vdbcloud.read_cloud(tmp_path / "bake.vdb").value_scale == pytest.approx(0.08)
+    placed = vdbcloud.Placement(vdbcloud.read_cloud(tmp_path / "bake.vdb"), np.eye(4), 2.0)
+    assert placed.extinction_scale == pytest.approx(0.16)
+    assert vdbcloud.read_cloud(_write(tmp_path / "plain.vdb", _ball())).value_scale == 1.0
+
+
 def test_the_grid_is_chosen_by_name_density_or_the_only_float_grid(tmp_path):
     vdb = bundled.openvdb()
     vec = vdb.Vec3SGrid()
