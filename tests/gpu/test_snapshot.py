@@ -322,8 +322,11 @@ def test_quitting_during_a_bake_cancels_it_and_keeps_the_earlier_file(cache_dir,
     script.write_text(
         textwrap.dedent(
             f"""
-            import sys
+            import atexit, os, sys
             sys.path.insert(0, {str(ROOT)!r})
+            # Registered first, so it runs last: no teardown of Blender as a module after the extension's
+            # own exit handler (4.5's crashes in it, as the command line's would: nubis_addon/__main__.py).
+            atexit.register(lambda: (sys.stdout.flush(), sys.stderr.flush(), os._exit(0)))
             import bpy, nubis_addon
             from nubis_addon.render.gpu_context import ensure_gpu_context
             nubis_addon.register()
