@@ -1,4 +1,4 @@
-"""`render`, `compare` and `benchmark --vdb FILE` (issue 36): an artist's cloud with the preset's sky, and
+"""`render`, `compare` and `benchmark --vdb FILE`: an artist's cloud with the preset's sky, and
 one line for each bad file, no traceback, nothing written."""
 
 from __future__ import annotations

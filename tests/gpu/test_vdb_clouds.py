@@ -1,4 +1,4 @@
-"""An artist's OpenVDB cloud drawn by the real-time renderer (issue 36): the shader reads the grid as its
+"""An artist's OpenVDB cloud drawn by the real-time renderer: the shader reads the grid as its
 trilinear interpolation wherever its object puts it, a marked Volume is drawn and follows its object, the
 real-time light agrees with the reference march, the bake holds it, and a file that vanishes is said."""
 
