@@ -18,7 +18,7 @@ from . import farm, pipeline, preview, registration, scene_io, scene_render, sna
 PROG = "nubis"
 # compare --draft bakes voxels no finer than this (metres): at half the scene's size the camera-footprint
 # size is about 15 m for the default cloudscape, a 35 s bake; 30 m takes a few seconds and Cycles renders
-# it faster too, with the alpha RMSE within 0.01 of the finer bake's (measured 2026-12-02).
+# it faster too, with the alpha RMSE within 0.01 of the finer bake's (docs/measurements.md#draft-comparison).
 DRAFT_VOXEL = 30.0
 # A field composite slower than this gets an estimate first, then a progress bar.
 SLOW_COMPOSITE_S = 5.0

@@ -130,7 +130,7 @@ def import_volume(scene, vdb_path: str, sequence: tuple[int, int, int] | None = 
         # index cell [i, i + 1], half a voxel off the grid's transform (5.0 puts it at i, as the bake
         # writes it). Measured with the single-scattering parity shot of tests/test_parity.py on 4.5.15:
         # alpha RMSE 0.022 as imported, 0.007 shifted by half a voxel back, 0.043 shifted forward
-        # (README, "Parity with Cycles").
+        # (docs/history.md#parity-with-cycles).
         half = _voxel_size(vdb_path) / 2
         obj.location = (-half, -half, -half)
     return obj

@@ -13,7 +13,7 @@ GLSL the viewport draws, and the scene's World is swapped for a copy that shows 
   with the wind.
 
 After the frame (`render_post`, `render_cancel`) the artist's World is put back. What this cannot do
-is in the README ("Final renders").
+is in docs/limits.md.
 """
 
 from __future__ import annotations

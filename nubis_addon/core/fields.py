@@ -153,7 +153,7 @@ def _blend(dst: np.ndarray, src: np.ndarray, mode: str, alpha: np.ndarray | floa
 
 
 # Seconds per million field pixels and octave of the procedural noises, and per million pixels of any
-# layer (remap and blend), measured on the 2-core test machine (2026-12-01); a faster machine only
+# layer (remap and blend), measured on the 2-core test machine (docs/measurements.md#machine); a faster machine only
 # finishes early.
 _NOISE_COST = {"perlin": 0.25, "worley": 0.18, "perlin_worley": 0.40}
 _LAYER_COST = 0.03

@@ -93,7 +93,7 @@ def test_flash_renders_offline_through_the_glow_grid(make_scene, tmp_path):
     # A black ground: the storm's base is then lit by the flash alone, as under the Sky Texture's black
     # below the horizon when this was measured. Lit from a ground, the base is 3000 times brighter and
     # the flash's emission pushes Cycles past its closure limit, which dims the scattered light
-    # (README, Known limits).
+    # (docs/limits.md).
     scene.nubis.sky_ground = (0.0, 0.0, 0.0)
     storm = scene.nubis.storms[0]
     storm.glow = 0.0

@@ -2,8 +2,8 @@
 small size on the stratus deck: before the light model of docs/viewport.md#light-model the viewport
 read it 15 % too dark against the converged reference (and 149 % too bright against the unconverged
 8-bounce one). Cycles renders 256 volume bounces and adds samples until its own noise is at most 6 %;
-the limits are the measured numbers plus one and a half times that noise. The README's table has
-every preset at 160x90."""
+the limits are the measured numbers plus one and a half times that noise. The table of
+docs/measurements.md#parity-with-cycles has every preset at 160x90."""
 
 import pytest
 

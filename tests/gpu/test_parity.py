@@ -17,7 +17,7 @@ LUMINANCE_ERROR_MAX = 0.05
 # With the physically based sky World (Blender's Sky Texture, New Cloudscape's default), measured
 # 2026-12-01 on llvmpipe (Blender 5.0.1): alpha RMSE 0.005, luminance error 0.054, bias +0.013, IoU 0.99
 # (Cycles' noise 0.021). The flat World keeps the issue's targets pinned; the sky's limits pin what it
-# measures (README, "Parity with Cycles").
+# measures (docs/history.md#parity-with-cycles).
 SKY_LUMINANCE_ERROR_MAX = 0.07
 SKY_BIAS_MAX = 0.03
 

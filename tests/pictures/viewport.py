@@ -1,4 +1,4 @@
-"""Make the real-time viewport pictures of the README from the `preview` command's outputs: the first
+"""Make the real-time viewport pictures of docs/guide.md from the `preview` command's outputs: the first
 redraw next to the one after 16 and 64 redraws (480x270), and an orbit strip (320x180, 1.5 degrees and
 one redraw per frame, the wind blowing).
 
