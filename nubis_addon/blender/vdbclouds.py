@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 from collections import OrderedDict
 
 import bpy
@@ -114,7 +115,10 @@ def native(scene):
     try:
         for obj in marked(scene):
             settings = obj.data.nubis_cloud
-            cloud = read(volume_file(obj), settings.grid.strip())
+            path = volume_file(obj, scene.frame_current)
+            if path is None:
+                continue
+            cloud = read(path, settings.grid.strip())
             mat = cycles_setup.build_material(
                 scene.nubis,
                 grid=cloud.grid,
@@ -132,15 +136,44 @@ def native(scene):
                 volume.materials.append(m)
 
 
-def volume_file(obj) -> str:
-    """The file the Volume reads at the scene's current frame (a sequence's frame file)."""
+def volume_file(obj, frame: int | None = None) -> str | None:
+    """The file the Volume reads at `frame` (the scene's current one by default): for a sequence, its frame's
+    file by Blender's own rule (start, offset, duration and mode), or None where a clipped sequence has
+    none. Computed here rather than read from the evaluated Volume, which the viewport's draw must not ask
+    for."""
     volume = obj.data
-    path = ""
-    try:
-        path = volume.grids.frame_filepath
-    except AttributeError:
-        pass
-    return bpy.path.abspath(path or volume.filepath, library=volume.library)
+    path = bpy.path.abspath(volume.filepath, library=volume.library)
+    if not volume.is_sequence:
+        return path
+    if frame is None:
+        frame = bpy.context.scene.frame_current
+    n = sequence_frame(frame, volume.frame_start, volume.frame_duration, volume.frame_offset, volume.sequence_mode)
+    if n is None:
+        return None
+    head, name = os.path.split(path)
+    runs = list(re.finditer(r"\d+", name))
+    if not runs:
+        return path
+    run = runs[-1]
+    return os.path.join(head, f"{name[: run.start()]}{n:0{len(run.group())}d}{name[run.end() :]}")
+
+
+def sequence_frame(frame: int, start: int, duration: int, offset: int, mode: str) -> int | None:
+    """Blender's Volume sequence: the file number shown at scene frame `frame`, None outside a clipped one."""
+    n = frame - start + 1
+    duration = max(duration, 1)
+    if mode == "CLIP":
+        if n < 1 or n > duration:
+            return None
+    elif mode == "EXTEND":
+        n = min(max(n, 1), duration)
+    elif mode == "REPEAT":
+        n = (n - 1) % duration + 1
+    else:  # PING_PONG
+        period = max(2 * (duration - 1), 1)
+        k = (n - 1) % period
+        n = (k if k < duration else period - k) + 1
+    return n + offset
 
 
 def read(path: str, grid: str) -> vdbcloud.VdbCloud:
@@ -169,8 +202,11 @@ def placements(scene, strict: bool = True) -> tuple:
     _problems.clear()
     for obj in marked(scene):
         settings = obj.data.nubis_cloud
+        path = volume_file(obj, scene.frame_current)
+        if path is None:
+            continue  # a clipped sequence before its first frame or after its last
         try:
-            cloud = read(volume_file(obj), settings.grid.strip())
+            cloud = read(path, settings.grid.strip())
         except NubisError as err:
             if strict:
                 raise NubisError(f"the Nubis cloud '{obj.name}': {err}") from None

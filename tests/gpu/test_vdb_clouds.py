@@ -177,3 +177,26 @@ def test_a_file_that_vanishes_is_said_and_the_rest_still_draws(blender, make_sce
     # A render or a bake stops with the sentence.
     with pytest.raises(NubisError, match=f"the Nubis cloud '{obj.name}': the VDB '.*gone.vdb' is not there"):
         pipeline.render_viewport(scene, 32, 18)
+
+
+@pytest.mark.parametrize("mode", ["CLIP", "EXTEND", "REPEAT", "PING_PONG"])
+def test_a_vdb_sequence_follows_the_timeline_as_blender_reads_it(blender, make_scene, tmp_path, mode):
+    """The frame's file by Blender's own rule: the same file the evaluated Volume reads, every frame."""
+    from nubis_addon.blender import scene_io, vdbclouds
+
+    scene = _vdb_only(make_scene)
+    for n, x in ((3, -1500.0), (4, 0.0), (5, 1500.0)):
+        write_cumulus(tmp_path / f"cloud_{n:04d}.vdb", base=(x, -2000.0, 1400.0), n_xy=24, n_z=20)
+    obj = _import(blender, scene, tmp_path / "cloud_0003.vdb")
+    vol = obj.data
+    vol.is_sequence, vol.frame_start, vol.frame_duration, vol.frame_offset = True, 10, 3, 2
+    vol.sequence_mode = mode
+    seen = {}
+    for frame in range(7, 17):
+        scene.frame_set(frame)
+        evaluated = obj.evaluated_get(blender.context.evaluated_depsgraph_get()).data.grids.frame_filepath
+        mine = vdbclouds.volume_file(obj, frame)
+        assert (mine or "") == (blender.path.abspath(evaluated) if evaluated else ""), (frame, mine, evaluated)
+        clouds = scene_io.state_from_scene(scene).vdb_clouds
+        seen[frame] = round(float(clouds[0].world_box()[0][0])) if clouds else None
+    assert len({v for v in seen.values() if v is not None}) == 3  # the three files, moving across the sky
