@@ -132,3 +132,26 @@ def bad_vdb(tmp_path, kind):
         rows = [[50, 0, 0, 0], [30, 40, 0, 0], [0, 0, 50, 0], [0, 0, 0, 1]]  # equal lengths, not square
         return write_grid(tmp_path / "shear.vdb", dense, rows), "sheared transform"
     raise AssertionError(kind)
+
+
+def trilinear(dense: np.ndarray, ijk: np.ndarray) -> np.ndarray:
+    """A dense grid (z, y, x) at index coordinates (N, 3): x, y, z; 0 outside, as OpenVDB's background."""
+    padded = np.pad(dense.astype(np.float64), 1)
+    p = ijk + 1.0
+    i0 = np.floor(p).astype(int)
+    t = p - i0
+    out = np.zeros(len(p))
+    hi = np.array(padded.shape[::-1]) - 1
+    for dz in range(2):
+        for dy in range(2):
+            for dx in range(2):
+                w = (
+                    (t[:, 0] if dx else 1 - t[:, 0])
+                    * (t[:, 1] if dy else 1 - t[:, 1])
+                    * (t[:, 2] if dz else 1 - t[:, 2])
+                )
+                c = i0 + (dx, dy, dz)
+                ok = ((c >= 0) & (c <= hi)).all(-1)
+                c = np.clip(c, 0, hi)
+                out += np.where(ok, w * padded[c[:, 2], c[:, 1], c[:, 0]], 0.0)
+    return out

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from vdb_helpers import trilinear
 
 from nubis_addon.core import bricks
 from nubis_addon.core.errors import NubisError
@@ -59,25 +60,6 @@ def test_a_leaf_is_kept_when_its_far_edge_reads_the_next_leafs_cloud(voxel):
     assert {tuple(int(c) for c in p) for p in zip(*np.nonzero(occ), strict=True)} == want
 
 
-def _trilinear(dense: np.ndarray, ijk: np.ndarray) -> np.ndarray:
-    padded = np.pad(dense.astype(np.float64), 1)
-    p = ijk + 1.0
-    i0 = np.floor(p).astype(int)
-    t = p - i0
-    out = np.zeros(len(p))
-    for dz in range(2):
-        for dy in range(2):
-            for dx in range(2):
-                w = (
-                    (t[:, 0] if dx else 1 - t[:, 0])
-                    * (t[:, 1] if dy else 1 - t[:, 1])
-                    * (t[:, 2] if dz else 1 - t[:, 2])
-                )
-                c = np.clip(i0 + (dx, dy, dz), 0, np.array(padded.shape[::-1]) - 1)
-                out += w * padded[c[:, 2], c[:, 1], c[:, 0]]
-    return out
-
-
 def test_samples_equal_the_dense_grids_trilinear_interpolation():
     dense = _sparse((30, 26, 33), fill=0.05, seed=9)
     packed = bricks.pack_dense(dense, origin=(4, -2, 0), dtype=np.float32)
@@ -86,7 +68,7 @@ def test_samples_equal_the_dense_grids_trilinear_interpolation():
     atlas, per_side, firsts = bricks.layout([np.zeros((3, 9, 9, 9), np.float32), packed.data])
     leaf_rel = ijk + 8.0  # the leaf origin is one leaf before the grid's first voxel
     got = bricks.sample(atlas, per_side, packed.index, firsts[1], leaf_rel)
-    want = _trilinear(dense, ijk)
+    want = trilinear(dense, ijk)
     inside = (ijk >= -1).all(-1) & (ijk[:, 0] < 32) & (ijk[:, 1] < 25) & (ijk[:, 2] < 29)
     np.testing.assert_allclose(got[inside], want[inside], atol=1e-6)
 

@@ -12,7 +12,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from vdb_helpers import write_cumulus  # noqa: E402
+from vdb_helpers import trilinear, write_cumulus  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -35,29 +35,6 @@ def _import(blender, scene, path: Path, density: float = 1.0):
     vol.nubis_cloud.enabled = True
     vol.nubis_cloud.density = density
     return obj
-
-
-def _trilinear(dense: np.ndarray, ijk: np.ndarray) -> np.ndarray:
-    """A dense grid (z, y, x) at index coordinates (N, 3): x, y, z; 0 outside, as OpenVDB's background."""
-    padded = np.pad(dense.astype(np.float64), 1)
-    p = ijk + 1.0
-    i0 = np.floor(p).astype(int)
-    t = p - i0
-    out = np.zeros(len(p))
-    hi = np.array(padded.shape[::-1]) - 1
-    for dz in range(2):
-        for dy in range(2):
-            for dx in range(2):
-                w = (
-                    (t[:, 0] if dx else 1 - t[:, 0])
-                    * (t[:, 1] if dy else 1 - t[:, 1])
-                    * (t[:, 2] if dz else 1 - t[:, 2])
-                )
-                c = i0 + (dx, dy, dz)
-                ok = ((c >= 0) & (c <= hi)).all(-1)
-                c = np.clip(c, 0, hi)
-                out += np.where(ok, w * padded[c[:, 2], c[:, 1], c[:, 0]], 0.0)
-    return out
 
 
 def test_the_shader_reads_the_grid_where_its_object_puts_it(blender, make_scene, cumulus_file):
@@ -85,7 +62,7 @@ def test_the_shader_reads_the_grid_where_its_object_puts_it(blender, make_scene,
     ijk = rng.uniform(np.array(lo) - 1.0, np.array(hi) + 1.0, (4000, 3))
     world = (np.c_[ijk, np.ones(len(ijk))] @ placed.index_to_world.T)[:, :3].astype(np.float32)
     back = (np.c_[world.astype(np.float64), np.ones(len(world))] @ np.linalg.inv(placed.index_to_world).T)[:, :3]
-    want = _trilinear(dense, back - np.array(lo)) * 1.5 / scene.nubis.density_sigma
+    want = trilinear(dense, back - np.array(lo)) * 1.5 / scene.nubis.density_sigma
     got = probe_density(clouds, world)
     assert want.max() > 0.5 and (want > 0).mean() > 0.2
     # Half floats in the atlas and the GPU's filter weights: within 1 % of the cloud's peak.
