@@ -383,6 +383,8 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
     if (d.coarse <= 0.0) {
       d.h = h;
     }
+    /* An artist's cloud holds no rain: the field's precipitation darkens the field's share only. */
+    d.precipitation *= d.fine / (d.fine + v);
     d.fine += v;
     d.coarse += v;
   }
