@@ -60,11 +60,11 @@ float nubis_vdb_density(vec3 p, out float h)
 vec2 nubis_vdb_span(vec3 origin, vec3 dir)
 {
   vec2 span = vec2(1e30, -1e30);
+  vec3 inv = 1.0 / dir;
   for (int c = 0; c < NUBIS_MAX_VDB; c++) {
     if (float(c) >= P.vdb_count) {
       break;
     }
-    vec3 inv = 1.0 / dir;
     vec3 a = (P.vdb_box_lo[c].xyz - origin) * inv;
     vec3 b = (P.vdb_box_hi[c].xyz - origin) * inv;
     vec3 near = min(a, b), far = max(a, b);

@@ -22,7 +22,7 @@ from ..core import vdbcloud
 from ..core.errors import NubisError
 from ..core.sequence import human_bytes
 from ..render import vdbclouds as gpu_side
-from . import status
+from . import cycles_setup, status
 
 # Clouds read from disk, by (path, modification time, size, grid): a few, as Blender's own volume cache.
 _CACHE_ENTRIES = 8
@@ -109,8 +109,6 @@ def native(scene):
     """Around a Cycles render of the comparison: the marked Volumes render natively, each with the clouds'
     material reading its grid times its Density (blender/cycles_setup.py), so Cycles sees the same file
     with the same material as the viewport; their own materials are put back after."""
-    from . import cycles_setup
-
     kept = []
     try:
         for obj in marked(scene):

@@ -337,7 +337,7 @@ def plan_tiles(state: CloudState, plan: BakePlan, tile: int = TILE) -> list[Tile
     clip = state.clip_box
     margin_z = v + 4.0  # a voxel, and the shader's float32 altitude near a 6371 km sphere
     # The artists' VDB clouds (core/vdbcloud.py): their world boxes, with the half voxel a sample reads.
-    vdb_boxes = [placed.world_box() for placed in state.vdb_clouds]
+    vdb_boxes = [placed.world_box for placed in state.vdb_clouds]
     tiles = []
     for j0 in range(0, ny, tile):
         for i0 in range(0, nx, tile):

@@ -87,7 +87,7 @@ class CloudState:
         for placed in self.vdb_clouds:
             # The VDB clouds' boxes too (heights as altitudes: a cloud within tens of kilometres of the
             # origin stands within metres of the planet's curve).
-            lo_box, hi_box = placed.world_box()
+            lo_box, hi_box = placed.world_box
             bottom, top = min(bottom, float(lo_box[2])), max(top, float(hi_box[2]))
         return bottom, top
 

@@ -11,6 +11,7 @@ deep), so the memory this takes follows the cloud, not its bounding box (core/br
 
 from __future__ import annotations
 
+import functools
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -238,16 +239,20 @@ class Placement:
         """Extinction per metre per unit of the grid's value: the Density times the file's own scale."""
         return self.multiplier * self.cloud.value_scale
 
-    @property
+    # Where the cloud stands is fixed once placed (a moved object is a new Placement): its geometry is
+    # computed once, not on every upload of the uniform block.
+    @functools.cached_property
     def index_to_world(self) -> np.ndarray:
         return np.asarray(self.object_to_world, np.float64) @ self.cloud.index_to_world
 
+    @functools.cached_property
     def world_to_leaf_index(self) -> np.ndarray:
         """3x4 rows taking world (x, y, z, 1) to index coordinates relative to the bricks' leaf origin."""
         inv = np.linalg.inv(self.index_to_world)
         inv[:3, 3] -= np.asarray(self.cloud.bricks.leaf_origin, np.float64)
         return inv[:3]
 
+    @functools.cached_property
     def world_box(self) -> tuple[np.ndarray, np.ndarray]:
         """The world box around the active voxels and the half voxel a sample reads beyond them."""
         lo, hi = (np.asarray(c, np.float64) for c in self.cloud.bounds)
@@ -262,17 +267,29 @@ class Placement:
         world = corners @ self.index_to_world.T
         return world[:, :3].min(axis=0), world[:, :3].max(axis=0)
 
-    @property
+    @functools.cached_property
     def voxel_size(self) -> float:
         """World length of a voxel's edge (the object's scale included; its smallest axis if not uniform)."""
         m = self.index_to_world
         return float(min(np.linalg.norm(m[:3, a]) for a in range(3)))
 
 
-def index_layout(placements) -> list[int]:
-    """Where each cloud's index starts along z in the index texture the clouds share."""
-    offsets, z = [], 0
-    for p in placements:
-        offsets.append(z)
-        z += p.cloud.bricks.index.shape[0]
-    return offsets
+@dataclass(frozen=True)
+class GpuLayout:
+    """How the clouds share the GPU's two textures (render/vdbclouds.py), as the uniform block tells the
+    shader (render/uniforms.py): bricks per side of the one atlas, each cloud's first brick in it, each
+    cloud's first z slice in the one index texture, and that texture's shape (z, y, x)."""
+
+    per_side: tuple[int, int, int]
+    first_brick: tuple[int, ...]
+    first_slice: tuple[int, ...]
+    index_shape: tuple[int, int, int]
+
+
+def gpu_layout(placements) -> GpuLayout:
+    counts = [p.cloud.bricks.count for p in placements]
+    shapes = [p.cloud.bricks.index.shape for p in placements]
+    firsts = tuple(sum(counts[:i]) for i in range(len(counts)))
+    slices = tuple(sum(s[0] for s in shapes[:i]) for i in range(len(shapes)))
+    index = (sum(s[0] for s in shapes), max((s[1] for s in shapes), default=0), max((s[2] for s in shapes), default=0))
+    return GpuLayout(brickmod.atlas_shape(max(sum(counts), 1)), firsts, slices, index)

@@ -15,13 +15,18 @@ from functools import cache
 
 import numpy as np
 
-from ..core import bricks, lightvolume, march, schema, storms, vdbcloud
+from ..core import lightvolume, march, schema, storms, vdbcloud
 from ..core.errors import NubisError
 from ..core.state import MAX_STORMS, CloudState, wind_vector
 
 
 def _volume_row(volume, row: int):
     return lambda st: tuple(float(x) for x in volume(st).to_unit()[row])
+
+
+def _vdb_atlas(st: CloudState) -> tuple:
+    per_side = vdbcloud.gpu_layout(st.vdb_clouds).per_side if st.vdb_clouds else (1, 1, 1)
+    return (*map(float, per_side), 0.0)
 
 
 # Derived vec4 members: (name, what it holds, value).
@@ -43,7 +48,7 @@ _VEC4: tuple[tuple[str, str, Callable[[CloudState], tuple]], ...] = (
         for name, volume in (("sun", lightvolume.sun_volume), ("sky", lightvolume.sky_volume))
         for axis, fn in (("x", _volume_row(volume, 0)), ("y", _volume_row(volume, 1)), ("z", _volume_row(volume, 2)))
     ),
-    ("vdb_atlas", "the VDB clouds' brick atlas: bricks per side x, y, z, -", lambda st: _vdb_layout(st)[0]),
+    ("vdb_atlas", "the VDB clouds' brick atlas: bricks per side x, y, z, -", _vdb_atlas),
     (
         "clip_box",
         "x0, y0, x1, y1: no clouds outside (a comparison clips to the baked box); x1 < x0: off",
@@ -107,18 +112,7 @@ def _vdb_step(st: CloudState) -> float:
 
 
 def _vdb_rows(row: int):
-    return lambda st: [tuple(p.world_to_leaf_index()[row]) for p in st.vdb_clouds]
-
-
-def _vdb_layout(st: CloudState) -> tuple[tuple, list[int], list[int]]:
-    """(bricks per side, -), each cloud's first z in the index texture, each cloud's first brick: as
-    render/vdbclouds.py lays them out."""
-    if not st.vdb_clouds:
-        return (1.0, 1.0, 1.0, 0.0), [], []
-    counts = [p.cloud.bricks.count for p in st.vdb_clouds]
-    per_side = bricks.atlas_shape(max(sum(counts), 1))
-    firsts = [sum(counts[:i]) for i in range(len(counts))]
-    return (*map(float, per_side), 0.0), vdbcloud.index_layout(st.vdb_clouds), firsts
+    return lambda st: [tuple(p.world_to_leaf_index[row]) for p in st.vdb_clouds]
 
 
 def _storm_rows(fn):
@@ -155,20 +149,24 @@ _ARRAYS: tuple[tuple[str, int, str, Callable[[CloudState], list]], ...] = (
         vdbcloud.MAX_CLOUDS,
         "the VDB cloud's index: leaves x, y, z, its first z in the index texture",
         lambda st: [
-            (*p.cloud.bricks.index.shape[::-1], z) for p, z in zip(st.vdb_clouds, _vdb_layout(st)[1], strict=True)
+            (*p.cloud.bricks.index.shape[::-1], z)
+            for p, z in zip(st.vdb_clouds, vdbcloud.gpu_layout(st.vdb_clouds).first_slice, strict=True)
         ],
     ),
     (
         "vdb_box_lo",
         vdbcloud.MAX_CLOUDS,
         "the VDB cloud's world box, low corner; density per value (extinction scale / density sigma)",
-        lambda st: [(*p.world_box()[0], p.extinction_scale / st.params["density_sigma"]) for p in st.vdb_clouds],
+        lambda st: [(*p.world_box[0], p.extinction_scale / st.params["density_sigma"]) for p in st.vdb_clouds],
     ),
     (
         "vdb_box_hi",
         vdbcloud.MAX_CLOUDS,
         "the VDB cloud's world box, high corner; its first brick in the atlas",
-        lambda st: [(*p.world_box()[1], first) for p, first in zip(st.vdb_clouds, _vdb_layout(st)[2], strict=True)],
+        lambda st: [
+            (*p.world_box[1], first)
+            for p, first in zip(st.vdb_clouds, vdbcloud.gpu_layout(st.vdb_clouds).first_brick, strict=True)
+        ],
     ),
     (
         "light_taps",

@@ -12,7 +12,7 @@ from __future__ import annotations
 import gpu
 import numpy as np
 
-from ..core import bricks
+from ..core import bricks, vdbcloud
 from ..core.errors import NubisError
 from ..core.sequence import human_bytes
 
@@ -32,15 +32,13 @@ def _texture(arr: np.ndarray, fmt: str) -> gpu.types.GPUTexture:
     return gpu.types.GPUTexture(size, format=fmt, data=buf)
 
 
-def combined_index(placements, firsts: list[int]) -> np.ndarray:
-    """Every cloud's leaf index stacked along z (core/vdbcloud.py, index_layout), brick numbers as they
-    are within each cloud (the shader adds the cloud's first brick), -1 where a leaf is empty."""
-    shapes = [p.cloud.bricks.index.shape for p in placements]
-    out = np.full((sum(s[0] for s in shapes), max(s[1] for s in shapes), max(s[2] for s in shapes)), -1.0, np.float32)
-    z = 0
-    for p, (lz, ly, lx) in zip(placements, shapes, strict=True):
+def combined_index(placements, layout: vdbcloud.GpuLayout) -> np.ndarray:
+    """Every cloud's leaf index at its first slice of the shared index texture, brick numbers as they are
+    within each cloud (the shader adds the cloud's first brick), -1 where a leaf is empty."""
+    out = np.full(layout.index_shape, -1.0, np.float32)
+    for p, z in zip(placements, layout.first_slice, strict=True):
+        lz, ly, lx = p.cloud.bricks.index.shape
         out[z : z + lz, :ly, :lx] = p.cloud.bricks.index
-        z += lz
     return out
 
 
@@ -48,11 +46,8 @@ def gpu_bytes(placements) -> int:
     """What the clouds' textures take on the GPU (half-float atlas, float index)."""
     if not placements:
         return 0
-    count = sum(p.cloud.bricks.count for p in placements)
-    bx, by, bz = bricks.atlas_shape(max(count, 1))
-    shapes = [p.cloud.bricks.index.shape for p in placements]
-    index = sum(s[0] for s in shapes) * max(s[1] for s in shapes) * max(s[2] for s in shapes)
-    return bx * by * bz * bricks.BRICK**3 * 2 + index * 4
+    layout = vdbcloud.gpu_layout(placements)
+    return bricks.gpu_bytes_estimate(sum(p.cloud.bricks.count for p in placements), int(np.prod(layout.index_shape)))
 
 
 class VdbTextures:
@@ -80,7 +75,7 @@ class VdbTextures:
                 f"the VDB clouds need {human_bytes(need)} on the GPU together, over the "
                 f"{human_bytes(bricks.DEFAULT_GPU_LIMIT)} they may take: draw fewer of them, or coarser ones"
             )
-        atlas, _per_side, firsts = bricks.layout([p.cloud.bricks.data for p in placements])
+        atlas, _per_side, _firsts = bricks.layout([p.cloud.bricks.data for p in placements])
         self.atlas = _texture(atlas, ATLAS_FORMAT)
-        self.index = _texture(combined_index(placements, firsts), INDEX_FORMAT)
+        self.index = _texture(combined_index(placements, vdbcloud.gpu_layout(placements)), INDEX_FORMAT)
         self.bytes = need

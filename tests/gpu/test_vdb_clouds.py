@@ -178,7 +178,7 @@ def test_a_vdb_sequence_follows_the_timeline_as_blender_reads_it(blender, make_s
         mine = vdbclouds.volume_file(obj, frame)
         assert (mine or "") == (blender.path.abspath(evaluated) if evaluated else ""), (frame, mine, evaluated)
         clouds = scene_io.state_from_scene(scene).vdb_clouds
-        seen[frame] = round(float(clouds[0].world_box()[0][0])) if clouds else None
+        seen[frame] = round(float(clouds[0].world_box[0][0])) if clouds else None
     assert len({v for v in seen.values() if v is not None}) == 3  # the three files, moving across the sky
 
 
