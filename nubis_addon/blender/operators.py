@@ -227,7 +227,9 @@ class NUBIS_OT_layer_duplicate(NeedsCloudscape, NubisOperator, bpy.types.Operato
         data = scene_io.layer_to_dict(s.layers[s.active_layer])
         data["name"] += " copy"
         with scene_io.batch_edit():
-            scene_io.layer_from_dict(s.layers.add(), data)
+            copy = s.layers.add()
+            scene_io.layer_from_dict(copy, data)
+            scene_io.copy_dabs(s.layers[s.active_layer], copy)
         s.layers.move(len(s.layers) - 1, s.active_layer + 1)
         s.active_layer += 1
         scene_io.generate_fields(context.scene)

@@ -8,7 +8,7 @@ import bpy
 
 from ..core import quality, schema
 from ..core.errors import NubisError
-from . import operators, pipeline, runtime, scene_io, status, viewport
+from . import operators, paint, pipeline, runtime, scene_io, status, viewport
 
 
 def draw_settings(layout, owner, settings) -> None:
@@ -117,6 +117,7 @@ _KIND_ICONS = {
     "GRADIENT": "IPO_LINEAR",
     "CONSTANT": "SNAP_FACE",
     "IMAGE": "IMAGE_DATA",
+    "PAINT": "BRUSH_DATA",
 }
 
 
@@ -140,6 +141,7 @@ _LAYER_KEYS_BY_KIND = {
     "GRADIENT": ("gradient", "angle", "center", "radius"),
     "CONSTANT": ("value",),
     "IMAGE": (),
+    "PAINT": (),
 }
 _LAYER_COMMON = ("kind", "channel", "blend", "enabled", "opacity")
 
@@ -164,6 +166,12 @@ class NUBIS_PT_field(NubisPanel, bpy.types.Panel):
             layer = s.layers[s.active_layer]
             box = layout.box()
             box.use_property_split = True
+            if layer.kind == "PAINT":  # strokes on top of the field: no blend, mask or remap
+                for key in ("kind", "channel", "enabled", "opacity"):
+                    box.prop(layer, key)
+                paint.draw_layer(box, layer)
+                layout.operator("nubis.generate_field", icon="FILE_REFRESH")
+                return
             for key in _LAYER_COMMON:
                 box.prop(layer, key)
             # The mask is chosen from the layers above this one (the loader refuses any other).

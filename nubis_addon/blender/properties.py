@@ -93,10 +93,29 @@ def _annotations(settings, skip=()) -> dict:
     return {s.key: prop_for(s) for s in settings if s.key not in skip}
 
 
+class NubisPaintDab(bpy.types.PropertyGroup):
+    """One brush dab of a paint layer, in world metres (core/paint.py: DAB_COLUMNS)."""
+
+    x: FloatProperty(name="X", subtype="DISTANCE", unit="LENGTH")
+    y: FloatProperty(name="Y", subtype="DISTANCE", unit="LENGTH")
+    radius: FloatProperty(name="Radius", min=0.0, subtype="DISTANCE", unit="LENGTH")
+    strength: FloatProperty(name="Strength", min=-1.0, max=1.0, description="Signed: negative subtracts")
+    falloff: IntProperty(name="Falloff", min=0, description="Index into core/paint.FALLOFFS")
+    mode: IntProperty(name="Mode", min=0, description="Index into core/paint.MODES")
+    start: BoolProperty(name="Stroke Start", description="The first dab of a stroke")
+
+
+def _layer_annotations() -> dict:
+    ann = _annotations(schema.LAYER)
+    # A paint layer's strokes: plain data, so Blender saves and undoes them like any setting.
+    ann["dabs"] = CollectionProperty(type=NubisPaintDab)
+    return ann
+
+
 NubisFieldLayer = type(
     "NubisFieldLayer",
     (bpy.types.PropertyGroup,),
-    {"__annotations__": _annotations(schema.LAYER), "__doc__": "One layer of the data-field stack"},
+    {"__annotations__": _layer_annotations(), "__doc__": "One layer of the data-field stack"},
 )
 
 # The storm's Empty holds its position (x, y are preset-only).
@@ -120,7 +139,7 @@ NubisSceneSettings = type(
     {"__annotations__": _scene_annotations(), "__doc__": "Nubis cloudscape settings of a scene"},
 )
 
-CLASSES = (NubisFieldLayer, NubisStorm, NubisSceneSettings)
+CLASSES = (NubisPaintDab, NubisFieldLayer, NubisStorm, NubisSceneSettings)
 
 
 def register() -> None:

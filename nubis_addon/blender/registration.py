@@ -4,7 +4,20 @@ from __future__ import annotations
 
 import bpy
 
-from . import events, operators, panels, preferences, properties, runtime, scene_render, sky, vdbclouds, viewport, work
+from . import (
+    events,
+    operators,
+    paint,
+    panels,
+    preferences,
+    properties,
+    runtime,
+    scene_render,
+    sky,
+    vdbclouds,
+    viewport,
+    work,
+)
 
 _registered = [False]
 
@@ -17,6 +30,7 @@ def register() -> None:
     operators.register()
     panels.register()
     vdbclouds.register()  # its sidebar panel is a child of the main one
+    paint.register()  # likewise
     preferences.register()
     viewport.register()
     sky.register()
@@ -33,6 +47,7 @@ def unregister() -> None:
     sky.unregister()
     viewport.unregister()
     preferences.unregister()
+    paint.unregister()
     vdbclouds.unregister()
     panels.unregister()
     operators.unregister()

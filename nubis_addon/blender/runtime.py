@@ -72,6 +72,11 @@ def cloud_gpu(seed: int) -> CloudGPU:
     return _gpu[seed]
 
 
+def loaded_gpu(seed: int) -> CloudGPU | None:
+    """The GPU inputs for a seed if this session has them, without making or waiting for any."""
+    return _gpu.get(seed)
+
+
 # ---- noise off the draw callback ---------------------------------------------------------------------
 
 _executor: list[ThreadPoolExecutor] = []

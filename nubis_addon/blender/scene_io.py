@@ -11,7 +11,7 @@ import bpy
 import numpy as np
 from mathutils import Euler, Matrix, Vector
 
-from ..core import bundled, camera, coverage, limits, schema, userpresets
+from ..core import bundled, camera, coverage, limits, paint, schema, userpresets
 from ..core import fields as fieldgen
 from ..core import sky as skymath
 from ..core import storms as stormgen
@@ -148,6 +148,8 @@ def pack_fields(settings) -> None:
 
 _stale: set[int] = set()
 _cover_hist: dict = {}  # scene pointer -> the histogram of its last composite's coverage, before the storms
+_cover_painted: dict = {}  # scene pointer -> whether its last composite painted coverage (core/paint.py)
+_pre_paint: dict = {}  # scene pointer -> (the paintable planes before the paint, the slider's multiplier)
 
 
 def mark_field_stale(scene) -> None:
@@ -167,6 +169,9 @@ def forget_stale() -> None:
     """Forget what is remembered per scene pointer (on file loads, when pointers are reused)."""
     _stale.clear()
     _cover_hist.clear()
+    _cover_painted.clear()
+    _pre_paint.clear()
+    paint.forget()
 
 
 def coverage_multiplier(scene) -> float:
@@ -174,7 +179,54 @@ def coverage_multiplier(scene) -> float:
     composite's field before the storms, or, until this session composites, the one saved with the file."""
     hist = _cover_hist.get(scene.as_pointer())
     s = scene.nubis
-    return coverage.multiplier_for(s.density_cover, hist) if hist is not None else s.density_coverage
+    if hist is None:
+        return s.density_coverage
+    m = coverage.multiplier_for(s.density_cover, hist)
+    return max(m, paint.MULTIPLIER_FLOOR) if _cover_painted.get(scene.as_pointer()) else m
+
+
+def paint_dabs(layer) -> np.ndarray:
+    """A paint layer's dabs as an (N, 7) array (core/paint.py: DAB_COLUMNS)."""
+    n = len(layer.dabs)
+    out = np.empty((n, len(paint.DAB_COLUMNS)), np.float64)
+    for k, name in enumerate(paint.DAB_COLUMNS):
+        buf = np.empty(n, np.float32 if name in ("x", "y", "radius", "strength") else np.int32)
+        if n:
+            layer.dabs.foreach_get(name, buf)
+        out[:, k] = buf
+    return out
+
+
+def copy_dabs(src, dst) -> None:
+    """A duplicated paint layer keeps its strokes."""
+    for d in src.dabs:
+        n = dst.dabs.add()
+        for name in paint.DAB_COLUMNS:
+            setattr(n, name, getattr(d, name))
+
+
+def paint_layers(settings, params=None) -> list[paint.PaintLayer]:
+    """The enabled paint layers, top of the stack first, rasterized on the field's grid."""
+    grid = paint.Grid.of(params or params_from_scene(settings))
+    out = []
+    for layer in settings.layers:
+        if layer.kind != "PAINT" or not layer.enabled or not len(layer.dabs):
+            continue
+        channel = layer.channel.lower()
+        if channel not in paint.PAINT_CHANNELS:
+            raise NubisError(
+                f"the paint layer '{layer.name}' writes '{channel}', which a brush cannot paint: "
+                f"set its channel to one of {', '.join(paint.PAINT_CHANNELS)}"
+            )
+        r = paint.raster(layer.as_pointer(), paint_dabs(layer), grid)
+        out.append(paint.PaintLayer(channel, float(layer.opacity), r.values))
+    return out
+
+
+def pre_paint(scene):
+    """(the paintable planes before the paint, the slider's multiplier) of the scene's last composite, or
+    None: what a live stroke re-applies the paint to (blender/paint.py)."""
+    return _pre_paint.get(scene.as_pointer())
 
 
 def read_field_image(img, which: str, resolution: int) -> np.ndarray:
@@ -233,7 +285,10 @@ def generate_fields(scene, progress=None) -> None:
     # Coverage is the fraction of the sky covered: the multiplier on this field that gives it, found from
     # the field before the storms (a superstorm's stencil is its own system, GDC22: counting it would thin
     # the fair-weather clouds everywhere else). Kept in the file, so a reopened file draws the same sky.
-    _cover_hist[scene.as_pointer()] = coverage.histogram(result["a"][..., 0])
+    ptr = scene.as_pointer()
+    _cover_hist[ptr] = coverage.histogram(result["a"][..., 0])
+    painted = paint_layers(settings, params)
+    _cover_painted[ptr] = any(p.channel == "coverage" for p in painted)
     try:
         with batch_edit():
             settings.density_coverage = coverage_multiplier(scene)
@@ -244,6 +299,15 @@ def generate_fields(scene, progress=None) -> None:
     storms = storm_stencils(settings, params)
     if storms:
         stormgen.apply_storms(result, params, storms)
+    # The artist's strokes act last, coverage on top of the slider's cover (core/paint.py): kept before the
+    # paint while the scene has paint layers, so a live stroke re-applies its paint to a rectangle only.
+    if any(layer.kind == "PAINT" for layer in settings.layers):
+        pre = paint.pre_planes(result)
+        m = coverage.multiplier_for(settings.density_cover, _cover_hist[ptr])
+        _pre_paint[ptr] = (pre, m)
+        paint.apply(result, pre, painted, m)
+    else:
+        _pre_paint.pop(ptr, None)
     for which, data in result.items():
         write_field_image(settings, which, data)
     _stale.discard(scene.as_pointer())

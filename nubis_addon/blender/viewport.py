@@ -31,13 +31,24 @@ def geometry_changed(generation: int) -> None:
     _geometry[0] = generation
 
 
-def _state(scene, view_origin):
-    """Settings, sun and sky are read every redraw (cheap); the field pixels only when they changed."""
+def _fields_key(scene) -> tuple:
     s = scene.nubis
     images = (s.field_a, s.field_b, s.field_cirrus)
-    key = (scene.as_pointer(), s.field_resolution, scene_io.field_generation()) + tuple(
+    return (scene.as_pointer(), s.field_resolution, scene_io.field_generation()) + tuple(
         img.as_pointer() if img else 0 for img in images
     )
+
+
+def field_arrays(scene) -> tuple | None:
+    """The field arrays the viewport draws for `scene`, if it has read them for the current field: a live
+    brush stroke edits them in place (blender/paint.py)."""
+    cached = _fields_cache.get(scene.as_pointer())
+    return cached[1] if cached is not None and cached[0] == _fields_key(scene) else None
+
+
+def _state(scene, view_origin):
+    """Settings, sun and sky are read every redraw (cheap); the field pixels only when they changed."""
+    key = _fields_key(scene)
     # One entry per scene: two windows on two cloudscapes must not re-read each other's fields.
     cached = _fields_cache.get(scene.as_pointer())
     if cached is None or cached[0] != key:
@@ -45,7 +56,7 @@ def _state(scene, view_origin):
             _fields_cache.clear()
         # Headless there is no debounce timer: a composite owed is made here. In the interface the
         # timer makes it (blender/events.py) and the draw shows the last field until then.
-        cached = _fields_cache[scene.as_pointer()] = (key, scene_io.read_fields(s, flush=bpy.app.background))
+        cached = _fields_cache[scene.as_pointer()] = (key, scene_io.read_fields(scene.nubis, flush=bpy.app.background))
     return scene_io.state_from_scene(scene, camera_location=view_origin, fields=cached[1], wait=False)
 
 

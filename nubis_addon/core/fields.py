@@ -184,8 +184,8 @@ def composite(
     for i, layer in enumerate(layers):
         if progress is not None and i:
             progress(i / len(layers))
-        if not layer["enabled"]:
-            continue
+        if not layer["enabled"] or layer["kind"] == "paint":
+            continue  # paint layers act after the stack, the rules and the storms (core/paint.py)
         values = _remap(layer_values(layer, xs, ys, images), layer["remap"])
         raw[layer["name"]] = values
         channel = layer["channel"]

@@ -1245,7 +1245,7 @@ SCENE: tuple[Setting, ...] = (
 )
 del S
 
-LAYER_KINDS = ("perlin", "worley", "perlin_worley", "gradient", "constant", "image")
+LAYER_KINDS = ("perlin", "worley", "perlin_worley", "gradient", "constant", "image", "paint")
 FIELD_CHANNELS = (
     "coverage",
     "precipitation",

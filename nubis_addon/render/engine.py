@@ -15,7 +15,7 @@ from ..core import lightvolume, noise, sky
 from ..core.errors import NubisError
 from ..core.schema import defaults
 from ..core.state import CloudState
-from . import uniforms, vdbclouds
+from . import fieldpatch, uniforms, vdbclouds
 from .sources import CLOUD_LIBS, assemble, read_shader
 from .textures import NoiseTextures, field_texture, sky_texture
 
@@ -217,6 +217,7 @@ class CloudGPU:
         self._volume_key = None
         self._no_volume = None
         self.volume_fills = 0  # how often the volumes were filled (tests, the benchmark)
+        self.field_revision = 0  # bumped by each in-place patch of the field textures (patch_field)
         self.vdb = vdbclouds.VdbTextures()
 
     def fork(self) -> CloudGPU:
@@ -257,6 +258,17 @@ class CloudGPU:
         if light:
             self._update_volumes(state)
 
+    def patch_field(self, arrays: tuple, which: int, rect: tuple[int, int, int, int]) -> bool:
+        """A brush changed `rect` of field image `which` (0 A, 1 B, 2 cirrus) in the arrays this object
+        uploaded, in place: write that rectangle into the texture (render/fieldpatch.py). Returns False, doing
+        nothing, when these are not the arrays uploaded (the next update uploads them whole)."""
+        if len(self._field_arrays) != 3 or any(a is not b for a, b in zip(arrays, self._field_arrays, strict=True)):
+            return False
+        texture = (self.field_a, self.field_b, self.field_c)[which]
+        fieldpatch.patch(texture, self._field_arrays[which], rect)
+        self.field_revision += 1
+        return True
+
     def _update_volumes(self, state: CloudState) -> None:
         """Refill the optical-depth volumes when what they hold changed: the field, the density
         settings, the sun's direction, the storms, the box, or the time by a step of the wind's drift
@@ -281,6 +293,7 @@ class CloudGPU:
         density_switches = {k: self.switches[k] for k in ("NUBIS_STORMS", "NUBIS_CIRRUS", "NUBIS_VDB")}
         key = (
             tuple(id(a) for a in self._field_arrays),
+            self.field_revision,
             self.vdb.key,
             uniforms.pack(still).tobytes(),
             tuple(sorted(self.noise.defines.items())),

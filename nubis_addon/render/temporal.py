@@ -152,6 +152,7 @@ class TemporalViewport:
         return (
             uniforms.pack(quiet).tobytes(),
             tuple(id(a) for a in (state.field_a, state.field_b, state.field_c)),
+            clouds.field_revision,
             tuple(id(p.cloud.bricks) for p in state.vdb_clouds),
         )
 

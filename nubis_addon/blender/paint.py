@@ -1,0 +1,521 @@
+"""Painting the sky from above, live in the 3D view: the Paint Sky tool and `nubis.paint_field`.
+
+A stroke's dabs go into a paint layer of the field's layer stack (core/paint.py): plain data, saved with
+the .blend and undone stroke by stroke (the operator is one undo step). During a drag only the stroke's
+rectangle of the field is re-composited and written into the GPU texture in place
+(render/fieldpatch.py); when the stroke ends the whole field is composited again after the usual pause,
+for renders, bakes and the file. docs/painting.md says how painted coverage meets the Coverage slider.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import bpy
+import gpu
+import numpy as np
+from bpy.props import CollectionProperty, EnumProperty, FloatProperty, StringProperty
+from bpy_extras import view3d_utils
+from gpu_extras.batch import batch_for_shader
+
+from ..core import paint
+from ..core.errors import NubisError
+from . import events, runtime, scene_io, viewport
+from .operators import NeedsCloudscape
+
+TOOL_ID = "nubis.paint_sky"
+_CHANNELS = (
+    ("COVERAGE", "Coverage", "Where the clouds are: adds to the cover the Coverage slider gives"),
+    ("TYPE", "Cloud Type", "Stratus (0) to cumulonimbus (1)"),
+    ("PRECIPITATION", "Precipitation", "Rain: darker, denser clouds"),
+    ("STORM", "Storm Coverage", "Where a superstorm's clouds stand (inside a superstorm)"),
+)
+_MODES = (
+    ("ADD", "Add", "Raise the channel under the brush (the tool's plain drag)"),
+    ("SUBTRACT", "Subtract", "Lower the channel under the brush (Ctrl-drag)"),
+    ("SMOOTH", "Smooth", "Soften the paint layer's strokes under the brush (Shift-drag)"),
+)
+_FALLOFFS = tuple((f.upper(), f.title(), f"{f.title()} falloff from the centre to the radius") for f in paint.FALLOFFS)
+_cursor: dict = {}  # what the brush circle draws: world centre, radius; empty when it is off the layer
+
+
+# ---- where a stroke lands -------------------------------------------------------------------------------
+
+
+def brush_altitude(settings) -> float:
+    """The cloud layer's base: a stroke lands where the view ray meets it (the field itself is flat)."""
+    return float(settings.layer_bottom)
+
+
+def hit(context, mouse: tuple[float, float]):
+    """The world point under the mouse on the cloud layer's base, or None when the ray misses it."""
+    region, rv3d = context.region, context.region_data
+    if region is None or rv3d is None:
+        return None
+    origin = view3d_utils.region_2d_to_origin_3d(region, rv3d, mouse)
+    direction = view3d_utils.region_2d_to_vector_3d(region, rv3d, mouse)
+    z = brush_altitude(context.scene.nubis)
+    if abs(direction.z) < 1e-9:
+        return None
+    t = (z - origin.z) / direction.z
+    if t < 0 and rv3d.is_perspective:
+        return None
+    return origin + direction * t
+
+
+# ---- the paint layer --------------------------------------------------------------------------------------
+
+
+def paint_layer(settings, channel: str, name: str = ""):
+    """The paint layer a stroke goes into: the named one (made if missing), else the active layer when it
+    paints this channel, else the last paint layer of this channel, else a new one at the bottom."""
+    channel = channel.upper()
+    if name:
+        layer = settings.layers.get(name)
+        if layer is not None and layer.kind != "PAINT":
+            raise NubisError(f"the layer '{name}' is a {layer.kind.lower()} layer, not a paint layer: name another")
+        if layer is not None and layer.channel != channel:
+            raise NubisError(
+                f"the paint layer '{name}' paints {layer.channel.lower()}, not {channel.lower()}: "
+                "choose its channel or another layer"
+            )
+    else:
+        layer = None
+        active = settings.layers[settings.active_layer] if 0 <= settings.active_layer < len(settings.layers) else None
+        if active is not None and active.kind == "PAINT" and active.channel == channel:
+            layer = active
+        else:
+            layer = next((x for x in reversed(settings.layers) if x.kind == "PAINT" and x.channel == channel), None)
+    if layer is None:
+        with scene_io.batch_edit():
+            layer = settings.layers.add()
+            layer.name = name or f"Paint {channel.replace('_', ' ').title()}"
+            layer.kind = "PAINT"
+            layer.channel = channel
+            layer.blend = "ADD"
+        settings.active_layer = len(settings.layers) - 1
+    return layer
+
+
+def append_dabs(layer, dabs: np.ndarray) -> None:
+    if len(layer.dabs) + len(dabs) > paint.MAX_DABS:
+        raise NubisError(
+            f"the paint layer '{layer.name}' holds {len(layer.dabs)} dabs, and this stroke would pass "
+            f"{paint.MAX_DABS}: start a new paint layer (Data Field > +, kind Paint)"
+        )
+    for row in dabs:
+        d = layer.dabs.add()
+        d.x, d.y, d.radius, d.strength = (float(v) for v in row[:4])
+        d.falloff, d.mode, d.start = int(row[4]), int(row[5]), bool(row[6])
+
+
+def check_channel(scene, channel: str) -> None:
+    if channel == "STORM" and not len(scene.nubis.storms):
+        raise NubisError(
+            "storm coverage is drawn only inside a superstorm and this scene has none: add one "
+            "(Nubis > Superstorms > Add), then paint its coverage"
+        )
+
+
+def _sign(mode: str) -> float:
+    return -1.0 if mode == "SUBTRACT" else 1.0
+
+
+# ---- live: a stroke's rectangle into the drawn field ------------------------------------------------
+
+
+class LiveStroke:
+    """One drag: dabs are rasterized as they come, the field's rectangle under them re-composited and
+    written into the viewport's field arrays and GPU texture in place."""
+
+    def __init__(self, scene, layer, radius: float, strength: float, falloff: str, mode: str):
+        self.scene = scene
+        self.layer_key = layer.as_pointer()
+        settings = scene.nubis
+        if scene_io.field_stale(scene) or scene_io.pre_paint(scene) is None:
+            scene_io.generate_fields(scene)
+        self.grid = paint.Grid.of(scene_io.params_from_scene(settings))
+        self.pre, self.multiplier = scene_io.pre_paint(scene)
+        self.channel = layer.channel.lower()
+        self.image, self.plane = paint.PAINT_CHANNELS[self.channel]
+        self.which = ("a", "b", "cirrus").index(self.image)
+        # The layer's raster as it stands, copied: a cancelled drag leaves the cached one untouched.
+        base = paint.raster(self.layer_key, scene_io.paint_dabs(layer), self.grid)
+        self.raster = paint.Raster(self.grid)
+        self.raster.values = base.values.copy()
+        self.raster.count = base.count
+        self.layers = []
+        for other in settings.layers:
+            if other.kind != "PAINT" or not other.enabled or (other != layer and not len(other.dabs)):
+                continue
+            values = (
+                self.raster.values
+                if other == layer
+                else paint.raster(other.as_pointer(), scene_io.paint_dabs(other), self.grid).values
+            )
+            self.layers.append(paint.PaintLayer(other.channel.lower(), float(other.opacity), values))
+        mode_name = "smooth" if mode == "SMOOTH" else "paint"
+        self.spacer = paint.Spacer(radius, _sign(mode) * strength, falloff.lower(), mode_name)
+        self.dabs: list[tuple] = []
+        self.latencies: list[float] = []
+
+    def add(self, x: float, y: float, pressure: float, start: bool) -> tuple | None:
+        """Dab along the stroke to (x, y); returns the field rectangle changed."""
+        rows = self.spacer.add(x, y, pressure, start)
+        self.dabs.extend(rows)
+        rect = None
+        for row in rows:
+            rect = paint.union(rect, self.raster.add(row))
+        if rect is not None:
+            self.show(rect)
+        return rect
+
+    def show(self, rect) -> bool:
+        """Re-composite `rect` into the viewport's arrays and texture; False when the viewport has no
+        field arrays yet (its next redraw reads the composite whole)."""
+        arrays = viewport.field_arrays(self.scene)
+        if arrays is None:
+            return False
+        plane = paint.paint_plane(self.channel, self.pre[self.channel], self.layers, self.multiplier, rect)
+        r0, r1, c0, c1 = rect
+        arrays[self.which][r0:r1, c0:c1, self.plane] = plane
+        clouds = runtime.loaded_gpu(self.scene.nubis.noise_seed)
+        if clouds is not None:
+            clouds.patch_field(arrays, self.which, rect)
+        scene_io.redraw_views()
+        return True
+
+    def commit(self, layer) -> int:
+        """The stroke's dabs into the layer (the undo step's data); the raster is kept as the layer's."""
+        dabs = paint.as_dabs(self.dabs)
+        append_dabs(layer, dabs)
+        paint.remember(layer.as_pointer(), scene_io.paint_dabs(layer), self.raster)
+        return len(dabs)
+
+
+# ---- operators ---------------------------------------------------------------------------------------------
+
+
+class NUBIS_OT_paint_field(NeedsCloudscape, bpy.types.Operator):
+    """Paint the data field from above: drag over the clouds (Ctrl subtracts, Shift smooths). From a script,
+    give `stroke` as Blender's paint operators take it (world locations, pressure, is_start)"""
+
+    bl_idname = "nubis.paint_field"
+    bl_label = "Paint Sky"
+    bl_options = {"REGISTER", "UNDO"}
+
+    channel: EnumProperty(name="Channel", items=_CHANNELS, default="COVERAGE")
+    radius: FloatProperty(
+        name="Radius",
+        description="The brush's radius on the cloud layer",
+        default=2500.0,
+        min=0.0,
+        soft_min=100.0,
+        soft_max=50000.0,
+        subtype="DISTANCE",
+        unit="LENGTH",
+    )
+    strength: FloatProperty(
+        name="Strength",
+        description="How far one stroke moves the channel (1: all the way)",
+        default=1.0,
+        min=0.0,
+        max=1.0,
+    )
+    falloff: EnumProperty(name="Falloff", items=_FALLOFFS, default="SMOOTH")
+    mode: EnumProperty(name="Mode", items=_MODES, default="ADD")
+    layer: StringProperty(name="Layer", description="The paint layer to paint into (empty: the channel's own)")
+    stroke: CollectionProperty(type=bpy.types.OperatorStrokeElement, options={"SKIP_SAVE"})
+
+    def _checked(self, context):
+        settings = context.scene.nubis
+        check_channel(context.scene, self.channel)
+        grid = paint.Grid.of(scene_io.params_from_scene(settings))
+        paint.check_brush(grid, self.radius, self.strength)
+        return grid
+
+    def execute(self, context):
+        scene = context.scene
+        try:
+            grid = self._checked(context)
+            points = []
+            for n, el in enumerate(self.stroke):
+                x, y = float(el.location[0]), float(el.location[1])
+                points.append((x, y, float(el.pressure), bool(el.is_start) or n == 0))
+            paint.check_points(grid, points)
+            mode = "smooth" if self.mode == "SMOOTH" else "paint"
+            strength = _sign(self.mode) * self.strength
+            dabs = paint.stroke_dabs(points, self.radius, strength, self.falloff.lower(), mode)
+            layer = paint_layer(scene.nubis, self.channel, self.layer)
+            append_dabs(layer, dabs)
+            scene_io.generate_fields(scene)
+        except NubisError as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        viewport.invalidate()
+        scene_io.redraw_views()
+        return {"FINISHED"}
+
+    def invoke(self, context, event):
+        if len(self.stroke) or context.area is None or context.area.type != "VIEW_3D":
+            return self.execute(context)
+        scene = context.scene
+        mode = "SUBTRACT" if event.ctrl else "SMOOTH" if event.shift else self.mode
+        self.mode = mode
+        try:
+            self._checked(context)
+            self._layer_name = paint_layer(scene.nubis, self.channel, self.layer).name
+            layer = scene.nubis.layers[self._layer_name]
+            self._live = LiveStroke(scene, layer, self.radius, self.strength, self.falloff, mode)
+        except NubisError as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        self._first = True
+        self._sample(context, event)
+        context.window_manager.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def _sample(self, context, event) -> None:
+        mouse = (event.mouse_region_x, event.mouse_region_y)
+        point = hit(context, mouse)
+        _cursor.clear()
+        if point is None:
+            return
+        _cursor.update(centre=tuple(point), radius=self.radius)
+        pressure = event.pressure if getattr(event, "is_tablet", False) else 1.0
+        t0 = time.perf_counter()
+        self._live.add(point.x, point.y, pressure, self._first)
+        self._live.latencies.append(time.perf_counter() - t0)
+        el = self.stroke.add()
+        el.location = point
+        el.mouse = mouse
+        el.pressure = pressure
+        el.is_start = self._first
+        el.time = time.monotonic()
+        self._first = False
+
+    def modal(self, context, event):
+        if event.type in {"MOUSEMOVE", "INBETWEEN_MOUSEMOVE"}:
+            self._sample(context, event)
+            return {"RUNNING_MODAL"}
+        if event.type == "LEFTMOUSE" and event.value == "RELEASE":
+            return self._finish(context)
+        if event.type in {"ESC", "RIGHTMOUSE"}:
+            self._live = None
+            viewport.invalidate()
+            events.request_composite(context.scene)
+            scene_io.redraw_views()
+            return {"CANCELLED"}
+        return {"RUNNING_MODAL"}
+
+    def _finish(self, context):
+        scene = context.scene
+        layer = scene.nubis.layers.get(self._layer_name)
+        if layer is None or not self._live.dabs:
+            self._live = None
+            if not len(self.stroke):
+                self.report({"WARNING"}, "the stroke missed the cloud layer: paint over the clouds (a top view helps)")
+            return {"CANCELLED"}
+        try:
+            self._live.commit(layer)
+        except NubisError as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        self._live = None
+        # The whole field after the usual pause (renders, saves and bakes composite first if it is owed).
+        events.request_composite(scene)
+        return {"FINISHED"}
+
+
+class NUBIS_OT_paint_cursor(bpy.types.Operator):
+    """Follow the mouse with the brush circle (the Paint Sky tool's mouse move)"""
+
+    bl_idname = "nubis.paint_cursor"
+    bl_label = "Paint Sky Cursor"
+    bl_options = {"INTERNAL"}
+
+    def invoke(self, context, event):
+        _cursor.clear()
+        if scene_io.has_cloudscape(context.scene):
+            point = hit(context, (event.mouse_region_x, event.mouse_region_y))
+            props = tool_settings(context)
+            if point is not None and props is not None:
+                _cursor.update(centre=tuple(point), radius=props.radius)
+        if context.area is not None:
+            context.area.tag_redraw()
+        return {"PASS_THROUGH"}
+
+
+class NUBIS_OT_view_field_top(NeedsCloudscape, bpy.types.Operator):
+    """Look straight down on the data field, all of it in view (orthographic): the best view to paint from"""
+
+    bl_idname = "nubis.view_field_top"
+    bl_label = "Top View of the Clouds"
+
+    @classmethod
+    def poll(cls, context):
+        return super().poll(context) and context.area is not None and context.area.type == "VIEW_3D"
+
+    def execute(self, context):
+        s = context.scene.nubis
+        space, rv3d = context.space_data, context.region_data
+        from mathutils import Quaternion, Vector
+
+        rv3d.view_perspective = "ORTHO"
+        rv3d.view_rotation = Quaternion((1.0, 0.0, 0.0, 0.0))
+        rv3d.view_location = Vector((s.field_origin_x, s.field_origin_y, brush_altitude(s)))
+        rv3d.view_distance = s.field_size * 0.75
+        # The orthographic view clips around its location: keep the whole sky and the ground inside.
+        space.clip_end = max(space.clip_end, 4.0 * (s.layer_top + s.field_size))
+        return {"FINISHED"}
+
+
+class NUBIS_OT_paint_layer_clear(NeedsCloudscape, bpy.types.Operator):
+    """Remove every stroke of the active paint layer"""
+
+    bl_idname = "nubis.paint_layer_clear"
+    bl_label = "Clear Strokes"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        s = context.scene.nubis
+        if not (0 <= s.active_layer < len(s.layers)) or s.layers[s.active_layer].kind != "PAINT":
+            self.report({"ERROR"}, "the active layer is not a paint layer: select one in the Data Field's stack")
+            return {"CANCELLED"}
+        s.layers[s.active_layer].dabs.clear()
+        try:
+            scene_io.generate_fields(context.scene)
+        except NubisError as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        viewport.invalidate()
+        scene_io.redraw_views()
+        return {"FINISHED"}
+
+
+# ---- the tool, its circle and its panel ---------------------------------------------------------------
+
+
+def tool_settings(context):
+    """The Paint Sky tool's operator settings (radius, strength, ...), or None without a workspace."""
+    workspace = getattr(context, "workspace", None)
+    if workspace is None:
+        return None
+    try:
+        tool = workspace.tools.from_space_view3d_mode("OBJECT", create=True)
+        if tool.idname != TOOL_ID:
+            tool = None
+        return tool.operator_properties("nubis.paint_field") if tool is not None else None
+    except (AttributeError, RuntimeError, TypeError):
+        return None
+
+
+class NubisPaintSkyTool(bpy.types.WorkSpaceTool):
+    bl_space_type = "VIEW_3D"
+    bl_context_mode = "OBJECT"
+    bl_idname = TOOL_ID
+    bl_label = "Paint Sky"
+    bl_description = "Paint where the clouds are, from above: drag to add, Ctrl-drag to subtract, Shift-drag to smooth"
+    bl_icon = "ops.generic.select_circle"
+    bl_keymap = (
+        ("nubis.paint_field", {"type": "LEFTMOUSE", "value": "PRESS", "any": True}, None),
+        ("nubis.paint_cursor", {"type": "MOUSEMOVE", "value": "ANY", "any": True}, None),
+    )
+
+    def draw_settings(context, layout, tool):
+        props = tool.operator_properties("nubis.paint_field")
+        for key in ("channel", "radius", "strength", "falloff"):
+            layout.prop(props, key)
+
+
+def _circle_points(centre, radius: float, n: int = 64):
+    cx, cy, cz = centre
+    return [
+        (cx + radius * math.cos(2 * math.pi * k / n), cy + radius * math.sin(2 * math.pi * k / n), cz)
+        for k in range(n + 1)
+    ]
+
+
+def _draw_cursor() -> None:
+    if not _cursor:
+        return
+    context = bpy.context
+    if tool_settings(context) is None:
+        return
+    shader = gpu.shader.from_builtin("UNIFORM_COLOR")
+    batch = batch_for_shader(shader, "LINE_STRIP", {"pos": _circle_points(_cursor["centre"], _cursor["radius"])})
+    gpu.state.blend_set("ALPHA")
+    shader.bind()
+    shader.uniform_float("color", (1.0, 0.55, 0.1, 0.9))
+    batch.draw(shader)
+    gpu.state.blend_set("NONE")
+
+
+class NUBIS_PT_paint(bpy.types.Panel):
+    """The sidebar's painting tools: the Paint Sky tool, its brush and the top view."""
+
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Nubis"
+    bl_parent_id = "NUBIS_PT_main"
+    bl_label = "Paint Sky"
+
+    @classmethod
+    def poll(cls, context):
+        return scene_io.has_cloudscape(context.scene)
+
+    def draw(self, context):
+        layout = self.layout
+        row = layout.row(align=True)
+        row.operator("wm.tool_set_by_id", text="Paint Sky", icon="BRUSH_DATA").name = TOOL_ID
+        row.operator("nubis.view_field_top", text="Top View", icon="VIEW_ORTHO")
+        props = tool_settings(context)
+        if props is not None:
+            col = layout.column()
+            col.use_property_split = True
+            for key in ("channel", "radius", "strength", "falloff"):
+                col.prop(props, key)
+            layout.label(text="Drag: add · Ctrl: subtract · Shift: smooth", icon="INFO")
+        s = context.scene.nubis
+        painted = [x for x in s.layers if x.kind == "PAINT"]
+        for x in painted:
+            layout.label(text=f"{x.name}: {len(x.dabs)} dabs", icon="BRUSH_DATA" if x.enabled else "HIDE_ON")
+
+
+def draw_layer(layout, layer) -> None:
+    """A paint layer's own rows in the Data Field panel."""
+    layout.label(text=f"{len(layer.dabs)} dabs (strokes are kept in the file)", icon="BRUSH_DATA")
+    layout.operator("nubis.paint_layer_clear", icon="TRASH")
+
+
+_CLASSES = (
+    NUBIS_OT_paint_field,
+    NUBIS_OT_paint_cursor,
+    NUBIS_OT_view_field_top,
+    NUBIS_OT_paint_layer_clear,
+    NUBIS_PT_paint,
+)
+_handle: list = []
+_tool: list = []
+
+
+def register() -> None:
+    for cls in _CLASSES:
+        bpy.utils.register_class(cls)
+    _handle.append(bpy.types.SpaceView3D.draw_handler_add(_draw_cursor, (), "WINDOW", "POST_VIEW"))
+    try:
+        bpy.utils.register_tool(NubisPaintSkyTool, separator=True)
+        _tool.append(NubisPaintSkyTool)
+    except (ValueError, RuntimeError, KeyError) as err:  # a toolbar Blender cannot extend here
+        print(f"Nubis: the Paint Sky tool is not in the toolbar ({err}); nubis.paint_field still paints")
+
+
+def unregister() -> None:
+    while _tool:
+        bpy.utils.unregister_tool(_tool.pop())
+    while _handle:
+        bpy.types.SpaceView3D.draw_handler_remove(_handle.pop(), "WINDOW")
+    for cls in reversed(_CLASSES):
+        bpy.utils.unregister_class(cls)
+    _cursor.clear()
