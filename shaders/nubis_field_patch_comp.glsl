@@ -7,5 +7,5 @@ void main()
   if (texel.x >= patch_size.x || texel.y >= patch_size.y) {
     return;
   }
-  imageStore(field_out, patch_offset + texel, texelFetch(patch, texel, 0));
+  imageStore(field_out, patch_offset + texel, texelFetch(patch_texels, texel, 0));
 }

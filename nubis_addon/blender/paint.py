@@ -171,12 +171,10 @@ class LiveStroke:
             self.show(rect)
         return rect
 
-    def show(self, rect) -> bool:
-        """Re-composite `rect` into the viewport's arrays and texture; False when the viewport has no
-        field arrays yet (its next redraw reads the composite whole)."""
+    def show(self, rect) -> None:
+        """Re-composite `rect` into the viewport's field arrays and, when it has uploaded them, its texture
+        (otherwise its next redraw uploads them whole, this rectangle included)."""
         arrays = viewport.field_arrays(self.scene)
-        if arrays is None:
-            return False
         plane = paint.paint_plane(self.channel, self.pre[self.channel], self.layers, self.multiplier, rect)
         r0, r1, c0, c1 = rect
         arrays[self.which][r0:r1, c0:c1, self.plane] = plane
@@ -184,7 +182,6 @@ class LiveStroke:
         if clouds is not None:
             clouds.patch_field(arrays, self.which, rect)
         scene_io.redraw_views()
-        return True
 
     def commit(self, layer) -> int:
         """The stroke's dabs into the layer (the undo step's data); the raster is kept as the layer's."""

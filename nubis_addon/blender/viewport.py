@@ -39,15 +39,9 @@ def _fields_key(scene) -> tuple:
     )
 
 
-def field_arrays(scene) -> tuple | None:
-    """The field arrays the viewport draws for `scene`, if it has read them for the current field: a live
-    brush stroke edits them in place (blender/paint.py)."""
-    cached = _fields_cache.get(scene.as_pointer())
-    return cached[1] if cached is not None and cached[0] == _fields_key(scene) else None
-
-
-def _state(scene, view_origin):
-    """Settings, sun and sky are read every redraw (cheap); the field pixels only when they changed."""
+def field_arrays(scene) -> tuple:
+    """The field arrays the viewport draws for `scene`, read from the field images when they changed: a
+    live brush stroke edits them in place (blender/paint.py)."""
     key = _fields_key(scene)
     # One entry per scene: two windows on two cloudscapes must not re-read each other's fields.
     cached = _fields_cache.get(scene.as_pointer())
@@ -57,7 +51,13 @@ def _state(scene, view_origin):
         # Headless there is no debounce timer: a composite owed is made here. In the interface the
         # timer makes it (blender/events.py) and the draw shows the last field until then.
         cached = _fields_cache[scene.as_pointer()] = (key, scene_io.read_fields(scene.nubis, flush=bpy.app.background))
-    return scene_io.state_from_scene(scene, camera_location=view_origin, fields=cached[1], wait=False)
+    return cached[1]
+
+
+def _state(scene, view_origin):
+    """Settings, sun and sky are read every redraw (cheap); the field pixels only when they changed."""
+    fields = field_arrays(scene)
+    return scene_io.state_from_scene(scene, camera_location=view_origin, fields=fields, wait=False)
 
 
 _MAX_VIEWS = 8  # 3D views with a history of their own; the least recently drawn is freed beyond this

@@ -16,7 +16,7 @@ _shader: list = []
 def _patch_shader() -> gpu.types.GPUShader:
     if not _shader:
         info = GPUShaderCreateInfo()
-        info.sampler(0, "FLOAT_2D", "patch")
+        info.sampler(0, "FLOAT_2D", "patch_texels")
         info.image(0, "RGBA32F", "FLOAT_2D", "field_out", qualifiers={"WRITE"})
         info.push_constant("IVEC2", "patch_offset")
         info.push_constant("IVEC2", "patch_size")
@@ -37,7 +37,7 @@ def patch(texture: gpu.types.GPUTexture, array: np.ndarray, rect: tuple[int, int
     src = gpu.types.GPUTexture((w, h), format="RGBA32F", data=gpu.types.Buffer("FLOAT", block.size, block.ravel()))
     sh = _patch_shader()
     sh.bind()
-    sh.uniform_sampler("patch", src)
+    sh.uniform_sampler("patch_texels", src)
     sh.image("field_out", texture)
     sh.uniform_int("patch_offset", (c0, r0))
     sh.uniform_int("patch_size", (w, h))
