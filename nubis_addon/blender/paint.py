@@ -37,6 +37,9 @@ _MODES = (
     ("SMOOTH", "Smooth", "Soften the paint layer's strokes under the brush (Shift-drag)"),
 )
 _FALLOFFS = tuple((f.upper(), f.title(), f"{f.title()} falloff from the centre to the radius") for f in paint.FALLOFFS)
+# While a drag goes on, the light volumes (the clouds' shadows) wait this long after the last sample:
+# refilling them costs a whole-sky pass per sample (docs/measurements.md#painting).
+LIGHT_HOLD_S = 0.4
 _cursor: dict = {}  # what the brush circle draws: world centre, radius; empty when it is off the layer
 
 
@@ -158,7 +161,7 @@ class LiveStroke:
         mode_name = "smooth" if mode == "SMOOTH" else "paint"
         self.spacer = paint.Spacer(radius, _sign(mode) * strength, falloff.lower(), mode_name)
         self.dabs: list[tuple] = []
-        self.latencies: list[float] = []
+        self.hold_light = True  # False refills the shadows at every sample (the benchmark's comparison)
 
     def add(self, x: float, y: float, pressure: float, start: bool) -> tuple | None:
         """Dab along the stroke to (x, y); returns the field rectangle changed."""
@@ -181,6 +184,8 @@ class LiveStroke:
         clouds = runtime.loaded_gpu(self.scene.nubis.noise_seed)
         if clouds is not None:
             clouds.patch_field(arrays, self.which, rect)
+            if self.hold_light:
+                clouds.hold_light(LIGHT_HOLD_S)
         scene_io.redraw_views()
 
     def commit(self, layer) -> int:
@@ -281,9 +286,7 @@ class NUBIS_OT_paint_field(NeedsCloudscape, bpy.types.Operator):
             return
         _cursor.update(centre=tuple(point), radius=self.radius)
         pressure = event.pressure if getattr(event, "is_tablet", False) else 1.0
-        t0 = time.perf_counter()
         self._live.add(point.x, point.y, pressure, self._first)
-        self._live.latencies.append(time.perf_counter() - t0)
         el = self.stroke.add()
         el.location = point
         el.mouse = mouse

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 
@@ -218,6 +219,7 @@ class CloudGPU:
         self._no_volume = None
         self.volume_fills = 0  # how often the volumes were filled (tests, the benchmark)
         self.field_revision = 0  # bumped by each in-place patch of the field textures (patch_field)
+        self.light_held_until = 0.0  # time.monotonic() before which filled volumes are not refilled
         self.vdb = vdbclouds.VdbTextures()
 
     def fork(self) -> CloudGPU:
@@ -255,8 +257,14 @@ class CloudGPU:
         )
         if self._no_volume is None:  # bound in place of the volumes while they are filled or skipped
             self._no_volume = gpu.types.GPUTexture((1, 1, 1), format="R32F")
-        if light:
+        held = time.monotonic() < self.light_held_until and all(v is not None for v in self.volumes.values())
+        if light and not held:
             self._update_volumes(state)
+
+    def hold_light(self, seconds: float) -> None:
+        """Keep the light volumes as they are for `seconds` (a brush drag: the clouds under the brush change
+        at once, their shadows when the drag pauses or ends, docs/painting.md#live)."""
+        self.light_held_until = time.monotonic() + seconds
 
     def patch_field(self, arrays: tuple, which: int, rect: tuple[int, int, int, int]) -> bool:
         """A brush changed `rect` of field image `which` (0 A, 1 B, 2 cirrus) in the arrays this object

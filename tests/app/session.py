@@ -915,6 +915,99 @@ def s_vdb_cloud(step: Step):
     yield 2.0
 
 
+def _paint_layer_dabs() -> int:
+    return sum(len(x.dabs) for x in bpy.context.scene.nubis.layers if x.kind == "PAINT")
+
+
+def _cover_at(points) -> list[float]:
+    """The coverage the clouds are drawn with (field A red times the multiplier) at world points."""
+    scene_io = ext_module("scene_io")
+    scene = bpy.context.scene
+    s = scene.nubis
+    a = scene_io.read_fields(s)[0]
+    m = scene_io.coverage_multiplier(scene)
+    out = []
+    for x, y in points:
+        j = int(((x - s.field_origin_x) / s.field_size + 0.5) * s.field_resolution)
+        i = int(((y - s.field_origin_y) / s.field_size + 0.5) * s.field_resolution)
+        out.append(float(min(max(a[i, j, 0] * m, 0.0), 1.0)))
+    return out
+
+
+def s_paint(step: Step):
+    """The Paint Sky tool from the sidebar's Top View: a real mouse drag paints coverage, the clouds appear
+    during the drag, Ctrl-Z removes the stroke and Ctrl-Shift-Z brings it back for the saved file."""
+    scene = bpy.context.scene
+    s = scene.nubis
+    keep_cover = s.density_cover
+    s.density_cover = 0.03  # a nearly clear sky, so the picture shows what the stroke paints
+    with override():
+        bpy.ops.wm.tool_set_by_id(name="nubis.paint_sky")
+        bpy.ops.nubis.view_field_top()
+    tool = bpy.context.workspace.tools.from_space_view3d_mode("OBJECT")
+    step.check(tool.idname == "nubis.paint_sky", f"the active tool is {tool.idname}")
+    props = tool.operator_properties("nubis.paint_field")
+    props.radius, props.strength, props.channel = 3000.0, 1.0, "COVERAGE"
+    with override():
+        bpy.ops.ed.undo_push(message="Before painting")  # what Ctrl-Z returns to
+    yield 3.0
+    yield from _converge()
+    before = shot(step, "08_paint_before", "view")
+    left, top, w, h = box_of(region(view3d_area()))
+    y = top + h * 0.45
+    xs = [left + w * (0.3 + 0.4 * k / 16) for k in range(17)]
+    dabs_before = _paint_layer_dabs()
+    mouse_to(xs[0], y)
+    yield 0.5
+    xdo("mousedown", 1)
+    yield 0.3
+    for x in xs[1:10]:
+        mouse_to(x, y)
+        yield 0.15
+    step.check(_modal_running("nubis.paint_field"), "the drag runs nubis.paint_field")
+    yield 1.0
+    during = shot(step, "08_paint_during_drag", "view")
+    share = changed_share(during, before)
+    step.check(share >= 0.01, f"clouds appear during the drag: {share * 100:.1f} % of the view changed")
+    for x in xs[10:]:
+        mouse_to(x, y)
+        yield 0.15
+    xdo("mouseup", 1)
+    yield 2.0
+    painted = _paint_layer_dabs()
+    step.check(painted > dabs_before, f"the stroke is in a paint layer: {painted - dabs_before} dabs")
+    # Where the stroke went on the cloud layer: the view ray of the drag's middle at the layer's base.
+    paint_mod = ext_module("paint")
+    with override():
+        ctx = bpy.context
+        rx = xs[8] - left
+        ry = (top + h) - y
+        mid = paint_mod.hit(ctx, (rx, ry))
+    points = [(mid.x, mid.y)] if mid is not None else []
+    cover = _cover_at(points)
+    step.check(bool(cover) and min(cover) >= 0.9, f"the cover under the stroke's middle is {cover}")
+    yield from _converge()
+    after = shot(step, "08_paint_after", "view")
+    mouse_over_view()
+    key("ctrl+z")
+    yield 3.0
+    yield from _converge()
+    undone = shot(step, "08_paint_undone", "view")
+    step.check(_paint_layer_dabs() == dabs_before, f"Ctrl-Z removed the stroke ({_paint_layer_dabs()} dabs left)")
+    d_undo, d_after = mae(undone, before), mae(after, before)
+    step.check(d_undo < d_after / 3, f"the view is back as before the stroke (MAE {d_undo:.4f}, painted {d_after:.4f})")
+    key("ctrl+shift+z")
+    yield 3.0
+    step.check(_paint_layer_dabs() == painted, f"Ctrl-Shift-Z brought the stroke back ({_paint_layer_dabs()} dabs)")
+    with open(os.path.join(OUT, "paint.json"), "w") as f:
+        json.dump({"dabs": painted, "points": points}, f)
+    s = bpy.context.scene.nubis
+    s.density_cover = keep_cover
+    with override():
+        bpy.ops.wm.tool_set_by_id(name="builtin.select_box")
+    yield 2.0
+
+
 def s_save(step: Step):
     path = os.path.join(OUT, "scene.blend")
     with override():
@@ -930,6 +1023,11 @@ def s_reopen(step: Step):
         getattr(scene, "nubis", None) is not None and scene.nubis.field_a is not None,
         "the cloudscape came back with the file",
     )
+    with open(os.path.join(OUT, "paint.json")) as f:
+        painted = json.load(f)
+    step.check(_paint_layer_dabs() == painted["dabs"], f"the painted stroke came back: {_paint_layer_dabs()} dabs")
+    cover = _cover_at(painted["points"])
+    step.check(bool(cover) and min(cover) >= 0.9, f"the cover under the reopened stroke is {cover}")
     yield max(ARGS.converge, 10.0)
     yield from view_has_clouds(step, "06_reopened_view")
     small_render(scene, eevee())
@@ -952,6 +1050,7 @@ MAIN = [
     s_bake_disturbed,
     s_render_clouds,
     s_vdb_cloud,
+    s_paint,
     s_save,
 ]
 REOPEN = [s_startup, s_reopen]

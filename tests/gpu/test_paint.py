@@ -158,6 +158,7 @@ def test_the_live_stroke_shows_what_the_full_composite_makes(blender, make_scene
     layer = blender_paint.paint_layer(s, "COVERAGE")
     cam_xy = scene_io.evaluated_matrix(scene.camera).translation
     live = blender_paint.LiveStroke(scene, layer, RADIUS, 1.0, "SMOOTH", "ADD")
+    live.hold_light = False  # the 3D view holds the shadows during a drag; here they follow at once
     clouds = runtime.cloud_gpu(s.noise_seed)
 
     def converge(key):
@@ -182,6 +183,7 @@ def test_the_live_stroke_shows_what_the_full_composite_makes(blender, make_scene
     for i, x in enumerate(np.linspace(cam_xy.x - 5000.0, cam_xy.x + 5000.0, 12)):
         assert live.add(float(x), y, 1.0, i == 0) is not None
     assert clouds.field_revision > revision  # written in place, not re-uploaded
+    assert clouds.light_held_until == 0.0
     assert viewport.field_arrays(scene) is arrays
     np.testing.assert_array_equal(np.asarray(clouds.field_a.read(), np.float32).reshape(arrays[0].shape), arrays[0])
     live_image = converge(7002)
@@ -194,6 +196,16 @@ def test_the_live_stroke_shows_what_the_full_composite_makes(blender, make_scene
         np.testing.assert_allclose(arr, fresh[k], atol=1e-6)
     final = converge(7003)
     np.testing.assert_allclose(final, live_image, atol=2e-3)
+    # As the 3D view drags: the shadows wait while samples come, and follow once the drag pauses.
+    held = blender_paint.LiveStroke(scene, layer, RADIUS, 1.0, "SMOOTH", "ADD")
+    converge(7004)
+    fills = clouds.volume_fills
+    held.add(float(cam_xy.x), y - 3000.0, 1.0, True)
+    converge(7005)
+    assert clouds.volume_fills == fills
+    clouds.hold_light(0.0)
+    converge(7006)
+    assert clouds.volume_fills == fills + 1
 
 
 def test_strokes_are_saved_and_undo_recomposites_from_them(blender, make_scene, tmp_path):
