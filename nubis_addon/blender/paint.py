@@ -107,10 +107,7 @@ def append_dabs(layer, dabs: np.ndarray) -> None:
             f"the paint layer '{layer.name}' holds {len(layer.dabs)} dabs, and this stroke would pass "
             f"{paint.MAX_DABS}: start a new paint layer (Data Field > +, kind Paint)"
         )
-    for row in dabs:
-        d = layer.dabs.add()
-        d.x, d.y, d.radius, d.strength = (float(v) for v in row[:4])
-        d.falloff, d.mode, d.start = int(row[4]), int(row[5]), bool(row[6])
+    scene_io.add_dabs(layer, dabs)
 
 
 def check_channel(scene, channel: str) -> None:

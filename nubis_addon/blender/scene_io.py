@@ -98,6 +98,10 @@ def layer_to_dict(layer) -> dict:
 
 def layer_from_dict(layer, data: dict) -> None:
     for key, value in data.items():
+        if key == "dabs":  # a paint layer's strokes (core/paint.py)
+            layer.dabs.clear()
+            add_dabs(layer, value)
+            continue
         s = schema.LAYER_BY_NAME[key]
         if s.kind == "image":
             layer.image = bpy.data.images.get(value) if value else None
@@ -197,12 +201,17 @@ def paint_dabs(layer) -> np.ndarray:
     return out
 
 
+def add_dabs(layer, rows) -> None:
+    """Append dabs (DAB_COLUMNS rows) to a paint layer's strokes."""
+    for row in rows:
+        d = layer.dabs.add()
+        d.x, d.y, d.radius, d.strength = (float(v) for v in row[:4])
+        d.falloff, d.mode, d.start = int(row[4]), int(row[5]), bool(row[6])
+
+
 def copy_dabs(src, dst) -> None:
     """A duplicated paint layer keeps its strokes."""
-    for d in src.dabs:
-        n = dst.dabs.add()
-        for name in paint.DAB_COLUMNS:
-            setattr(n, name, getattr(d, name))
+    add_dabs(dst, paint_dabs(src))
 
 
 def paint_layers(settings, params=None) -> list[paint.PaintLayer]:
@@ -564,7 +573,14 @@ def preset_from_scene(scene, name: str, description: str = "") -> Preset:
     for s in schema.PRESET_SCENE:
         value = _from_blender(s, getattr(settings, s.key))
         params[s.key] = tidy(value) if s.kind in ("float", "vector", "color") else value
-    layers = [{k: tidy(v) for k, v in layer_to_dict(layer).items()} for layer in settings.layers]
+    layers = []
+    for layer in settings.layers:
+        data = {k: tidy(v) for k, v in layer_to_dict(layer).items()}
+        if layer.kind == "PAINT" and len(layer.dabs):
+            data["dabs"] = [
+                [*(tidy(float(v)) for v in row[:4]), *(int(v) for v in row[4:])] for row in paint_dabs(layer)
+            ]
+        layers.append(data)
     storms = []
     for storm in list(settings.storms)[:MAX_STORMS]:
         data = {k: tidy(v) for k, v in table_to_dict(storm, schema.STORM).items()}

@@ -180,6 +180,36 @@ def as_dabs(rows) -> np.ndarray:
     return np.array(rows, np.float64).reshape(-1, len(DAB_COLUMNS))
 
 
+def parse_dabs(value, where: str) -> list[list[float]]:
+    """A preset's `dabs` (a paint layer's strokes, one [x, y, radius, strength, falloff, mode, start] row per
+    dab) checked row by row, with the row and the rule in the message."""
+    if not isinstance(value, list):
+        raise NubisError(f"{where} must be an array of dabs, each [x, y, radius, strength, falloff, mode, start]")
+    if len(value) > MAX_DABS:
+        raise NubisError(f"{where} holds {len(value)} dabs, over {MAX_DABS}: split the strokes into more layers")
+    rows = []
+    for i, row in enumerate(value):
+        here = f"{where}[{i}]"
+        if (
+            not isinstance(row, list)
+            or len(row) != len(DAB_COLUMNS)
+            or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in row)
+        ):
+            raise NubisError(f"{here} must be 7 numbers: x, y, radius, strength, falloff, mode, start")
+        if not all(math.isfinite(v) for v in row):
+            raise NubisError(f"{here} holds a value that is not a finite number: fix or remove the dab")
+        x, y, radius, strength, falloff, mode, start = row
+        if radius <= 0 or abs(strength) > 1 or falloff not in range(len(FALLOFFS)) or mode not in range(len(MODES)):
+            raise NubisError(
+                f"{here}: radius must be positive, strength within -1 to 1, falloff 0-{len(FALLOFFS) - 1} "
+                f"({', '.join(FALLOFFS)}) and mode 0-{len(MODES) - 1} ({', '.join(MODES)})"
+            )
+        if start not in (0, 1):
+            raise NubisError(f"{here}: start must be 1 (the first dab of a stroke) or 0")
+        rows.append([float(x), float(y), float(radius), float(strength), int(falloff), int(mode), int(start)])
+    return rows
+
+
 # ---- rasterizing dabs -------------------------------------------------------------------------------------
 
 
@@ -259,6 +289,10 @@ class Raster:
         self.values[r0:r1, c0:c1] = np.clip(self._base[r0:r1, c0:c1] + self._sign * reach, -1.0, 1.0)
         return rect
 
+    def end_stroke(self) -> None:
+        """Drop the stroke's working arrays (two field-sized planes); the next dab starts a stroke."""
+        self._base = self._reach = None
+
     def add_all(self, dabs: np.ndarray) -> tuple[int, int, int, int] | None:
         rect = None
         for dab in dabs:
@@ -267,7 +301,7 @@ class Raster:
 
 
 _RASTERS: dict[int, tuple[tuple, np.ndarray, Raster]] = {}  # layer key -> (grid key, dabs, raster)
-_MAX_RASTERS = 16
+_MAX_RASTERS = 8  # at most 16 MB each for a 2048x2048 field
 
 
 def raster(layer_key: int, dabs: np.ndarray, grid: Grid) -> Raster:
@@ -280,12 +314,14 @@ def raster(layer_key: int, dabs: np.ndarray, grid: Grid) -> Raster:
         if np.array_equal(dabs[: len(old)], old):
             r = cached[2]
             r.add_all(dabs[len(old) :])
+            r.end_stroke()
             _RASTERS[layer_key] = (grid, dabs.copy(), r)
             return r
     if len(_RASTERS) >= _MAX_RASTERS and layer_key not in _RASTERS:
         _RASTERS.pop(next(iter(_RASTERS)))
     r = Raster(grid)
     r.add_all(dabs)
+    r.end_stroke()
     _RASTERS[layer_key] = (grid, dabs.copy(), r)
     return r
 
@@ -293,6 +329,7 @@ def raster(layer_key: int, dabs: np.ndarray, grid: Grid) -> Raster:
 def remember(layer_key: int, dabs: np.ndarray, r: Raster) -> None:
     """Keep a raster built live (during a drag) as the one for these dabs, so the stroke's end does not
     rasterize it again."""
+    r.end_stroke()
     _RASTERS[layer_key] = (r.grid, np.asarray(dabs, np.float64).reshape(-1, len(DAB_COLUMNS)).copy(), r)
 
 

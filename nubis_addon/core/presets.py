@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from . import limits, schema
+from . import limits, paint, schema
 from .errors import NubisError
 from .fsutil import not_a_file
 from .state import MAX_STORMS
@@ -225,9 +225,23 @@ def _parse_layers(value: Any, where: str) -> list[dict[str, Any]]:
         limits.check_count(
             f"{where}: field.layers", len(value), limits.MAX_LAYERS, "merge or remove layers (each costs a full pass)"
         )
+        # A paint layer's strokes (core/paint.py) are its own array, not a setting of the schema.
+        dabs = [raw.get("dabs") if isinstance(raw, dict) else None for raw in value]
+        value = [{k: v for k, v in raw.items() if k != "dabs"} if isinstance(raw, dict) else raw for raw in value]
+    else:
+        dabs = []
     layers = _parse_tables(value, where, "field.layers", schema.LAYER)
     for i, layer in enumerate(layers):
         here = f"{where}: field.layers[{i}]"
+        if layer["kind"] == "paint" and layer["channel"] not in paint.PAINT_CHANNELS:
+            raise NubisError(
+                f"{here}.channel: a paint layer paints {', '.join(paint.PAINT_CHANNELS)}, "
+                f"not {toml_value(layer['channel'])}"
+            )
+        if dabs[i] is not None:
+            if layer["kind"] != "paint":
+                raise NubisError(f'{here}.dabs: only a paint layer (kind = "paint") holds strokes')
+            layer["dabs"] = paint.parse_dabs(dabs[i], f"{here}.dabs")
         _check_span(layer["center"], f"{here}.center")
         if layer["remap"][0] == layer["remap"][1]:
             raise NubisError(f"{here}.remap: the input range is empty; make remap[0] and remap[1] differ")

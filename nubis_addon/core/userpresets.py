@@ -40,6 +40,9 @@ def dump_preset(preset: presets.Preset) -> str:
             for layer in preset.layers:
                 out.append("\n[[field.layers]]\n")
                 out.extend(_table(layer, schema.LAYER))
+                if layer.get("dabs"):  # a paint layer's strokes, one dab a line
+                    rows = ",\n".join("  " + toml_literal(row) for row in layer["dabs"])
+                    out.append(f"dabs = [\n{rows},\n]\n")
     for storm in preset.storms:
         out.append("\n[[storms]]\n")
         out.extend(_table(storm, schema.STORM))
