@@ -357,11 +357,14 @@ class NUBIS_OT_view_field_top(NeedsCloudscape, bpy.types.Operator):
     def execute(self, context):
         s = context.scene.nubis
         space, rv3d = context.space_data, context.region_data
-        from mathutils import Quaternion, Vector
-
+        prefs = context.preferences.view
+        smooth, prefs.smooth_view = prefs.smooth_view, 0  # no transition that would undo what follows
+        try:
+            bpy.ops.view3d.view_axis(type="TOP")  # Blender's own Top view: the header says so
+        finally:
+            prefs.smooth_view = smooth
         rv3d.view_perspective = "ORTHO"
-        rv3d.view_rotation = Quaternion((1.0, 0.0, 0.0, 0.0))
-        rv3d.view_location = Vector((s.field_origin_x, s.field_origin_y, brush_altitude(s)))
+        rv3d.view_location = (s.field_origin_x, s.field_origin_y, brush_altitude(s))
         rv3d.view_distance = s.field_size * 0.75
         # The orthographic view clips around its location: keep the whole sky and the ground inside.
         space.clip_end = max(space.clip_end, 4.0 * (s.layer_top + s.field_size))
@@ -400,7 +403,7 @@ def tool_settings(context):
     if workspace is None:
         return None
     try:
-        tool = workspace.tools.from_space_view3d_mode("OBJECT", create=True)
+        tool = workspace.tools.from_space_view3d_mode("OBJECT", create=False)  # no ID writes while drawing
         if tool.idname != TOOL_ID:
             tool = None
         return tool.operator_properties("nubis.paint_field") if tool is not None else None

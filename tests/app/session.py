@@ -934,6 +934,9 @@ def _cover_at(points) -> list[float]:
     return out
 
 
+PAINT_CONVERGE = 25.0  # seconds for the top view of the whole field: enough to show the stroke, not to converge
+
+
 def s_paint(step: Step):
     """The Paint Sky tool from the sidebar's Top View: a real mouse drag paints coverage, the clouds appear
     during the drag, Ctrl-Z removes the stroke and Ctrl-Shift-Z brings it back for the saved file."""
@@ -951,7 +954,7 @@ def s_paint(step: Step):
     with override():
         bpy.ops.ed.undo_push(message="Before painting")  # what Ctrl-Z returns to
     yield 3.0
-    yield from _converge()
+    yield from _converge(PAINT_CONVERGE)
     before = shot(step, "08_paint_before", "view")
     left, top, w, h = box_of(region(view3d_area()))
     y = top + h * 0.45
@@ -986,12 +989,12 @@ def s_paint(step: Step):
     points = [(mid.x, mid.y)] if mid is not None else []
     cover = _cover_at(points)
     step.check(bool(cover) and min(cover) >= 0.9, f"the cover under the stroke's middle is {cover}")
-    yield from _converge()
+    yield from _converge(PAINT_CONVERGE)
     after = shot(step, "08_paint_after", "view")
     mouse_over_view()
     key("ctrl+z")
     yield 3.0
-    yield from _converge()
+    yield from _converge(PAINT_CONVERGE)
     undone = shot(step, "08_paint_undone", "view")
     step.check(_paint_layer_dabs() == dabs_before, f"Ctrl-Z removed the stroke ({_paint_layer_dabs()} dabs left)")
     d_undo, d_after = mae(undone, before), mae(after, before)
