@@ -213,6 +213,7 @@ struct NubisDensity {
   float coarse; /* the base shape, uneroded: never below `fine` (erosion only removes density, GPU Pro 7, S15) */
   float h;      /* height fraction */
   float precipitation;
+  float vdb;    /* the artists' VDB clouds' share of `fine` (0 to 1; nubis_vdb_lib.glsl) */
 };
 
 /* The density, in GPU Pro 7's order (docs/sources.md#density-order): base shape, profile, coverage,
@@ -229,6 +230,7 @@ NubisDensity nubis_field_density(vec3 p, bool cheap, float lod)
   d.coarse = 0.0;
   d.h = 0.0;
   d.precipitation = 0.0;
+  d.vdb = 0.0;
 
   /* The early returns below skip work where the result is already known to be zero: S15's isosurface
    * ("we only need to do the high detail noise where the low detail sample returns a non zero
@@ -385,6 +387,7 @@ NubisDensity nubis_density(vec3 p, bool cheap, float lod)
     }
     /* An artist's cloud holds no rain: the field's precipitation darkens the field's share only. */
     d.precipitation *= d.fine / (d.fine + v);
+    d.vdb = v / (d.fine + v);
     d.fine += v;
     d.coarse += v;
   }
