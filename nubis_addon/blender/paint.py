@@ -438,13 +438,22 @@ def _circle_points(centre, radius: float, n: int = 64):
 
 
 def _draw_cursor() -> None:
+    """The brush circle on the cloud layer, drawn over the clouds (after the view's own drawing: the clouds
+    and the sky in Solid shading cover anything drawn in the view before them)."""
     if not _cursor:
         return
     context = bpy.context
-    if tool_settings(context) is None:
+    region, rv3d = context.region, context.region_data
+    if region is None or rv3d is None or tool_settings(context) is None:
         return
+    points = []
+    for p in _circle_points(_cursor["centre"], _cursor["radius"]):
+        q = view3d_utils.location_3d_to_region_2d(region, rv3d, p)
+        if q is None:
+            return
+        points.append((q.x, q.y))
     shader = gpu.shader.from_builtin("UNIFORM_COLOR")
-    batch = batch_for_shader(shader, "LINE_STRIP", {"pos": _circle_points(_cursor["centre"], _cursor["radius"])})
+    batch = batch_for_shader(shader, "LINE_STRIP", {"pos": points})
     gpu.state.blend_set("ALPHA")
     shader.bind()
     shader.uniform_float("color", (1.0, 0.55, 0.1, 0.9))
@@ -503,7 +512,7 @@ _tool: list = []
 def register() -> None:
     for cls in _CLASSES:
         bpy.utils.register_class(cls)
-    _handle.append(bpy.types.SpaceView3D.draw_handler_add(_draw_cursor, (), "WINDOW", "POST_VIEW"))
+    _handle.append(bpy.types.SpaceView3D.draw_handler_add(_draw_cursor, (), "WINDOW", "POST_PIXEL"))
     try:
         bpy.utils.register_tool(NubisPaintSkyTool, separator=True)
         _tool.append(NubisPaintSkyTool)

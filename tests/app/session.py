@@ -934,7 +934,7 @@ def _cover_at(points) -> list[float]:
     return out
 
 
-PAINT_CONVERGE = 25.0  # seconds for the top view of the whole field: enough to show the stroke, not to converge
+PAINT_CONVERGE = 15.0  # seconds for the top view of the whole field: enough to show the stroke, not to converge
 
 
 def s_paint(step: Step):
