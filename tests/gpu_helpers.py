@@ -22,3 +22,38 @@ def split_coverage_scene(make_scene, **overrides):
     scene_io.write_field_image(scene.nubis, "a", a)
     scene_io.write_field_image(scene.nubis, "cirrus", np.zeros((res, res, 4), np.float32))
     return scene
+
+
+def stroke_elements(xs, y=0.0, z=1500.0):
+    """A brush stroke along y at the x's, as `nubis.paint_field(stroke=...)` takes it: Blender's
+    OperatorStrokeElement, every key given (Blender wants them all)."""
+    return [
+        {
+            "name": "",
+            "location": (float(x), float(y), z),
+            "mouse": (0.0, 0.0),
+            "mouse_event": (0.0, 0.0),
+            "pressure": 1.0,
+            "size": 0.0,
+            "x_tilt": 0.0,
+            "y_tilt": 0.0,
+            "time": 0.0,
+            "is_start": i == 0,
+        }
+        for i, x in enumerate(xs)
+    ]
+
+
+def camera_view(bpy, scene, width: int, height: int):
+    """A 3D view's region-data stand-in looking through the scene camera at width x height."""
+    from types import SimpleNamespace
+
+    from nubis_addon.blender import scene_io
+
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    cam = scene.camera.evaluated_get(depsgraph)
+    return SimpleNamespace(
+        window_matrix=cam.calc_matrix_camera(depsgraph, x=width, y=height, scale_x=1.0, scale_y=1.0),
+        view_matrix=scene_io.evaluated_matrix(scene.camera).inverted(),
+        is_perspective=True,
+    )

@@ -23,6 +23,7 @@ from types import SimpleNamespace
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))
 
 W, H = 480, 270
 RADIUS = 2500.0
@@ -32,6 +33,7 @@ def main() -> None:
     import bpy
     import gpu
     import numpy as np
+    from gpu_helpers import camera_view
 
     import nubis_addon
     from nubis_addon.blender import ensure_registered, runtime, scene_io, viewport
@@ -53,13 +55,7 @@ def main() -> None:
         scene_io.apply_preset(scene, preset)
         s = scene.nubis
         s.viewport_samples = 1
-        depsgraph = bpy.context.evaluated_depsgraph_get()
-        cam = scene.camera.evaluated_get(depsgraph)
-        rv3d = SimpleNamespace(
-            window_matrix=cam.calc_matrix_camera(depsgraph, x=W, y=H, scale_x=1.0, scale_y=1.0),
-            view_matrix=scene_io.evaluated_matrix(scene.camera).inverted(),
-            is_perspective=True,
-        )
+        rv3d = camera_view(bpy, scene, W, H)
         region = SimpleNamespace(width=W, height=H, as_pointer=lambda: 99)
         offscreen = gpu.types.GPUOffScreen(W, H, format="RGBA16F")
         cam_xy = scene_io.evaluated_matrix(scene.camera).translation

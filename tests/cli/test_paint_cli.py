@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 from conftest import run_cli
+from gpu_helpers import stroke_elements
 
 STROKE_X = (-8000.0, 8000.0)  # along y = 0
 RADIUS = 2500.0
@@ -13,22 +14,7 @@ SIZE = 120
 
 
 def stroke(points=9):
-    xs = np.linspace(*STROKE_X, points)
-    return [
-        {
-            "name": "",
-            "location": (float(x), 0.0, 1500.0),
-            "mouse": (0.0, 0.0),
-            "mouse_event": (0.0, 0.0),
-            "pressure": 1.0,
-            "size": 0.0,
-            "x_tilt": 0.0,
-            "y_tilt": 0.0,
-            "time": 0.0,
-            "is_start": i == 0,
-        }
-        for i, x in enumerate(xs)
-    ]
+    return stroke_elements(np.linspace(*STROKE_X, points))
 
 
 def top_camera(bpy, scene):
