@@ -1,5 +1,6 @@
 """The verdict of the real-application stage: every step of both phases of tests/app/session.py ran and
-passed. A phase that crashed or timed out lacks steps, and fails here.
+passed. A phase that crashed or timed out lacks steps, and fails here; a step that ran but is not listed
+here fails too, so a new step is never left unjudged.
 
     python3 tests/app/check.py OUTDIR
 """
@@ -25,6 +26,7 @@ EXPECTED = {
         "bake_disturbed",
         "render_clouds",
         "vdb_cloud",
+        "paint",
         "save",
     ],
     "reopen": ["startup", "reopen"],
@@ -50,6 +52,9 @@ def main(outdir: str) -> int:
             for what in bad:
                 print(f"     - {what}")
             failed += not rec["ok"]
+        for name in results.keys() - set(steps):
+            print(f"FAIL {phase}/{name}: ran but is not in check.py's EXPECTED (add it there so it is judged)")
+            failed += 1
     print(f"real-application stage: {'passed' if not failed else f'{failed} step(s) failed'}")
     return 1 if failed else 0
 
