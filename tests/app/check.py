@@ -52,7 +52,7 @@ def main(outdir: str) -> int:
             for what in bad:
                 print(f"     - {what}")
             failed += not rec["ok"]
-        for name in results.keys() - set(steps):
+        for name in sorted(results.keys() - set(steps)):
             print(f"FAIL {phase}/{name}: ran but is not in check.py's EXPECTED (add it there so it is judged)")
             failed += 1
     print(f"real-application stage: {'passed' if not failed else f'{failed} step(s) failed'}")
