@@ -153,7 +153,12 @@ def xdo(*args) -> None:
 
 
 def mouse_to(x: float, y: float) -> None:
-    xdo("mousemove", "--sync", int(x), int(y))
+    # `--sync` waits for the pointer to move; already there, it waited 15 s for a move that never came (four
+    # times per F12 series: minutes of the stage). So only a pointer elsewhere is moved.
+    at = subprocess.run(["xdotool", "getmouselocation", "--shell"], capture_output=True, text=True, timeout=30).stdout
+    where = dict(ln.split("=", 1) for ln in at.split() if "=" in ln)
+    if (where.get("X"), where.get("Y")) != (str(int(x)), str(int(y))):
+        xdo("mousemove", "--sync", int(x), int(y))
 
 
 def mouse_over_view() -> None:
