@@ -7,19 +7,39 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
 _bars: set[int] = set()  # descriptors whose last line is an unfinished progress bar
+# Every write to a terminal and the bookkeeping of its bar go under this lock, so that the interrupt line,
+# written by the signal watcher thread while the main thread draws the bar, never lands inside a bar's line
+# or under a later bar (seen on Blender 4.5: "3.1%nubis: interrupted", then a 3.2 % bar).
+_lock = threading.Lock()
+
+
+def _end_bar(fd: int) -> None:
+    if fd in _bars:
+        _bars.discard(fd)
+        with contextlib.suppress(OSError):
+            os.write(fd, b"\n")
 
 
 def break_bar(fd: int) -> None:
     """End an unfinished progress bar's line on ``fd``, so that the next message (an error, the interrupt
     line) starts a line of its own and the bar stays visible above it."""
-    if fd in _bars:
-        _bars.discard(fd)
+    with _lock:
+        _end_bar(fd)
+
+
+def last_words(fd: int | None, text: str) -> None:
+    """Write ``text`` as the last line this process writes to any terminal: an unfinished bar's line is
+    ended first, and every later write, from any thread, waits for good (the caller ends the process)."""
+    _lock.acquire()  # never released
+    if fd is not None:
+        _end_bar(fd)
         with contextlib.suppress(OSError):
-            os.write(fd, b"\n")
+            os.write(fd, text.encode("utf-8", "replace"))
 
 
 class Console:
@@ -28,12 +48,14 @@ class Console:
         self.tty = os.isatty(self.fd)
 
     def write(self, text: str) -> None:
-        with contextlib.suppress(OSError):
+        with _lock, contextlib.suppress(OSError):
             os.write(self.fd, text.encode("utf-8", "replace"))
 
     def line(self, text: str) -> None:
-        break_bar(self.fd)
-        self.write(text.rstrip("\n") + "\n")
+        with _lock:
+            _end_bar(self.fd)
+            with contextlib.suppress(OSError):
+                os.write(self.fd, (text.rstrip("\n") + "\n").encode("utf-8", "replace"))
 
     def progress(self, label: str) -> Callable[[float], None] | None:
         """A progress bar on a terminal; nothing when stderr is a file or a pipe (logs stay clean)."""
@@ -43,8 +65,11 @@ class Console:
         def report(fraction: float) -> None:
             fraction = min(max(fraction, 0.0), 1.0)
             bar = "#" * int(fraction * 30)
-            self.write(f"\r{label} [{bar:<30}] {fraction * 100:5.1f}%" + ("\n" if fraction >= 1.0 else ""))
-            (_bars.discard if fraction >= 1.0 else _bars.add)(self.fd)
+            text = f"\r{label} [{bar:<30}] {fraction * 100:5.1f}%" + ("\n" if fraction >= 1.0 else "")
+            with _lock:
+                with contextlib.suppress(OSError):
+                    os.write(self.fd, text.encode("utf-8", "replace"))
+                (_bars.discard if fraction >= 1.0 else _bars.add)(self.fd)
 
         return report
 

@@ -170,11 +170,7 @@ def stop() -> None:
 def _die(signum: int) -> None:
     _lock.acquire()  # never released: the process ends here
     remove_registered()
-    fd = _installed.get("message_fd")
-    if fd is not None:
-        console.break_bar(fd)
-        with contextlib.suppress(OSError):
-            os.write(fd, MESSAGE.encode())
+    console.last_words(_installed.get("message_fd"), MESSAGE)
     os._exit(128 + signum)
 
 
