@@ -18,11 +18,16 @@ _bars: set[int] = set()  # descriptors whose last line is an unfinished progress
 _lock = threading.Lock()
 
 
+def _put(fd: int, text: str) -> None:
+    """One write to a terminal; the caller holds ``_lock``. A closed or gone terminal is not an error."""
+    with contextlib.suppress(OSError):
+        os.write(fd, text.encode("utf-8", "replace"))
+
+
 def _end_bar(fd: int) -> None:
     if fd in _bars:
         _bars.discard(fd)
-        with contextlib.suppress(OSError):
-            os.write(fd, b"\n")
+        _put(fd, "\n")
 
 
 def break_bar(fd: int) -> None:
@@ -38,8 +43,7 @@ def last_words(fd: int | None, text: str) -> None:
     _lock.acquire()  # never released
     if fd is not None:
         _end_bar(fd)
-        with contextlib.suppress(OSError):
-            os.write(fd, text.encode("utf-8", "replace"))
+        _put(fd, text)
 
 
 class Console:
@@ -48,14 +52,13 @@ class Console:
         self.tty = os.isatty(self.fd)
 
     def write(self, text: str) -> None:
-        with _lock, contextlib.suppress(OSError):
-            os.write(self.fd, text.encode("utf-8", "replace"))
+        with _lock:
+            _put(self.fd, text)
 
     def line(self, text: str) -> None:
         with _lock:
             _end_bar(self.fd)
-            with contextlib.suppress(OSError):
-                os.write(self.fd, (text.rstrip("\n") + "\n").encode("utf-8", "replace"))
+            _put(self.fd, text.rstrip("\n") + "\n")
 
     def progress(self, label: str) -> Callable[[float], None] | None:
         """A progress bar on a terminal; nothing when stderr is a file or a pipe (logs stay clean)."""
@@ -67,8 +70,7 @@ class Console:
             bar = "#" * int(fraction * 30)
             text = f"\r{label} [{bar:<30}] {fraction * 100:5.1f}%" + ("\n" if fraction >= 1.0 else "")
             with _lock:
-                with contextlib.suppress(OSError):
-                    os.write(self.fd, text.encode("utf-8", "replace"))
+                _put(self.fd, text)
                 (_bars.discard if fraction >= 1.0 else _bars.add)(self.fd)
 
         return report
