@@ -352,7 +352,7 @@ def check_arguments(args) -> None:
     if len(files) > vdbcloud.MAX_CLOUDS:
         raise NubisError(f"--vdb names {len(files)} files: at most {vdbcloud.MAX_CLOUDS} VDB clouds are drawn at once")
     for path in files:
-        vdbcloud.choose_grid(path)  # a missing file, not a VDB, no float grid: said before any work
+        vdbcloud.check_fits(path)  # missing, damaged, no float grid, too large to draw: said before any work
     if getattr(args, "with_cloudscape", False) and not files:
         raise NubisError("--with-cloudscape goes with --vdb: the procedural clouds are on without it")
     limits.check_noise_target("--noise-target", getattr(args, "noise_target", None))

@@ -107,7 +107,7 @@ def bad_vdb(tmp_path, kind):
     if kind == "not a vdb":
         p = tmp_path / "cloud.vdb"
         p.write_text("this is a text file, not a VDB\n")
-        return p, "is not an OpenVDB file this Blender reads"
+        return p, "is not an OpenVDB file"
     if kind == "missing":
         return tmp_path / "gone.vdb", "is not there"
     if kind == "no float grid":

@@ -18,7 +18,7 @@ from collections import OrderedDict
 import bpy
 from bpy.props import BoolProperty, FloatProperty, PointerProperty, StringProperty
 
-from ..core import vdbcloud
+from ..core import console, vdbcloud, vdbfile
 from ..core.errors import NubisError
 from ..core.sequence import human_bytes
 from ..render import vdbclouds as gpu_side
@@ -69,15 +69,29 @@ class NubisVolumeCloud(bpy.types.PropertyGroup):
     )
 
 
-def marked(scene) -> list:
-    """The scene's Volume objects marked as Nubis clouds and shown in renders, in a stable order (at most
-    vdbcloud.MAX_CLOUDS)."""
-    out = [
+def all_marked(scene) -> list:
+    """The scene's Volume objects marked as Nubis clouds and shown in renders, in a stable order (by name)."""
+    return [
         obj
         for obj in sorted(scene.objects, key=lambda o: o.name)
         if obj.type == "VOLUME" and obj.data.nubis_cloud.enabled and (not obj.hide_render or obj.name in _stepped_aside)
     ]
-    return out[: vdbcloud.MAX_CLOUDS]
+
+
+def marked(scene) -> list:
+    """The marked Volumes that are drawn: the first vdbcloud.MAX_CLOUDS by name (left_out() says the rest)."""
+    return all_marked(scene)[: vdbcloud.MAX_CLOUDS]
+
+
+def left_out(scene) -> list:
+    return all_marked(scene)[vdbcloud.MAX_CLOUDS :]
+
+
+def left_out_sentence(obj) -> str:
+    return (
+        f"the Nubis cloud '{obj.name}' is left out: at most {vdbcloud.MAX_CLOUDS} VDB clouds are drawn at once "
+        "(the first by name); unmark one, or join clouds into one file"
+    )
 
 
 # ---- final renders: one path for each cloud ------------------------------------------------------------
@@ -88,8 +102,9 @@ _stepped_aside: set[str] = set()  # marked Volumes hidden from a final render wh
 def step_aside(scene) -> None:
     """Before a final render that draws the clouds through the extension's path (blender/scene_render.py):
     the marked Volumes are hidden from Blender's own volume render for the frame, so each cloud is
-    rendered once."""
-    for obj in marked(scene):
+    rendered once. A cloud left out (beyond the four drawn) is hidden too, as in the viewport, where it shows
+    its bounds only."""
+    for obj in all_marked(scene):
         if not obj.hide_render:
             obj.hide_render = True
             _stepped_aside.add(obj.name)
@@ -109,8 +124,11 @@ def native(scene):
     """Around a Cycles render of the comparison: the marked Volumes render natively, each with the clouds'
     material reading its grid times its Density (blender/cycles_setup.py), so Cycles sees the same file
     with the same material as the viewport; their own materials are put back after."""
-    kept = []
+    kept, hidden = [], []
     try:
+        for obj in left_out(scene):  # not drawn by the real-time renderer: not rendered by Cycles either
+            obj.hide_render = True
+            hidden.append(obj)
         for obj in marked(scene):
             settings = obj.data.nubis_cloud
             path = volume_file(obj, scene.frame_current)
@@ -128,6 +146,8 @@ def native(scene):
             obj.data.materials.append(mat)
         yield
     finally:
+        for obj in hidden:
+            obj.hide_render = False
         for volume, materials in kept:
             volume.materials.clear()
             for m in materials:
@@ -176,12 +196,8 @@ def sequence_frame(frame: int, start: int, duration: int, offset: int, mode: str
 
 def read(path: str, grid: str) -> vdbcloud.VdbCloud:
     """The packed cloud of a file, read once per change of the file on disk."""
-    try:
-        st = os.stat(path)
-    except OSError:
-        raise NubisError(
-            f"the VDB '{path}' is not there (moved or deleted?): point the Volume at the file again"
-        ) from None
+    vdbfile.check(path)  # missing, a folder, damaged: one sentence before OpenVDB opens it
+    st = os.stat(path)
     key = (path, st.st_mtime_ns, st.st_size, grid)
     if key in _cache:
         _cache.move_to_end(key)
@@ -198,6 +214,12 @@ def placements(scene, strict: bool = True) -> tuple:
     viewport's draw leaves the cloud out and shows why in the sidebar."""
     out = []
     _problems.clear()
+    for obj in left_out(scene):
+        _problems[obj.name] = left_out_sentence(obj)
+        if strict:
+            console.current().line(f"nubis: note: {left_out_sentence(obj)}")
+        else:
+            status.set_error(left_out_sentence(obj))
     for obj in marked(scene):
         settings = obj.data.nubis_cloud
         path = volume_file(obj, scene.frame_current)
@@ -205,13 +227,18 @@ def placements(scene, strict: bool = True) -> tuple:
             continue  # a clipped sequence before its first frame or after its last
         try:
             cloud = read(path, settings.grid.strip())
+            placed = vdbcloud.Placement(cloud, [list(r) for r in obj.matrix_world], float(settings.density))
+            placed.check(obj.name)
+            crowded = vdbcloud.why_not_together([*out, placed])
+            if crowded:
+                raise NubisError(f"it is left out: {crowded}; unmark a cloud or use coarser ones")
         except NubisError as err:
             if strict:
                 raise NubisError(f"the Nubis cloud '{obj.name}': {err}") from None
             _problems[obj.name] = str(err)
             status.set_error(f"the Nubis cloud '{obj.name}' is not drawn: {err}")
             continue
-        out.append(vdbcloud.Placement(cloud, [list(r) for r in obj.matrix_world], float(settings.density)))
+        out.append(placed)
     return tuple(out)
 
 
@@ -221,7 +248,7 @@ def add_files(scene, paths) -> list:
     objects = []
     for path in paths:
         path = os.path.abspath(os.path.expanduser(str(path)))
-        vdbcloud.choose_grid(path)
+        vdbcloud.check_fits(path)
         name = os.path.splitext(os.path.basename(path))[0] or "VDB Cloud"
         volume = bpy.data.volumes.new(name)
         volume.filepath = path
@@ -234,6 +261,13 @@ def add_files(scene, paths) -> list:
 
 def problem(obj) -> str:
     return _problems.get(obj.name, "")
+
+
+def first_problem() -> str:
+    """The sidebar's error line after a draw: the first VDB cloud left out and why ("" when none is)."""
+    for name, why in _problems.items():
+        return why if why.startswith("the Nubis cloud") else f"the Nubis cloud '{name}' is not drawn: {why}"
+    return ""
 
 
 def gpu_bytes(scene) -> int:
@@ -294,10 +328,12 @@ class NUBIS_PT_vdb_clouds(bpy.types.Panel):
             draw_cloud_settings(layout, obj.data)
         else:
             layout.label(text="Select a Volume (File > Import > OpenVDB)", icon="INFO")
-        clouds = marked(context.scene)
+        clouds = all_marked(context.scene)
         for cloud in clouds:
             row = layout.row()
             row.label(text=cloud.name, icon="ERROR" if problem(cloud) else "OUTLINER_OB_VOLUME")
+            if problem(cloud):
+                layout.label(text=problem(cloud))
         if clouds:
             layout.label(text=f"GPU memory: {human_bytes(gpu_bytes(context.scene))}")
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+import traceback
 
 import bpy
 import gpu
@@ -12,7 +13,7 @@ from mathutils import Matrix
 from ..core import camera
 from ..core.errors import NubisError
 from ..render import engine, temporal
-from . import cycles_setup, runtime, scene_io, status
+from . import cycles_setup, runtime, scene_io, status, vdbclouds
 
 _handle = None
 _fields_cache: dict = {}  # scene pointer -> (key, field arrays)
@@ -229,10 +230,23 @@ def draw_in_context(context) -> bool:
         shading = getattr(context.space_data, "shading", None)
         sky = scene.nubis.viewport_solid_sky and shading is not None and shading.type == "SOLID"
         draw_region(scene, region, rv3d, sky)
-        status.clear_error()
+        left_out = vdbclouds.first_problem()  # a VDB cloud not drawn: the clouds were, without it
+        if left_out:
+            status.set_error(left_out)
+        else:
+            status.clear_error()
     except NubisError as err:
         # A draw callback cannot report; remember the message for the sidebar instead of spamming the console.
         status.set_error(str(err))
+    except Exception as err:  # noqa: BLE001 - nothing may raise from a draw handler: Blender would print it
+        # on every redraw. The sidebar says it, the console once, with what to send in a report.
+        detail = " ".join(str(err).split())[:200]
+        message = (
+            f"the clouds could not be drawn ({type(err).__name__}: {detail}): please report it with the console's text"
+        )
+        if status.last_error() != message:
+            traceback.print_exc()
+        status.set_error(message)
     return True
 
 

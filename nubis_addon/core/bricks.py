@@ -13,8 +13,9 @@ texture's own linear filter interpolates across leaf boundaries exactly as a den
 kept when any of its 9x9x9 voxels holds cloud, so a sample near an empty leaf's far edge still sees the
 cloud in the next one.
 
-This module has no Blender and no GPU: it turns dense blocks of a grid (copied out of OpenVDB slab by
-slab, core/vdbio.py) into the atlas and index arrays, and back for the tests.
+This module has no Blender and no GPU: it turns dense blocks of a grid (copied out of OpenVDB block by
+block where the grid's tree has nodes, core/vdbcloud.py) into the atlas and index arrays, and back for
+the tests.
 """
 
 from __future__ import annotations
@@ -93,9 +94,9 @@ def occupied_leaves(dense: np.ndarray, tolerance: float = 0.0) -> np.ndarray:
 
 
 class BrickPacker:
-    """Packs a grid slab by slab: `add(block, leaf_k0)` takes a dense block (z, y, x) of LEAF*m + 1 slices
-    starting at leaf row `leaf_k0`, covering the whole leaf extent in x and y (plus one voxel), and keeps
-    its occupied leaves; `finish()` returns the Bricks."""
+    """Packs a grid block by block: `add(block, leaf0)` takes a dense block (z, y, x) of whole leaves plus
+    one voxel per axis whose first leaf is `leaf0` (lz, ly, lx) of the index, and keeps its occupied
+    leaves; `finish()` returns the Bricks."""
 
     def __init__(self, leaves: tuple[int, int, int], leaf_origin: tuple[int, int, int], dtype=np.float16):
         self.leaves = leaves  # (lz, ly, lx)
@@ -108,11 +109,17 @@ class BrickPacker:
     def count(self) -> int:
         return len(self._bricks)
 
-    def add(self, block: np.ndarray, leaf_k0: int, tolerance: float = 0.0) -> None:
+    @property
+    def held_bytes(self) -> int:
+        """The bricks packed so far, as they are held before finish() stacks them."""
+        return self.count * BRICK**3 * self.dtype.itemsize
+
+    def add(self, block: np.ndarray, leaf0: tuple[int, int, int] = (0, 0, 0), tolerance: float = 0.0) -> None:
         occ = occupied_leaves(block, tolerance)
+        z0, y0, x0 = leaf0
         for lz, ly, lx in zip(*np.nonzero(occ), strict=True):
             z, y, x = lz * LEAF, ly * LEAF, lx * LEAF
-            self.index[leaf_k0 + lz, ly, lx] = len(self._bricks)
+            self.index[z0 + lz, y0 + ly, x0 + lx] = len(self._bricks)
             self._bricks.append(block[z : z + BRICK, y : y + BRICK, x : x + BRICK].astype(self.dtype))
 
     def finish(self) -> Bricks:
@@ -148,7 +155,7 @@ def pack_dense(dense: np.ndarray, origin: tuple[int, int, int] = (0, 0, 0), dtyp
     padded = np.zeros(tuple(n * LEAF + 1 for n in leaves), np.float32)
     padded[LEAF : LEAF + dense.shape[0], LEAF : LEAF + dense.shape[1], LEAF : LEAF + dense.shape[2]] = dense
     packer = BrickPacker(leaves, tuple(int(c) - LEAF for c in origin), dtype)
-    packer.add(padded, 0, tolerance)
+    packer.add(padded, (0, 0, 0), tolerance)
     return packer.finish()
 
 

@@ -2,24 +2,26 @@
 
 Any float grid of a .vdb file (Houdini, EmberGen, Blender's Mesh to Volume, the extension's own bake) is
 read as Blender's Principled Volume reads it at Density 1: its values are extinction per metre of world
-space. The file is checked before anything large is made: one sentence for a file that is not a VDB, has
-no float grid, an empty grid, negative or NaN values, a transform that is not a uniform scale with a
-rotation and a translation, or a size whose bricks would not fit the GPU budget. The grid is then copied
-out of OpenVDB one slab of leaves at a time (a slab is the leaves' whole extent in x and y, 9 voxels
-deep), so the memory this takes follows the cloud, not its bounding box (core/bricks.py).
+space. The file is checked before anything large is made: its layout first (core/vdbfile.py: a damaged
+or cut-short file is one sentence, never an allocation it states), then one sentence for a file with no
+float grid, an empty grid, negative or NaN values, a transform that is not a uniform scale with a
+rotation and a translation, or a size whose bricks and index would not fit the GPU budget, estimated from
+the tree's own counts (ReadPlan). The grid is then copied out of OpenVDB one block of 16 leaves per side
+at a time, only where its tree has nodes, so the memory and the time this takes follow the cloud, not
+its bounding box (core/bricks.py).
 """
 
 from __future__ import annotations
 
 import functools
+import math
 import os
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from . import bricks as brickmod
-from . import bundled
+from . import bundled, vdbfile
 from .errors import NubisError
 from .sequence import human_bytes
 
@@ -44,6 +46,8 @@ class VdbCloud:
     # Extinction per metre per unit of value: 1, or the `nubis_density_scale` a Nubis bake writes (its
     # values are densities, docs/bake.md), so the extension's own bakes read back as they were drawn.
     value_scale: float = 1.0
+    # The bricks hold value / storage_scale: half floats end at 65504 (read_cloud).
+    storage_scale: float = 1.0
 
     @property
     def gpu_bytes(self) -> int:
@@ -57,41 +61,39 @@ class GridChoice:
 
 
 def float_grids(path: str | os.PathLike) -> list[GridChoice]:
-    """The file's grids, checked to be a readable VDB (metadata only: nothing large is read)."""
-    path = Path(path)
-    if not path.is_file():
-        raise NubisError(f"the VDB '{path}' is not there (moved or deleted?): point the Volume at the file again")
-    vdb = bundled.openvdb()
-    try:
-        grids = vdb.readAllGridMetadata(str(path))
-    except (OSError, RuntimeError, ValueError, TypeError) as err:
-        raise NubisError(
-            f"'{path}' is not an OpenVDB file this Blender reads ({str(err).strip() or type(err).__name__}): "
-            "export it again as .vdb"
-        ) from None
-    out = []
-    for g in grids:
-        meta = dict(g.metadata)
-        out.append(GridChoice(str(g.name), str(meta.get("value_type", g.valueTypeName))))
-    return out
+    """The file's grids, from its layout checked by core/vdbfile.py (nothing large is read)."""
+    layout = vdbfile.check(path)
+    return [GridChoice(g.name, vdbfile.tree_value_type(g.type_name) or g.type_name) for g in layout.grids]
 
 
 def choose_grid(path: str | os.PathLike, name: str = "") -> str:
     """`name`, or `density`, or the file's only float grid; a sentence naming the float grids otherwise."""
     grids = float_grids(path)
+    shown = vdbfile.named(path)
     floats = [g.name for g in grids if g.value_type in ("float", "double")]
     if not floats:
-        held = ", ".join(f"'{g.name}' ({g.value_type})" for g in grids) or "no grids"
-        raise NubisError(f"'{path}' has no float grid to draw as a cloud (it holds {held}): export a density grid")
+        held = ", ".join(f"'{g.name}' ({g.value_type})" for g in grids[:8]) or "no grids"
+        raise NubisError(f"'{shown}' has no float grid to draw as a cloud (it holds {held}): export a density grid")
     if name:
         if name not in floats:
-            raise NubisError(f"'{path}' has no float grid '{name}': choose one of {', '.join(floats)}")
+            raise NubisError(f"'{shown}' has no float grid '{name}': choose one of {_listed(floats)}")
         return name
     if "density" in floats:
         return "density"
+    if floats == [""]:
+        # Blender's Volume names its grids by name: Cycles and EEVEE draw nothing from a nameless one.
+        raise NubisError(
+            f"'{shown}' holds one float grid with no name, which Blender's renderers cannot draw: name it "
+            "'density' where the file is made and export it again"
+        )
     if len(floats) == 1:
         return floats[0]
-    raise NubisError(f"'{path}' has no 'density' grid: choose one of its float grids ({', '.join(floats)})")
+    raise NubisError(f"'{shown}' has no 'density' grid: choose one of its float grids ({_listed(floats)})")
+
+
+def _listed(names: list[str]) -> str:
+    shown = [f"'{n}'" if n else "'' (no name)" for n in names[:12]]
+    return ", ".join(shown) + (f" and {len(names) - 12} more" if len(names) > 12 else "")
 
 
 def index_to_world(grid, path: str = "") -> np.ndarray:
@@ -101,11 +103,14 @@ def index_to_world(grid, path: str = "") -> np.ndarray:
     if not t.isLinear:
         raise NubisError(f"grid '{grid.name}' has a frustum (non-linear) transform: resample it to a linear one first")
     o = np.array(t.indexToWorld((0.0, 0.0, 0.0)), np.float64)
-    cols = [np.array(t.indexToWorld(tuple(float(c) for c in e)), np.float64) - o for e in np.eye(3)]
-    lengths = np.array([np.linalg.norm(c) for c in cols])
-    if lengths.min() <= 0.0:
+    with np.errstate(over="ignore", invalid="ignore"):  # a damaged transform is said below, not warned of
+        cols = [np.array(t.indexToWorld(tuple(float(c) for c in e)), np.float64) - o for e in np.eye(3)]
+        lengths = np.array([np.linalg.norm(c) for c in cols])
+    shown = vdbfile.named(path)
+    if not (np.all(np.isfinite(lengths)) and np.all(np.isfinite(o))) or lengths.min() <= 0.0:
         raise NubisError(
-            f"grid '{grid.name}' of '{path}' has a degenerate transform (voxels of size 0): export it again"
+            f"grid '{grid.name}' of '{shown}' has a degenerate transform (voxels of size 0 or not finite): "
+            "export it again"
         )
     uniform = lengths.max() - lengths.min() <= UNIFORM_TOLERANCE * lengths.max()
     unit = [c / n for c, n in zip(cols, lengths, strict=True)]
@@ -114,7 +119,7 @@ def index_to_world(grid, path: str = "") -> np.ndarray:
         sizes = " x ".join(f"{n:g}" for n in lengths)
         kind = "a sheared transform" if not square else "non-uniform voxels"
         raise NubisError(
-            f"grid '{grid.name}' of '{path}' has {kind} ({sizes} m): resample it to cubic voxels (Blender: "
+            f"grid '{grid.name}' of '{shown}' has {kind} ({sizes} m): resample it to cubic voxels (Blender: "
             "Volume to Mesh and Mesh to Volume, or a Houdini VDB Resample) and export again"
         )
     m = np.eye(4)
@@ -124,98 +129,216 @@ def index_to_world(grid, path: str = "") -> np.ndarray:
     return m
 
 
+# ---- reading a grid into bricks: planned from the tree's counts, then copied node by node -------------
+
+NODE = 128  # voxels per side of a 5_4_3 tree's lower internal node: where the tree says there is data
+CHUNK_LEAVES = NODE // brickmod.LEAF  # leaves per side of one block copied out of OpenVDB
+CHUNK_BYTES = (NODE + 1) ** 3 * 4 * 3  # one block as copied, transposed and divided (float32)
+HALF_MAX = 65504.0  # the largest half float
+
+
+@dataclass(frozen=True)
+class ReadPlan:
+    """What reading a grid into bricks allocates, known from its tree before any voxel is copied: the
+    index covers the active box, leaf-aligned, with one empty leaf before it (core/bricks.py); at least one
+    brick per leaf that holds voxels and per leaf's worth of active tile (dense regions stored as tiles)."""
+
+    lo: tuple[int, int, int]  # the active voxels' box (i, j, k), inclusive
+    hi: tuple[int, int, int]
+    least_bricks: int
+
+    @property
+    def leaf_lo(self) -> tuple[int, int, int]:
+        return tuple((c // brickmod.LEAF - 1) * brickmod.LEAF for c in self.lo)
+
+    @property
+    def leaves(self) -> tuple[int, int, int]:
+        """Leaves of the index along (x, y, z)."""
+        return tuple((self.hi[a] - self.leaf_lo[a]) // brickmod.LEAF + 1 for a in range(3))
+
+    @property
+    def index_leaves(self) -> int:
+        return math.prod(self.leaves)
+
+    @property
+    def gpu_bytes(self) -> int:
+        """The least the bricks' atlas and the index take on the GPU."""
+        if self.least_bricks > (brickmod.MAX_ATLAS_SIDE // brickmod.BRICK) ** 3:
+            return self.least_bricks * brickmod.BRICK**3 * 2 + self.index_leaves * 4
+        return brickmod.gpu_bytes_estimate(self.least_bricks, self.index_leaves)
+
+    @property
+    def host_bytes(self) -> int:
+        """The least the read holds in memory at its peak: the bricks twice (packed, then stacked), the
+        index and the blocks in flight."""
+        return 2 * self.least_bricks * brickmod.BRICK**3 * 2 + self.index_leaves * 4 + CHUNK_BYTES
+
+
+def plan_read(grid) -> ReadPlan:
+    lo, hi = (tuple(int(c) for c in corner) for corner in grid.evalActiveVoxelBoundingBox())
+    tile_voxels = int(grid.activeVoxelCount()) - int(grid.activeLeafVoxelCount())
+    least = int(grid.leafCount()) + -(-max(tile_voxels, 0) // brickmod.LEAF**3)
+    return ReadPlan(lo, hi, least)
+
+
+def check_plan(plan: ReadPlan, path: str, name: str, limit: int) -> None:
+    """One sentence when the plan cannot be drawn: its index too large for a 3D texture, or its bricks and
+    index over the GPU budget (applied before any voxel is copied)."""
+    widest = max(plan.leaves)
+    if widest > brickmod.MAX_ATLAS_SIDE:
+        axis = "xyz"[plan.leaves.index(widest)]
+        span = (plan.hi[plan.leaves.index(widest)] - plan.lo[plan.leaves.index(widest)]) + 1
+        raise NubisError(
+            f"grid '{name}' of '{vdbfile.named(path)}' spans {span} voxels along {axis}, more than the "
+            f"{brickmod.MAX_ATLAS_SIDE * brickmod.LEAF} a cloud's index texture can hold: crop it to the cloud "
+            "(stray voxels far from it widen its box) or export it at a coarser voxel size"
+        )
+    if plan.gpu_bytes > limit:
+        raise NubisError(_too_large(path, name, plan.gpu_bytes, limit))
+
+
 def estimate_gpu_bytes(path: str | os.PathLike, grid_name: str = "") -> tuple[int, int]:
-    """(active voxels, bytes the cloud takes on the GPU at least: one brick per leaf that holds voxels),
-    from reading the grid's tree, before any brick is made."""
+    """(active voxels, bytes the cloud takes on the GPU at least), from the grid's tree before any brick is
+    made."""
+    path = str(path)
     grid = _read_grid(path, choose_grid(path, grid_name))
-    leaves = int(grid.leafCount())
-    (lo, hi) = grid.evalActiveVoxelBoundingBox()
-    return int(grid.activeVoxelCount()), brickmod.gpu_bytes_estimate(leaves, _index_leaves(lo, hi))
+    return int(grid.activeVoxelCount()), plan_read(grid).gpu_bytes
 
 
-def _index_leaves(lo, hi) -> int:
-    n = 1
-    for a in range(3):
-        n *= (int(hi[a]) - int(lo[a])) // brickmod.LEAF + 3
-    return n
+def check_fits(path: str | os.PathLike, grid_name: str = "", limit: int = brickmod.DEFAULT_GPU_LIMIT) -> ReadPlan:
+    """The file read as far as its tree, and refused in one sentence if it cannot be drawn: what every
+    command asks before any work."""
+    path = str(path)
+    name = choose_grid(path, grid_name)
+    grid = _read_grid(path, name)
+    _check_values(grid, path, name)
+    plan = plan_read(grid)
+    check_plan(plan, path, name, limit)
+    return plan
 
 
-def _read_grid(path, name: str):
+def _read_grid(path: str, name: str):
     vdb = bundled.openvdb()
-    try:
-        return vdb.read(str(path), name)
-    except (OSError, RuntimeError, ValueError, TypeError, KeyError) as err:
-        raise NubisError(f"cannot read grid '{name}' of '{path}' ({err}): export the file again") from None
+    return vdbfile.guarded(path, f"grid '{name}'", lambda: vdb.read(str(path), name))
+
+
+def _check_values(grid, path: str, name: str) -> tuple[float, float]:
+    shown = vdbfile.named(path)
+    if grid.valueTypeName not in ("float", "double"):
+        raise NubisError(
+            f"grid '{name}' of '{shown}' holds {grid.valueTypeName} values, not floats: choose a float grid"
+        )
+    if int(grid.activeVoxelCount()) == 0:
+        raise NubisError(f"grid '{name}' of '{shown}' is empty (no active voxels): there is no cloud to draw")
+    vmin, vmax = (float(v) for v in grid.evalMinMax())
+    if not (np.isfinite(vmin) and np.isfinite(vmax)):
+        raise NubisError(
+            f"grid '{name}' of '{shown}' holds NaN or infinite values: fix the simulation or export it again"
+        )
+    if vmin < 0.0:
+        raise NubisError(
+            f"grid '{name}' of '{shown}' holds negative values (down to {vmin:g}): a density cannot be "
+            "negative; clamp it at 0 where it is made, or choose another grid"
+        )
+    return vmin, vmax
+
+
+def node_occupancy(grid, plan: ReadPlan) -> tuple[np.ndarray, tuple[int, int, int]]:
+    """Which lower internal nodes (NODE voxels per side) of the index's extent hold anything, (nz, ny, nx),
+    and the first node's (i, j, k) in nodes: one probe per node of the tree, no voxel copied."""
+    acc = grid.getConstAccessor()
+    background = float(grid.background)
+    first = tuple(c // NODE for c in plan.leaf_lo)
+    last = tuple((plan.leaf_lo[a] + plan.leaves[a] * brickmod.LEAF) // NODE for a in range(3))
+    occ = np.zeros(tuple(last[a] - first[a] + 1 for a in (2, 1, 0)), bool)
+    for nz in range(occ.shape[0]):
+        for ny in range(occ.shape[1]):
+            for nx in range(occ.shape[2]):
+                ijk = ((first[0] + nx) * NODE, (first[1] + ny) * NODE, (first[2] + nz) * NODE)
+                depth = acc.getValueDepth(ijk)
+                if depth >= 2:
+                    occ[nz, ny, nx] = True
+                elif depth >= 0:  # a tile above the nodes: dense when active or not the background
+                    value, active = acc.probeValue(ijk)
+                    occ[nz, ny, nx] = bool(active) or float(value) != background
+    return occ, first
+
+
+def _chunks(plan: ReadPlan, occ: np.ndarray, first: tuple[int, int, int]):
+    """The blocks to copy: (leaf0 (lz, ly, lx), leaves (nz, ny, nx), first voxel (i, j, k)), for each
+    block of CHUNK_LEAVES leaves per side of the index that meets a node holding anything."""
+    lx, ly, lz = plan.leaves
+    for cz in range(0, lz, CHUNK_LEAVES):
+        for cy in range(0, ly, CHUNK_LEAVES):
+            for cx in range(0, lx, CHUNK_LEAVES):
+                n = (min(CHUNK_LEAVES, lz - cz), min(CHUNK_LEAVES, ly - cy), min(CHUNK_LEAVES, lx - cx))
+                v0 = tuple(plan.leaf_lo[a] + (cx, cy, cz)[a] * brickmod.LEAF for a in range(3))
+                v1 = tuple(v0[a] + n[2 - a] * brickmod.LEAF for a in range(3))  # the extra voxel included
+                sel = tuple(slice(v0[a] // NODE - first[a], v1[a] // NODE - first[a] + 1) for a in (2, 1, 0))
+                if occ[sel].any():
+                    yield (cz, cy, cx), n, v0
 
 
 def read_cloud(
     path: str | os.PathLike, grid_name: str = "", limit: int = brickmod.DEFAULT_GPU_LIMIT, dtype=np.float16
 ) -> VdbCloud:
-    """The file's grid, checked and packed into bricks (see the module's note). Refused before packing when
-    even one brick per leaf would pass `limit` bytes, and after packing (before any GPU upload) when the
-    bricks do."""
+    """The file's grid, checked and packed into bricks (see the module's note). Refused before any voxel is
+    copied when its plan does not fit `limit` bytes, and while packing when the bricks pass it."""
     path = str(path)
     name = choose_grid(path, grid_name)
     grid = _read_grid(path, name)
-    if grid.valueTypeName not in ("float", "double"):
-        raise NubisError(
-            f"grid '{name}' of '{path}' holds {grid.valueTypeName} values, not floats: choose a float grid"
-        )
-    active = int(grid.activeVoxelCount())
-    if active == 0:
-        raise NubisError(f"grid '{name}' of '{path}' is empty (no active voxels): there is no cloud to draw")
+    _vmin, vmax = _check_values(grid, path, name)
     m = index_to_world(grid, path)
-    lo, hi = (tuple(int(c) for c in corner) for corner in grid.evalActiveVoxelBoundingBox())
-    least = brickmod.gpu_bytes_estimate(int(grid.leafCount()), _index_leaves(lo, hi))
-    if least > limit:
-        raise NubisError(_too_large(path, name, least, limit))
-    # The index covers the active box, leaf-aligned, with one empty leaf before it (core/bricks.py).
-    leaf_lo = tuple((c // brickmod.LEAF - 1) * brickmod.LEAF for c in lo)
-    leaves = tuple((hi[a] - leaf_lo[a]) // brickmod.LEAF + 1 for a in range(3))  # (x, y, z)
-    packer = brickmod.BrickPacker((leaves[2], leaves[1], leaves[0]), leaf_lo, dtype)
-    nx, ny = leaves[0] * brickmod.LEAF + 1, leaves[1] * brickmod.LEAF + 1
-    slab_leaves = max(1, (64 * 1024**2) // (nx * ny * 4 * brickmod.LEAF))  # slabs of at most about 64 MB
-    vmax, vmin = 0.0, 0.0
-    for lz0 in range(0, leaves[2], slab_leaves):
-        lz1 = min(leaves[2], lz0 + slab_leaves)
-        k0 = leaf_lo[2] + lz0 * brickmod.LEAF
-        block_xyz = np.zeros((nx, ny, (lz1 - lz0) * brickmod.LEAF + 1), np.float32)
-        grid.copyToArray(block_xyz, ijk=(leaf_lo[0], leaf_lo[1], k0))
-        block = block_xyz.transpose(2, 1, 0)
-        if not np.isfinite(block).all():
-            raise NubisError(
-                f"grid '{name}' of '{path}' holds NaN or infinite values: fix the simulation or export it again"
-            )
-        vmin = min(vmin, float(block.min()))
-        vmax = max(vmax, float(block.max()))
-        if vmin < 0.0:
-            raise NubisError(
-                f"grid '{name}' of '{path}' holds negative values (down to {vmin:g}): a density cannot be "
-                "negative; clamp it at 0 where it is made, or choose another grid"
-            )
-        packer.add(np.ascontiguousarray(block), lz0)
-        held = packer.count * brickmod.BRICK**3 * packer.dtype.itemsize
-        if held > limit:
-            raise NubisError(_too_large(path, name, held, limit))
+    plan = plan_read(grid)
+    check_plan(plan, path, name, limit)
+    lx, ly, lz = plan.leaves
+    packer = brickmod.BrickPacker((lz, ly, lx), plan.leaf_lo, dtype)
+    # Half floats end at 65504: larger values are stored divided, the factor kept (stays exact in ratio).
+    storage = max(1.0, vmax / (HALF_MAX * 0.5)) if packer.dtype == np.float16 else 1.0
+    occ, first = node_occupancy(grid, plan)
+    for leaf0, n, v0 in _chunks(plan, occ, first):
+        block_xyz = np.zeros(tuple(n[2 - a] * brickmod.LEAF + 1 for a in range(3)), np.float32)
+        vdbfile.guarded(path, f"grid '{name}'", lambda b=block_xyz, at=v0: grid.copyToArray(b, ijk=at))
+        block = _checked_block(block_xyz.transpose(2, 1, 0), path, name, storage)
+        packer.add(block, leaf0)
+        if packer.held_bytes > limit:
+            raise NubisError(_too_large(path, name, packer.held_bytes, limit))
     packed = packer.finish()
     if packed.gpu_bytes > limit:
         raise NubisError(_too_large(path, name, packed.gpu_bytes, limit))
     voxel = float(np.linalg.norm(m[:3, 0]))
-    return VdbCloud(path, name, packed, m, voxel, active, vmax, (lo, hi), _value_scale(path))
+    bounds = (plan.lo, plan.hi)
+    active = int(grid.activeVoxelCount())
+    return VdbCloud(path, name, packed, m, voxel, active, vmax, bounds, _value_scale(path), storage)
+
+
+def _checked_block(block: np.ndarray, path: str, name: str, storage: float) -> np.ndarray:
+    """A copied block (z, y, x), its inactive values checked too (evalMinMax sees active ones only)."""
+    if not np.isfinite(block).all():
+        raise NubisError(
+            f"grid '{name}' of '{vdbfile.named(path)}' holds NaN or infinite values: fix the simulation or export "
+            "it again"
+        )
+    if block.min() < 0.0:
+        np.maximum(block, 0.0, out=block)  # inactive voxels below zero: never drawn as cloud
+    if storage != 1.0:
+        block = block / np.float32(storage)
+    np.minimum(block, HALF_MAX, out=block)  # an inactive value beyond the active ones' maximum
+    return np.ascontiguousarray(block)
 
 
 def _value_scale(path: str) -> float:
     try:
-        meta = dict(bundled.openvdb().readMetadata(path))
+        meta = dict(vdbfile.guarded(path, "the metadata", lambda: bundled.openvdb().readMetadata(path)))
         scale = float(meta.get("nubis_density_scale", 1.0))
-    except (OSError, RuntimeError, ValueError, TypeError):
+    except (NubisError, ValueError, TypeError):
         return 1.0
     return scale if np.isfinite(scale) and scale > 0 else 1.0
 
 
 def _too_large(path: str, name: str, need: int, limit: int) -> str:
     return (
-        f"grid '{name}' of '{path}' needs at least {human_bytes(need)} on the GPU as bricks, over the "
+        f"grid '{name}' of '{vdbfile.named(path)}' needs at least {human_bytes(need)} on the GPU as bricks, over the "
         f"{human_bytes(limit)} a cloud may take: export it at a coarser voxel size (or a coarser level of its "
         "simulation), or crop it"
     )
@@ -234,10 +357,26 @@ class Placement:
     object_to_world: np.ndarray
     multiplier: float = 1.0
 
+    def check(self, label: str) -> None:
+        """One sentence when the placement cannot be drawn: an object scaled to zero (its matrix has no
+        inverse), a transform or a Density that is not a finite number."""
+        m = np.asarray(self.object_to_world, np.float64)
+        if not np.all(np.isfinite(m)) or not np.isfinite(self.multiplier) or self.multiplier < 0.0:
+            raise NubisError(
+                f"the object of the Nubis cloud '{label}' has a transform or Density that is not a finite number: "
+                "reset its transform (Alt-G, Alt-R, Alt-S) or its Density"
+            )
+        lengths = np.linalg.norm(m[:3, :3], axis=0)
+        if lengths.min() <= 1e-6 * max(lengths.max(), 1e-30) or abs(np.linalg.det(m[:3, :3])) < 1e-18:
+            raise NubisError(
+                f"the object of the Nubis cloud '{label}' is scaled to zero along an axis (scale "
+                f"{', '.join(f'{v:g}' for v in lengths)}): give it a scale above zero"
+            )
+
     @property
     def extinction_scale(self) -> float:
         """Extinction per metre per unit of the grid's value: the Density times the file's own scale."""
-        return self.multiplier * self.cloud.value_scale
+        return self.multiplier * self.cloud.value_scale * self.cloud.storage_scale
 
     # Where the cloud stands is fixed once placed (a moved object is a new Placement): its geometry is
     # computed once, not on every upload of the uniform block.
@@ -293,3 +432,27 @@ def gpu_layout(placements) -> GpuLayout:
     slices = tuple(sum(s[0] for s in shapes[:i]) for i in range(len(shapes)))
     index = (sum(s[0] for s in shapes), max((s[1] for s in shapes), default=0), max((s[2] for s in shapes), default=0))
     return GpuLayout(brickmod.atlas_shape(max(sum(counts), 1)), firsts, slices, index)
+
+
+def shared_gpu_bytes(placements) -> int:
+    """What the clouds' shared textures take on the GPU (half-float atlas, float index)."""
+    if not placements:
+        return 0
+    layout = gpu_layout(placements)
+    return brickmod.gpu_bytes_estimate(sum(p.cloud.bricks.count for p in placements), math.prod(layout.index_shape))
+
+
+def why_not_together(placements, limit: int = brickmod.DEFAULT_GPU_LIMIT) -> str:
+    """Why these clouds cannot share the GPU's two textures, in a few words ("" when they can)."""
+    if not placements:
+        return ""
+    shape = gpu_layout(placements).index_shape
+    if max(shape) > brickmod.MAX_ATLAS_SIDE:
+        return (
+            f"with the clouds before it, their leaf indices would be {shape[2]}x{shape[1]}x{shape[0]} texels, "
+            f"over the {brickmod.MAX_ATLAS_SIDE} per side a 3D texture may have"
+        )
+    need = shared_gpu_bytes(placements)
+    if need > limit:
+        return f"with the clouds before it, they need {human_bytes(need)} on the GPU, over the {human_bytes(limit)}"
+    return ""

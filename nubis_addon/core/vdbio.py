@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import bundled
+from . import bundled, vdbfile
 from .errors import NubisError
 from .fsutil import atomic_path, shown, sync_to_disk
 
@@ -165,10 +165,8 @@ def _check_written(tmp: Path, path: Path, grids: list) -> None:
 
 def read_grid_info(path: str | os.PathLike) -> dict[str, GridInfo]:
     vdb = bundled.openvdb()
-    try:
-        grids, _meta = vdb.readAll(str(path))
-    except (OSError, RuntimeError, ValueError) as err:
-        raise NubisError(f"cannot read the VDB '{path}' ({err}): bake it again") from None
+    vdbfile.check(path)
+    grids, _meta = vdbfile.guarded(path, "the grids", lambda: vdb.readAll(str(path)))
     info = {}
     for g in grids:
         origin = tuple(float(c) for c in g.transform.indexToWorld((0, 0, 0)))
@@ -182,7 +180,8 @@ def read_grid_info(path: str | os.PathLike) -> dict[str, GridInfo]:
 def read_grid_array(path: str | os.PathLike, name: str) -> tuple[np.ndarray, tuple[int, int, int]]:
     """Dense copy of a grid's active bounding box, indexed [z, y, x], with the index of its first voxel."""
     vdb = bundled.openvdb()
-    grid = vdb.read(str(path), name)
+    vdbfile.check(path)
+    grid = vdbfile.guarded(path, f"grid '{name}'", lambda: vdb.read(str(path), name))
     lo, hi = grid.evalActiveVoxelBoundingBox()
     shape = tuple(int(h - lo_ + 1) for lo_, h in zip(lo, hi, strict=True))
     arr = np.zeros(shape, np.float32)

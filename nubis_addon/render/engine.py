@@ -246,9 +246,13 @@ class CloudGPU:
         if self.sky_env is None or sky_key != self._sky_key or (env is not None and env is not self._sky_array):
             self.sky_env = sky_texture(env if env is not None else sky.uniform(state.ambient))
             self._sky_key, self._sky_array = sky_key, env
+        try:
+            self.vdb.update(state.vdb_clouds)
+        except Exception:
+            self.switches["NUBIS_VDB"] = 0  # no half-made VDB textures are ever bound
+            raise
         self.ubo_bytes = uniforms.pack(state).tobytes()
         self.ubo = gpu.types.GPUUniformBuf(self.ubo_bytes)
-        self.vdb.update(state.vdb_clouds)
         self.switches.update(
             NUBIS_STORMS=int(bool(state.storms)),
             NUBIS_REFERENCE=int(state.light_mode),
@@ -352,7 +356,7 @@ class CloudGPU:
         for _kind, name in CLOUD_SAMPLERS:
             tex = textures.get(name) or self.noise.textures[name.removeprefix("noise_")]
             sh.uniform_sampler(name, tex)
-        if self.switches["NUBIS_VDB"]:
+        if self.switches["NUBIS_VDB"] and self.vdb.atlas is not None:
             sh.uniform_sampler("vdb_index", self.vdb.index)
             sh.uniform_sampler("vdb_atlas", self.vdb.atlas)
 

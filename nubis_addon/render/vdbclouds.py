@@ -44,10 +44,7 @@ def combined_index(placements, layout: vdbcloud.GpuLayout) -> np.ndarray:
 
 def gpu_bytes(placements) -> int:
     """What the clouds' textures take on the GPU (half-float atlas, float index)."""
-    if not placements:
-        return 0
-    layout = vdbcloud.gpu_layout(placements)
-    return bricks.gpu_bytes_estimate(sum(p.cloud.bricks.count for p in placements), int(np.prod(layout.index_shape)))
+    return vdbcloud.shared_gpu_bytes(placements)
 
 
 class VdbTextures:
@@ -63,19 +60,20 @@ class VdbTextures:
         key = tuple(id(p.cloud.bricks) for p in placements)
         if key == self.key and (self.atlas is not None or not placements):
             return
+        # Nothing bound until both textures are made: a refusal leaves no clouds, never half of them.
         self.atlas = self.index = None
         self.bytes = 0
-        self.key = key
+        self.key = ()
         if not placements:
+            self.key = key
             return
         need = gpu_bytes(placements)
         if need > bricks.DEFAULT_GPU_LIMIT:
-            self.key = ()
             raise NubisError(
                 f"the VDB clouds need {human_bytes(need)} on the GPU together, over the "
                 f"{human_bytes(bricks.DEFAULT_GPU_LIMIT)} they may take: draw fewer of them, or coarser ones"
             )
         atlas, _per_side, _firsts = bricks.layout([p.cloud.bricks.data for p in placements])
-        self.atlas = _texture(atlas, ATLAS_FORMAT)
-        self.index = _texture(combined_index(placements, vdbcloud.gpu_layout(placements)), INDEX_FORMAT)
-        self.bytes = need
+        atlas_texture = _texture(atlas, ATLAS_FORMAT)
+        index_texture = _texture(combined_index(placements, vdbcloud.gpu_layout(placements)), INDEX_FORMAT)
+        self.atlas, self.index, self.bytes, self.key = atlas_texture, index_texture, need, key

@@ -60,7 +60,7 @@ def test_the_grid_is_chosen_by_name_density_or_the_only_float_grid(tmp_path):
     vec.name = "velocity"
     path = _write(tmp_path / "smoke.vdb", _ball(), name="smoke", extra=(vec,))
     assert vdbcloud.choose_grid(path) == "smoke"
-    with pytest.raises(NubisError, match="has no float grid 'heat': choose one of smoke"):
+    with pytest.raises(NubisError, match="has no float grid 'heat': choose one of 'smoke'"):
         vdbcloud.choose_grid(path, "heat")
 
 
