@@ -102,12 +102,22 @@ def paint_layer(settings, channel: str, name: str = ""):
 
 
 def append_dabs(layer, dabs: np.ndarray) -> None:
-    if len(layer.dabs) + len(dabs) > paint.MAX_DABS:
-        raise NubisError(
-            f"the paint layer '{layer.name}' holds {len(layer.dabs)} dabs, and this stroke would pass "
-            f"{paint.MAX_DABS}: start a new paint layer (Data Field > +, kind Paint)"
-        )
+    paint.check_room(len(layer.dabs), len(dabs), layer.name)
     scene_io.add_dabs(layer, dabs)
+
+
+def composite_notice(scene, layer, dabs: np.ndarray, grid: paint.Grid) -> str | None:
+    """Before a stroke's dabs go into `layer`: refuse a composite that would hold too much memory, and the
+    line announcing a long one (core/paint.py: composite_cost), or None."""
+    todo = []
+    for other in scene.nubis.layers:
+        if other.kind != "PAINT" or not other.enabled or (other != layer and not len(other.dabs)):
+            continue
+        held = scene_io.paint_dabs(other)
+        todo.append((other.as_pointer(), np.vstack([held, dabs]) if other == layer else held))
+    cost = paint.composite_cost(todo, grid)
+    paint.check_cost(cost)
+    return paint.notice(cost)
 
 
 def check_channel(scene, channel: str) -> None:
@@ -156,14 +166,24 @@ class LiveStroke:
             )
             self.layers.append(paint.PaintLayer(other.channel.lower(), float(other.opacity), values))
         mode_name = "smooth" if mode == "SMOOTH" else "paint"
-        self.spacer = paint.Spacer(radius, _sign(mode) * strength, falloff.lower(), mode_name)
-        self.dabs: list[tuple] = []
+        self.spacer = paint.Spacer(radius, _sign(mode) * strength, falloff.lower(), mode_name, grid=self.grid)
+        self.layer_name = layer.name
+        self.held = len(layer.dabs)
+        self.dabs: list[np.ndarray] = []
+        self.laid = 0
         self.hold_light = True  # False refills the shadows at every sample (the benchmark's comparison)
 
     def add(self, x: float, y: float, pressure: float, start: bool) -> tuple | None:
-        """Dab along the stroke to (x, y); returns the field rectangle changed."""
-        rows = self.spacer.add(x, y, pressure, start)
-        self.dabs.extend(rows)
+        """Dab along the stroke to (x, y); returns the field rectangle changed. The stretch is clipped to the
+        field and its dabs counted before they are laid: past the layer's MAX_DABS the stroke is refused."""
+        if not all(math.isfinite(v) and abs(v) < paint.NUMBER_MAX for v in (x, y, pressure)):
+            return None  # a view ray the float range cannot place: no sample
+        run = self.spacer.advance(x, y, pressure, start)
+        paint.check_room(self.held + self.laid, run[-1] if run is not None else 0, self.layer_name)
+        rows = self.spacer.lay(run)
+        if len(rows):
+            self.dabs.append(rows)
+            self.laid += len(rows)
         rect = None
         for row in rows:
             rect = paint.union(rect, self.raster.add(row))
@@ -187,7 +207,7 @@ class LiveStroke:
 
     def commit(self, layer) -> int:
         """The stroke's dabs into the layer (the undo step's data); the raster is kept as the layer's."""
-        dabs = paint.as_dabs(self.dabs)
+        dabs = np.concatenate(self.dabs) if self.dabs else paint.as_dabs([])
         append_dabs(layer, dabs)
         paint.remember(layer.as_pointer(), scene_io.paint_dabs(layer), self.raster)
         return len(dabs)
@@ -245,9 +265,12 @@ class NUBIS_OT_paint_field(NeedsCloudscape, bpy.types.Operator):
             paint.check_points(grid, points)
             mode = "smooth" if self.mode == "SMOOTH" else "paint"
             strength = _sign(self.mode) * self.strength
-            dabs = paint.stroke_dabs(points, self.radius, strength, self.falloff.lower(), mode)
+            dabs = paint.stroke_dabs(points, self.radius, strength, self.falloff.lower(), mode, grid=grid)
             layer = paint_layer(scene.nubis, self.channel, self.layer)
+            line = composite_notice(scene, layer, dabs, grid)
             append_dabs(layer, dabs)
+            if line:  # the console has it now, from core/paint.py's raster; the Info log gets it here
+                self.report({"INFO"}, line)
             scene_io.generate_fields(scene)
         except NubisError as err:
             self.report({"ERROR"}, str(err))
@@ -267,11 +290,11 @@ class NUBIS_OT_paint_field(NeedsCloudscape, bpy.types.Operator):
             self._layer_name = paint_layer(scene.nubis, self.channel, self.layer).name
             layer = scene.nubis.layers[self._layer_name]
             self._live = LiveStroke(scene, layer, self.radius, self.strength, self.falloff, mode)
+            self._first = True
+            self._sample(context, event)
         except NubisError as err:
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}
-        self._first = True
-        self._sample(context, event)
         context.window_manager.modal_handler_add(self)
         return {"RUNNING_MODAL"}
 
@@ -294,17 +317,25 @@ class NUBIS_OT_paint_field(NeedsCloudscape, bpy.types.Operator):
 
     def modal(self, context, event):
         if event.type in {"MOUSEMOVE", "INBETWEEN_MOUSEMOVE"}:
-            self._sample(context, event)
+            try:
+                self._sample(context, event)
+            except NubisError as err:  # the layer is full (core/paint.py: check_room): the stroke is dropped
+                self.report({"ERROR"}, str(err))
+                return self._cancel(context)
             return {"RUNNING_MODAL"}
         if event.type == "LEFTMOUSE" and event.value == "RELEASE":
             return self._finish(context)
         if event.type in {"ESC", "RIGHTMOUSE"}:
-            self._live = None
-            viewport.invalidate()
-            events.request_composite(context.scene)
-            scene_io.redraw_views()
-            return {"CANCELLED"}
+            return self._cancel(context)
         return {"RUNNING_MODAL"}
+
+    def _cancel(self, context):
+        """Drop the drag: the field is composited again without it."""
+        self._live = None
+        viewport.invalidate()
+        events.request_composite(context.scene)
+        scene_io.redraw_views()
+        return {"CANCELLED"}
 
     def _finish(self, context):
         scene = context.scene

@@ -15,10 +15,12 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from fractions import Fraction
 from typing import Any
 
 import numpy as np
 
+from . import console
 from .errors import NubisError
 
 # The channels a brush paints, and where they live in the field images (core/fields.py's layout).
@@ -37,7 +39,9 @@ DAB_COLUMNS = ("x", "y", "radius", "strength", "falloff", "mode", "start")
 # cover could not be stored as cover / multiplier. Unpainted texels read exactly as before at any floor.
 MULTIPLIER_FLOOR = 1e-3
 SPACING = 0.2  # dabs along a stroke, in radii: dense enough that a stroke has no beads at full strength
-MAX_DABS = 1_000_000  # a layer's dabs; beyond this a stroke is refused (about 56 MB of strokes)
+# A layer's dabs; beyond this a stroke is refused. 56 MB as arrays, 1.7 GB as Blender holds them and about
+# 35 s to rasterize (docs/painting.md#long-composites).
+MAX_DABS = 1_000_000
 
 
 @dataclass(frozen=True)
@@ -69,9 +73,10 @@ class Grid:
             (y - self.oy) / self.size + 0.5
         ) * self.resolution - 0.5
 
-    def contains(self, x: float, y: float) -> bool:
-        half = self.size / 2
-        return abs(x - self.ox) <= half and abs(y - self.oy) <= half
+    def reach(self, radius: float) -> tuple[float, float, float, float]:
+        """(x min, x max, y min, y max): where a dab's centre must lie for its disc to touch the field."""
+        half = self.size / 2 + radius
+        return self.ox - half, self.ox + half, self.oy - half, self.oy + half
 
     def rect(self, x: float, y: float, radius: float, margin: int = 0) -> tuple[int, int, int, int] | None:
         """(row0, row1, col0, col1), ends exclusive, of the pixels a disc can touch; None when it misses."""
@@ -92,73 +97,254 @@ def union(a: tuple[int, int, int, int] | None, b: tuple[int, int, int, int] | No
     return min(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), max(a[3], b[3])
 
 
-# ---- checking a stroke -------------------------------------------------------------------------------
+# ---- checking a brush, a stroke and a dab ------------------------------------------------------------
+#
+# Each rule stated once, here; the brush and a script's stroke (blender/paint.py) and a preset's dabs
+# (parse_dabs, which core/presets.py calls) go through the same functions (docs/painting.md#what-is-refused).
+
+# Values at or beyond this size are refused as infinite: Blender stores an infinite float property as float32's
+# largest, 3.4e38, which math.isfinite passes, and a float64 beyond float32's range is stored the same way.
+NUMBER_MAX = 3.0e38
+FLOAT32_MAX = 3.4028234663852886e38
+# metres: a millimetre. A smaller radius rounds to 0 once Blender stores it as float32, and the raster
+# divides by it; the brush asks for more anyway (half a field pixel, 12 mm on the finest field).
+RADIUS_MIN = 0.001
+RADIUS_MAX = 1e7  # metres: the widest data field (Field > Size's maximum, core/schema.py)
+# metres from the origin, a stored dab's x and y: the farthest field edge is 1.5e7 m away (Center within
+# 1e7 m, Size up to 1e7 m), so this leaves room for strokes kept while the field moves, and no more.
+DAB_POSITION_MAX = 1e8
+
+
+def _shown(value: float) -> str:
+    """A refused number as a person reads it: NaN, infinite (float32's largest too: Blender's infinity), or
+    itself with the bound it passes."""
+    if math.isnan(value):
+        return "NaN"
+    if math.isinf(value) or abs(value) == FLOAT32_MAX:
+        return "infinite"
+    return f"{value:g} ({NUMBER_MAX:g} or more)"
+
+
+def _metres(value: float) -> str:
+    """A bound in metres as a person writes it: 64000, 125, 0.0122."""
+    return f"{value:.0f}" if abs(value) >= 100 else f"{value:.3g}"
+
+
+def _at_least(value: float) -> str:
+    """A lower bound in metres rounded up as a person writes it: 125, 68.4 (for 68.36), 0.0123 (0.01221)."""
+    if value >= 100:
+        return str(math.ceil(value))
+    scale = 10.0 ** (2 - math.floor(math.log10(value)))
+    return f"{math.ceil(value * scale) / scale:.3g}"
+
+
+def check_number(value: float, what: str, unit: str, fix: str) -> None:
+    """Rule: a finite number below NUMBER_MAX in size (what Blender can store as float32 and is not its
+    infinity). `unit` is "" or " of metres"."""
+    if not (math.isfinite(value) and abs(value) < NUMBER_MAX):
+        raise NubisError(f"{what} must be a finite number{unit}, not {_shown(value)}: {fix}")
+
+
+def check_radius(radius: float, what: str, grid: Grid | None = None) -> None:
+    """Rules: a radius of at least a millimetre and, on a field, half its pixel (a smaller dab would not show);
+    at most the field's width, or without a field the widest field's."""
+    lo = RADIUS_MIN if grid is None else max(RADIUS_MIN, grid.pixel / 2)
+    hi = RADIUS_MAX if grid is None else grid.size
+    check_number(radius, what, " of metres", f"use {_at_least(lo)} to {_metres(hi)} m")
+    if radius < lo:
+        if lo > RADIUS_MIN:
+            raise NubisError(
+                f"{what} {radius:g} m is smaller than half a field pixel ({_metres(lo)} m): "
+                f"use at least {_at_least(lo)} m, or raise the field resolution"
+            )
+        raise NubisError(f"{what} {radius:g} m is under a millimetre: use at least {RADIUS_MIN:g} m")
+    if radius > hi:
+        field = "the whole field" if grid is not None else "the widest data field"
+        raise NubisError(
+            f"{what} {radius:g} m is larger than {field} ({_metres(hi)} m across): use at most {_metres(hi)} m "
+            "(a constant or gradient layer changes the whole field)"
+        )
 
 
 def check_brush(grid: Grid, radius: float, strength: float) -> None:
-    """Refuse a radius the field cannot show or that would repaint all of it, and a strength that is not a
-    number, each with what to use instead."""
-    if not math.isfinite(radius) or radius < grid.pixel / 2:
-        raise NubisError(
-            f"the brush radius {radius:g} m is smaller than half a field pixel ({grid.pixel / 2:.0f} m): "
-            f"use at least {math.ceil(grid.pixel / 2)} m, or raise the field resolution"
-        )
-    if radius > grid.size:
-        raise NubisError(
-            f"the brush radius {radius:.0f} m is larger than the whole field ({grid.size:.0f} m across): "
-            f"use at most {grid.size:.0f} m (a constant or gradient layer changes the whole field)"
-        )
-    if not math.isfinite(strength) or not 0.0 < abs(strength) <= 1.0:
+    """The brush: its radius (check_radius on the field) and its strength, in (0, 1]. Blender's Strength
+    slider clamps to 0-1 before this sees it, as its own sliders do; 0 would paint nothing."""
+    check_radius(radius, "the brush radius", grid)
+    check_number(strength, "the brush strength", "", "use a strength between 0.01 and 1")
+    if not 0.0 < strength <= 1.0:
         raise NubisError(f"the brush strength {strength:g} is not in (0, 1]: use a strength between 0.01 and 1")
 
 
 def check_points(grid: Grid, points: Sequence[tuple[float, float, float, bool]]) -> None:
-    """A stroke must have points, finite ones, and at least one inside the field."""
+    """A stroke must have points, each location and pressure a finite number (check_number). Points far
+    outside the `grid` are fine: stroke_dabs lays only the part of the stroke over it, and refuses a stroke
+    with no such part."""
     if not points:
         raise NubisError("the stroke has no points: give it at least one location")
-    for x, y, pressure, _start in points:
-        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(pressure)):
-            raise NubisError("a stroke point is not a number (NaN or infinite): give finite world locations")
-    if not any(grid.contains(x, y) for x, y, _p, _s in points):
-        half = grid.size / 2
+    for n, (x, y, pressure, _start) in enumerate(points, 1):
+        for name, v in (("x", x), ("y", y)):
+            check_number(v, f"the {name} of stroke point {n}", " of metres", "give finite world locations")
+        check_number(pressure, f"the pressure of stroke point {n}", "", "give a pressure between 0 and 1")
+
+
+def check_room(held: int, adding: int, layer: str = "") -> None:
+    """Rule: a paint layer holds at most MAX_DABS dabs; `adding` is counted before any is laid."""
+    if held + adding <= MAX_DABS:
+        return
+    whose = f"the paint layer '{layer}' holds {held:,} dabs, and " if layer else ""
+    raise NubisError(
+        f"{whose}this stroke would lay {adding:,} dabs, over the {MAX_DABS:,} a paint layer holds: paint shorter "
+        "strokes or with a larger radius, or start a new paint layer (Data Field > +, kind Paint)"
+    )
+
+
+def outside(grid: Grid) -> NubisError:
+    half = grid.size / 2
+    return NubisError(
+        f"the stroke lies outside the data field (x {grid.ox - half:.0f} to {grid.ox + half:.0f} m, "
+        f"y {grid.oy - half:.0f} to {grid.oy + half:.0f} m): paint over the field, or move or enlarge it "
+        "(Field > Origin, Size)"
+    )
+
+
+def check_dab(row: Sequence[float], where: str) -> None:
+    """A stored dab (a preset's row): finite numbers (check_number), its radius by check_radius without a
+    field (the field may change after painting: the dabs are re-rasterized), its strength signed within
+    -1 to 1 (a subtracting stroke's dabs are negative, a pen's light touch near 0), its position within
+    DAB_POSITION_MAX of the origin."""
+    x, y, radius, strength, falloff, mode, start = row
+    for name, v in zip(DAB_COLUMNS, row, strict=True):
+        if name != "radius":  # check_radius says which radius to use
+            check_number(v, f"{where}: {name}", " of metres" if name in "xy" else "", "fix or remove the dab")
+    for name, v in (("x", x), ("y", y)):
+        if abs(v) > DAB_POSITION_MAX:
+            raise NubisError(
+                f"{where}: {name} = {v:g} m is too far out: keep a dab within {DAB_POSITION_MAX:g} m of the "
+                "origin (the farthest data field ends 1.5e+07 m from it), or remove it"
+            )
+    check_radius(radius, f"{where}: the radius", None)
+    if not -1.0 <= strength <= 1.0:
+        raise NubisError(f"{where}: the strength {strength:g} is outside -1 to 1: use -1 (subtract) to 1 (add)")
+    if falloff not in range(len(FALLOFFS)) or mode not in range(len(MODES)):
         raise NubisError(
-            f"the stroke lies outside the data field (x {grid.ox - half:.0f} to {grid.ox + half:.0f} m, "
-            f"y {grid.oy - half:.0f} to {grid.oy + half:.0f} m): paint over the field, or move or enlarge it "
-            "(Field > Origin, Size)"
+            f"{where}: falloff must be 0-{len(FALLOFFS) - 1} ({', '.join(FALLOFFS)}) and mode "
+            f"0-{len(MODES) - 1} ({', '.join(MODES)})"
         )
+    if start not in (0, 1):
+        raise NubisError(f"{where}: start must be 1 (the first dab of a stroke) or 0")
 
 
 # ---- a stroke into dabs --------------------------------------------------------------------------------
 
 
+def clip(box: tuple[float, float, float, float], x0: float, y0: float, x1: float, y1: float):
+    """The part (t0, t1) of the segment from (x0, y0) to (x1, y1) inside `box` (x min, x max, y min, y max),
+    as fractions of the segment, or None when it misses the box (Liang-Barsky). Exact on Fractions."""
+    t0, t1 = 0, 1
+    dx, dy = x1 - x0, y1 - y0
+    for p, q in ((-dx, x0 - box[0]), (dx, box[1] - x0), (-dy, y0 - box[2]), (dy, box[3] - y0)):
+        if p == 0:
+            if q < 0:
+                return None
+            continue
+        t = q / p
+        if p < 0:
+            t0 = max(t0, t)
+        else:
+            t1 = min(t1, t)
+        if t0 > t1:
+            return None
+    return t0, t1
+
+
+# metres: a stretch with an end this far out is clipped in exact arithmetic. In float64 the part over the
+# field of a line from 1e20 m away would be placed up to 1e20 * 2e-16 = 20 km off it.
+FAR = 1e9
+
+
+def clip_points(box, x0: float, y0: float, x1: float, y1: float):
+    """The part of the segment inside `box`: (entry x, y, exit x, y, t at the entry, t at the exit), or None."""
+    far = max(abs(x0), abs(y0), abs(x1), abs(y1)) >= FAR
+    ends = tuple(Fraction(v) for v in (x0, y0, x1, y1)) if far else (x0, y0, x1, y1)
+    window = clip(tuple(Fraction(v) for v in box) if far else box, *ends)
+    if window is None:
+        return None
+    t0, t1 = window
+    ax, ay, bx, by = ends
+    entry = (x0, y0) if t0 == 0 else (float(ax + (bx - ax) * t0), float(ay + (by - ay) * t0))
+    leave = (x1, y1) if t1 == 1 else (float(ax + (bx - ax) * t1), float(ay + (by - ay) * t1))
+    return (*entry, *leave, float(t0), float(t1))
+
+
 class Spacer:
     """Turns stroke points, as they come, into dabs spaced `spacing` radii apart along the stroke (the
-    pressure interpolated between points); the first point of a stroke is a dab of its own."""
+    pressure interpolated between points); the first point of a stroke is a dab of its own.
 
-    def __init__(self, radius: float, strength: float, falloff: str = "smooth", mode: str = "paint", spacing=SPACING):
+    On a `grid`, each stretch between two points is clipped to the field widened by the radius before any
+    dab is laid: a point kilometres (or 1e12 m) away costs the dabs over the field and no more, and the
+    first dab laid of a stroke that starts off the field is its start. `advance` counts a stretch's dabs
+    without laying them (check_room can refuse them first), `lay` lays them."""
+
+    def __init__(self, radius: float, strength: float, falloff="smooth", mode="paint", spacing=SPACING, grid=None):
         self.radius, self.strength = radius, strength
         self.fi, self.mi = FALLOFFS.index(falloff), MODES.index(mode)
         self.step = max(radius * spacing, 1e-6)
+        self.box = None if grid is None else grid.reach(radius)
         self.prev: tuple[float, float, float] | None = None
-        self.carry = 0.0
+        self.carry = 0.0  # the distance along the stroke since its last dab, laid or clipped away
+        self.pending = False  # the stroke's start is not laid yet (its point was off the field)
 
-    def add(self, x: float, y: float, pressure: float, start: bool = False) -> list[tuple]:
+    def advance(self, x: float, y: float, pressure: float, start: bool = False) -> tuple | None:
+        """Move along the stroke to (x, y) and say which of the stretch's dabs fall on the field, laying none:
+        (x0, y0, p0, x1, y1, p1, length, first, count) for `count` dabs at first + k * step along the line
+        from (x0, y0) (pressure p0) to (x1, y1) (p1), `length` long; None for no dab."""
         pressure = min(max(float(pressure), 0.0), 1.0)
         if self.prev is None or start:
-            self.prev, self.carry = (x, y, pressure), 0.0
-            return [(x, y, self.radius, self.strength * pressure, self.fi, self.mi, 1.0)]
+            self.prev, self.carry, self.pending = (x, y, pressure), 0.0, True
+            if self.box is not None and clip(self.box, x, y, x, y) is None:
+                return None
+            return (x, y, pressure, x, y, pressure, 1.0, 0.0, 1)
         px, py, pp = self.prev
-        length = math.hypot(x - px, y - py)
-        rows = []
-        d = self.step - self.carry
-        while d <= length:
-            t = d / length
-            p = pp + (pressure - pp) * t
-            rows.append((px + (x - px) * t, py + (y - py) * t, self.radius, self.strength * p, self.fi, self.mi, 0.0))
-            d += self.step
-        self.carry = length - (d - self.step)
         self.prev = (x, y, pressure)
-        return rows
+        length = math.hypot(x - px, y - py)
+        first = self.step - self.carry
+        if first > length:
+            self.carry += length
+            return None
+        self.carry = math.fmod(length - first, self.step)  # exact at any length
+        part = (px, py, x, y, 0.0, 1.0) if self.box is None else clip_points(self.box, px, py, x, y)
+        if part is None:
+            return None
+        ex, ey, xx, xy, t0, t1 = part
+        span = math.hypot(xx - ex, xy - ey)
+        # The first dab at or after the entry: along the whole stretch the dabs lie at first + k * step.
+        entry = t0 * length
+        offset = first - entry if entry <= first else (self.step - math.fmod(entry - first, self.step)) % self.step
+        if span <= 0.0 or offset > span:
+            return None
+        count = round((span - offset - math.fmod(span - offset, self.step)) / self.step) + 1
+        p0, p1 = pp + (pressure - pp) * t0, pp + (pressure - pp) * t1
+        return (ex, ey, p0, xx, xy, p1, span, offset, count)
+
+    def lay(self, run: tuple | None) -> np.ndarray:
+        """The dabs of an `advance`: (N, 7) float64 in DAB_COLUMNS order."""
+        if run is None:
+            return as_dabs([])
+        x0, y0, p0, x1, y1, p1, length, first, count = run
+        t = (first + np.arange(count) * self.step) / length
+        out = np.empty((count, len(DAB_COLUMNS)), np.float64)
+        out[:, 0] = x0 + (x1 - x0) * t
+        out[:, 1] = y0 + (y1 - y0) * t
+        out[:, 2] = self.radius
+        out[:, 3] = self.strength * (p0 + (p1 - p0) * t)
+        out[:, 4], out[:, 5], out[:, 6] = self.fi, self.mi, 0.0
+        if self.pending:
+            out[0, 6], self.pending = 1.0, False
+        return out
+
+    def add(self, x: float, y: float, pressure: float, start: bool = False) -> np.ndarray:
+        """Dab along the stroke to (x, y): the new dabs, (N, 7)."""
+        return self.lay(self.advance(x, y, pressure, start))
 
 
 def stroke_dabs(
@@ -168,25 +354,48 @@ def stroke_dabs(
     falloff: str = "smooth",
     mode: str = "paint",
     spacing: float = SPACING,
+    grid: Grid | None = None,
 ) -> np.ndarray:
     """The dabs of one or more strokes: `points` are (x, y, pressure, is_start); `strength` is signed
-    (negative subtracts). Returns (N, 7) float64 in DAB_COLUMNS order."""
-    spacer = Spacer(radius, strength, falloff, mode, spacing)
-    rows = [row for x, y, pressure, start in points for row in spacer.add(x, y, pressure, start)]
-    return as_dabs(rows)
+    (negative subtracts). On a `grid` only the strokes' parts over the field are laid, and a stroke with no
+    part over it is refused. The dabs are counted first and refused past MAX_DABS before any is laid.
+    Returns (N, 7) float64 in DAB_COLUMNS order."""
+    points = list(points)
+    counter = Spacer(radius, strength, falloff, mode, spacing, grid)
+    total = 0
+    for x, y, pressure, start in points:
+        run = counter.advance(x, y, pressure, start)
+        total += run[-1] if run is not None else 0
+    check_room(0, total)
+    if grid is not None and total == 0:
+        raise outside(grid)
+    spacer = Spacer(radius, strength, falloff, mode, spacing, grid)
+    parts = [spacer.add(x, y, pressure, start) for x, y, pressure, start in points]
+    return np.concatenate(parts) if parts else as_dabs([])
 
 
 def as_dabs(rows) -> np.ndarray:
     return np.array(rows, np.float64).reshape(-1, len(DAB_COLUMNS))
 
 
+def _as_float(v: int | float) -> float:
+    """A TOML number as a float: an integer too large for one is infinite (check_number refuses it)."""
+    try:
+        return float(v)
+    except OverflowError:
+        return math.inf if v > 0 else -math.inf
+
+
 def parse_dabs(value, where: str) -> list[list[float]]:
     """A preset's `dabs` (a paint layer's strokes, one [x, y, radius, strength, falloff, mode, start] row per
-    dab) checked row by row, with the row and the rule in the message."""
+    dab) checked row by row by check_dab, with the row and the rule in the message."""
     if not isinstance(value, list):
         raise NubisError(f"{where} must be an array of dabs, each [x, y, radius, strength, falloff, mode, start]")
     if len(value) > MAX_DABS:
-        raise NubisError(f"{where} holds {len(value)} dabs, over {MAX_DABS}: split the strokes into more layers")
+        raise NubisError(
+            f"{where} holds {len(value):,} dabs, over the {MAX_DABS:,} a paint layer holds: split the strokes "
+            "into more layers"
+        )
     rows = []
     for i, row in enumerate(value):
         here = f"{where}[{i}]"
@@ -196,17 +405,10 @@ def parse_dabs(value, where: str) -> list[list[float]]:
             or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in row)
         ):
             raise NubisError(f"{here} must be 7 numbers: x, y, radius, strength, falloff, mode, start")
-        if not all(math.isfinite(v) for v in row):
-            raise NubisError(f"{here} holds a value that is not a finite number: fix or remove the dab")
+        row = [_as_float(v) for v in row]
+        check_dab(row, here)
         x, y, radius, strength, falloff, mode, start = row
-        if radius <= 0 or abs(strength) > 1 or falloff not in range(len(FALLOFFS)) or mode not in range(len(MODES)):
-            raise NubisError(
-                f"{here}: radius must be positive, strength within -1 to 1, falloff 0-{len(FALLOFFS) - 1} "
-                f"({', '.join(FALLOFFS)}) and mode 0-{len(MODES) - 1} ({', '.join(MODES)})"
-            )
-        if start not in (0, 1):
-            raise NubisError(f"{here}: start must be 1 (the first dab of a stroke) or 0")
-        rows.append([float(x), float(y), float(radius), float(strength), int(falloff), int(mode), int(start)])
+        rows.append([x, y, radius, strength, int(falloff), int(mode), int(start)])
     return rows
 
 
@@ -267,6 +469,13 @@ class Raster:
         if start or self._base is None:
             self._base, self._reach = None, None
             self._sign = 1.0 if strength >= 0 else -1.0
+        # Dabs the checks (check_dab) keep out, should a script write them into a layer's strokes: a radius
+        # under RADIUS_MIN divides by (float32's) zero, one past RADIUS_MAX or a point beyond the float range
+        # paints nothing sensible. They are skipped.
+        if not (RADIUS_MIN <= radius <= RADIUS_MAX and abs(x) < NUMBER_MAX and abs(y) < NUMBER_MAX):
+            return None
+        if math.isnan(strength):
+            return None
         rect = self.grid.rect(x, y, radius)
         if rect is None:
             return None
@@ -306,21 +515,20 @@ _MAX_RASTERS = 8  # at most 16 MB each for a 2048x2048 field
 
 def raster(layer_key: int, dabs: np.ndarray, grid: Grid) -> Raster:
     """The raster of a layer's dabs, cached per layer: a layer whose dabs only grew (a new stroke) is
-    rasterized from where it was, anything else (an undo, a cleared layer, a new field grid) from scratch."""
+    rasterized from where it was, anything else (an undo, a cleared layer, a new field grid) from scratch.
+    A long one is announced on the console first (notice), one holding too much memory refused (check_cost)."""
     dabs = np.asarray(dabs, np.float64).reshape(-1, len(DAB_COLUMNS))
-    cached = _RASTERS.get(layer_key)
-    if cached is not None and cached[0] == grid and len(dabs) >= len(cached[1]):
-        old = cached[1]
-        if np.array_equal(dabs[: len(old)], old):
-            r = cached[2]
-            r.add_all(dabs[len(old) :])
-            r.end_stroke()
-            _RASTERS[layer_key] = (grid, dabs.copy(), r)
-            return r
-    if len(_RASTERS) >= _MAX_RASTERS and layer_key not in _RASTERS:
-        _RASTERS.pop(next(iter(_RASTERS)))
-    r = Raster(grid)
-    r.add_all(dabs)
+    todo, r = _todo(layer_key, dabs, grid)
+    cost = raster_cost(todo, grid)
+    check_cost(cost)
+    line = notice(cost)
+    if line:
+        console.current().line(f"Nubis: {line}")
+    if r is None:
+        if len(_RASTERS) >= _MAX_RASTERS and layer_key not in _RASTERS:
+            _RASTERS.pop(next(iter(_RASTERS)))
+        r = Raster(grid)
+    r.add_all(todo)
     r.end_stroke()
     _RASTERS[layer_key] = (grid, dabs.copy(), r)
     return r
@@ -335,6 +543,92 @@ def remember(layer_key: int, dabs: np.ndarray, r: Raster) -> None:
 
 def forget() -> None:
     _RASTERS.clear()
+
+
+# ---- what a raster costs ---------------------------------------------------------------------------------
+#
+# Measured on the development machine (2 cores, shared; Blender 5.3's Python and numpy) by rasterizing random
+# dabs on 512- to 4096-pixel fields (docs/painting.md#long-composites): 1,000,000 dabs of 2500 m on the
+# default field (70 km, 512 pixels) took 33 s, 34 us a dab. A dab costs a fixed part (Python's work around
+# numpy), a part per pixel of its rectangle (more once the rectangle outgrows the caches, above 256x256
+# pixels: 15 ns measured against 3-6), twenty times more for a smoothing dab (its blur), and a stroke's
+# first dab two field planes (the stroke's working arrays: 1.2 ns a pixel, 17 s for 3000 strokes at 2048).
+DAB_S = 32e-6
+PIXEL_S = 5e-9
+BIG_PIXEL_S = 15e-9
+BIG_RECT = 256 * 256
+SMOOTH_FACTOR = 20.0
+STROKE_PIXEL_S = 1.2e-9
+NOTICE_S = 2.0  # a composite of paint longer than this is announced first
+# bytes: the arrays a composite of paint holds at once (dabs, planes, one dab's rectangle), beyond which it is
+# refused. A full layer (MAX_DABS) on the finest field needs about 1.2 GB; this takes several full layers.
+MEMORY_MAX = 8 * 2**30
+
+
+@dataclass(frozen=True)
+class Cost:
+    """What rasterizing some dabs takes: how many, about how long, and the arrays' bytes at the peak."""
+
+    dabs: int
+    seconds: float
+    bytes: int
+
+    def __add__(self, other: Cost) -> Cost:
+        return Cost(self.dabs + other.dabs, self.seconds + other.seconds, self.bytes + other.bytes)
+
+
+def raster_cost(dabs: np.ndarray, grid: Grid) -> Cost:
+    """The cost of rasterizing `dabs` on `grid`, from their count, their rectangles' areas in pixels and
+    their strokes (bpy-free arithmetic: nothing is rasterized)."""
+    dabs = np.asarray(dabs, np.float64).reshape(-1, len(DAB_COLUMNS))
+    res = grid.resolution
+    radius_px = np.abs(np.nan_to_num(dabs[:, 2], posinf=0.0)) / grid.pixel
+    side = np.minimum(2.0 * np.ceil(radius_px) + 2.0, res)
+    smooth = dabs[:, 5] == MODES.index("smooth")
+    area = side * side
+    per_pixel = np.where(area > BIG_RECT, BIG_PIXEL_S, PIXEL_S) * np.where(smooth, SMOOTH_FACTOR, 1.0)
+    strokes = int(np.count_nonzero((dabs[:, 6] == 1) & ~smooth)) + (len(dabs) > 0)
+    seconds = len(dabs) * DAB_S + float((area * per_pixel).sum()) + strokes * res * res * STROKE_PIXEL_S
+    # The dabs read from Blender and the cached copy, three planes (the values, the stroke's base and reach),
+    # and the largest rectangle's float64 temporaries (about six at once).
+    peak = float(side.max()) ** 2 * 8 * 6 if len(dabs) else 0.0
+    return Cost(len(dabs), seconds, int(dabs.nbytes * 2 + 3 * res * res * 4 + peak))
+
+
+def _todo(layer_key: int, dabs: np.ndarray, grid: Grid) -> tuple[np.ndarray, Raster | None]:
+    """The dabs `raster` has still to rasterize for this layer, and the cached raster they add to (None:
+    from scratch)."""
+    cached = _RASTERS.get(layer_key)
+    if cached is not None and cached[0] == grid and len(dabs) >= len(cached[1]):
+        old = cached[1]
+        if np.array_equal(dabs[: len(old)], old):
+            return dabs[len(old) :], cached[2]
+    return dabs, None
+
+
+def composite_cost(layers: Iterable[tuple[int, np.ndarray]], grid: Grid) -> Cost:
+    """What rasterizing these (layer key, dabs) takes now, the cached rasters counted as done."""
+    total = Cost(0, 0.0, 0)
+    for key, dabs in layers:
+        todo, _cached = _todo(key, np.asarray(dabs, np.float64).reshape(-1, len(DAB_COLUMNS)), grid)
+        total += raster_cost(todo, grid)
+    return total
+
+
+def notice(cost: Cost) -> str | None:
+    """The line announcing a long composite, or None for a short one."""
+    if cost.seconds < NOTICE_S:
+        return None
+    return f"compositing {cost.dabs:,} dabs takes about {cost.seconds:.0f} s"
+
+
+def check_cost(cost: Cost) -> None:
+    """Rule: a composite of paint holds at most MEMORY_MAX bytes of arrays."""
+    if cost.bytes > MEMORY_MAX:
+        raise NubisError(
+            f"compositing {cost.dabs:,} dabs would hold about {cost.bytes / 2**30:.1f} GB, over the "
+            f"{MEMORY_MAX / 2**30:.0f} GB Nubis allows: clear or disable paint layers, or lower the field resolution"
+        )
 
 
 # ---- the paint on the field ----------------------------------------------------------------------------

@@ -116,18 +116,19 @@ def test_painted_coverage_adds_after_the_multiplier_and_is_stored_divided_by_it(
 def test_bad_brushes_and_strokes_are_refused_with_what_to_do():
     cases = [
         (lambda: paint.check_brush(GRID, 0.0, 1.0), "at least 125 m"),
-        (lambda: paint.check_brush(GRID, math.nan, 1.0), "smaller than half a field pixel"),
+        (lambda: paint.check_brush(GRID, math.nan, 1.0), "must be a finite number of metres, not NaN"),
         (lambda: paint.check_brush(GRID, 1e6, 1.0), "at most 64000 m"),
         (lambda: paint.check_brush(GRID, 1000.0, 0.0), "between 0.01 and 1"),
         (lambda: paint.check_points(GRID, []), "no points"),
-        (lambda: paint.check_points(GRID, [(math.inf, 0, 1, True)]), "not a number"),
-        (lambda: paint.check_points(GRID, [(1e6, 0, 1, True)]), "x -32000 to 32000 m"),
+        (lambda: paint.check_points(GRID, [(math.inf, 0, 1, True)]), "not infinite"),
+        (lambda: paint.stroke_dabs([(1e6, 0, 1, True)], 1000.0, 1.0, grid=GRID), "x -32000 to 32000 m"),
     ]
     for call, words in cases:
         with pytest.raises(NubisError, match=words):
             call()
     paint.check_brush(GRID, 125.0, 1.0)
-    paint.check_points(GRID, [(1e6, 0, 1, True), (0, 0, 1, False)])  # partly outside is fine
+    paint.check_points(GRID, [(1e6, 0, 1, True), (0, 0, 1, False)])  # partly outside is fine: clipped
+    assert len(paint.stroke_dabs([(1e6 + 100, 0, 1, True), (0, 0, 1, False)], 1000.0, 1.0, grid=GRID)) == 165
 
 
 def test_a_preset_keeps_a_paint_layers_strokes(tmp_path):

@@ -225,7 +225,7 @@ def test_bad_strokes_get_a_clear_message_and_change_nothing(blender, make_scene)
         (dict(radius=0.0, stroke=stroke([0, 100])), "smaller than half a field pixel"),
         (dict(radius=1e7, stroke=stroke([0, 100])), "larger than the whole field"),
         (dict(stroke=stroke([9e5, 9.1e5], y=9e5)), "outside the data field"),
-        (dict(stroke=stroke([float("nan"), 0])), "not a number"),
+        (dict(stroke=stroke([float("nan"), 0])), "not NaN"),
         (dict(stroke=[]), "no points"),
         (dict(channel="STORM", stroke=stroke([0, 100])), "add one"),
     ]
@@ -241,3 +241,136 @@ def test_bad_strokes_get_a_clear_message_and_change_nothing(blender, make_scene)
     blender.ops.wm.read_factory_settings(use_empty=True)
     with pytest.raises(RuntimeError, match="New Cloudscape"):
         blender.ops.nubis.paint_field(stroke=stroke([0, 100]))
+
+
+FIELD = "x -35000 to 35000 m, y -35000 to 35000 m"  # the default field's extent, as the sentences give it
+
+
+def refusal(blender, **kwargs) -> str:
+    """The sentence `nubis.paint_field` refuses with (Blender raises it as "Error: ...")."""
+    with pytest.raises(RuntimeError) as info:
+        blender.ops.nubis.paint_field(**{"channel": "COVERAGE", "radius": RADIUS, "strength": 1.0, **kwargs})
+    text = str(info.value).strip()
+    assert text.startswith("Error: ") and "\n" not in text, text
+    return text.removeprefix("Error: ")
+
+
+def test_a_stroke_to_far_away_paints_its_part_over_the_field_or_is_refused(blender, make_scene):
+    """A point 1e12 m away, or at infinity (which Blender stores as float32's largest, 3.4e38): the part of
+    the stroke over the field is painted, in milliseconds, and a stroke with no such part is refused."""
+    import time
+
+    from nubis_addon.blender import scene_io
+
+    scene = make_scene("default")
+    start = time.perf_counter()
+    assert blender.ops.nubis.paint_field(channel="COVERAGE", radius=RADIUS, stroke=stroke([0.0, 1e12])) == {"FINISHED"}
+    assert time.perf_counter() - start < 30.0  # a composite; no billions of dabs
+    dabs = scene_io.paint_dabs(scene.nubis.layers[-1])
+    assert len(dabs) == 76  # 0 to 37500 m (the field's edge and the radius), 500 m apart
+    assert dabs[:, 0].min() == 0.0 and dabs[:, 0].max() == 37500.0
+    a = scene_io.read_fields(scene.nubis)[0].copy()
+    n = len(dabs)
+    cases = [
+        (stroke([0.0, float("inf")]), "the x of stroke point 2 must be a finite number of metres, not infinite"),
+        (stroke([0.0, -1e39]), "the x of stroke point 2 must be a finite number of metres, not infinite"),
+        (stroke([0.0, float("nan")]), "the x of stroke point 2 must be a finite number of metres, not NaN"),
+    ]
+    for points, words in cases:
+        assert refusal(blender, stroke=points) == f"{words}: give finite world locations"
+    outside = (
+        f"the stroke lies outside the data field ({FIELD}): paint over the field, or move or enlarge it "
+        "(Field > Origin, Size)"
+    )
+    assert refusal(blender, stroke=stroke([1e12, 2e12], y=1e12)) == outside
+    assert len(scene.nubis.layers[-1].dabs) == n
+    np.testing.assert_array_equal(scene_io.read_fields(scene.nubis)[0], a)
+
+
+def test_the_brush_radius_and_strength_as_the_docs_say(blender, make_scene):
+    """Radius: finite, half a field pixel to the field's width. Strength: Blender's slider clamps it to 0-1,
+    as its own sliders do (5 paints at 1); 0 and NaN are refused (docs/painting.md#what-is-refused)."""
+    from nubis_addon.blender import scene_io
+
+    make_scene("default")
+    for value in (float("inf"), float("nan")):
+        shown = "infinite" if value > 0 else "NaN"
+        assert refusal(blender, radius=value, stroke=stroke([0, 100])) == (
+            f"the brush radius must be a finite number of metres, not {shown}: use 68.4 to 70000 m"
+        )
+    assert refusal(blender, radius=1e-300, stroke=stroke([0, 100])) == (
+        "the brush radius 0 m is smaller than half a field pixel (68.4 m): use at least 68.4 m, "
+        "or raise the field resolution"
+    )
+    for value in (0.0, -3.0):
+        assert refusal(blender, strength=value, stroke=stroke([0, 100])) == (
+            "the brush strength 0 is not in (0, 1]: use a strength between 0.01 and 1"
+        )
+    assert refusal(blender, strength=float("nan"), stroke=stroke([0, 100])) == (
+        "the brush strength must be a finite number, not NaN: use a strength between 0.01 and 1"
+    )
+    assert blender.ops.nubis.paint_field(radius=RADIUS, strength=5.0, stroke=stroke([0, 100])) == {"FINISHED"}
+    layer = blender.context.scene.nubis.layers[-1]
+    assert scene_io.paint_dabs(layer)[:, 3].max() == 1.0
+
+
+def test_a_long_composite_is_announced_and_an_absurd_one_refused(blender, make_scene, monkeypatch, capfd):
+    """The notice's threshold is lowered so a short stroke passes it: the Info report and the console line
+    say how long the composite takes; a composite over the memory bound is refused and changes nothing."""
+    import re
+
+    from nubis_addon.blender import paint as blender_paint
+    from nubis_addon.blender import scene_io
+    from nubis_addon.core import console, paint
+
+    scene = make_scene("default")
+    grid = paint.Grid.of(scene_io.params_from_scene(scene.nubis))
+    layer = blender_paint.paint_layer(scene.nubis, "COVERAGE")
+    dabs = paint.stroke_dabs([(0.0, 0.0, 1.0, True), (5000.0, 0.0, 1.0, False)], RADIUS, 1.0, grid=grid)
+    monkeypatch.setattr(paint, "NOTICE_S", 0.0)
+    assert re.fullmatch(
+        r"compositing 11 dabs takes about \d+ s", blender_paint.composite_notice(scene, layer, dabs, grid)
+    )
+    printed = []
+    monkeypatch.setattr(console, "current", lambda: type("C", (), {"line": staticmethod(printed.append)})())
+    capfd.readouterr()
+    assert blender.ops.nubis.paint_field(radius=RADIUS, stroke=stroke([0.0, 5000.0])) == {"FINISHED"}
+    info = re.findall(r"^Info: (.*)$", capfd.readouterr().out, re.MULTILINE)  # the operator's report
+    assert len(info) == 1 and re.fullmatch(r"compositing 11 dabs takes about \d+ s", info[0])
+    assert printed == [f"Nubis: {info[0]}"]  # the console's line, from core/paint.py's raster
+    monkeypatch.undo()
+    n = len(layer.dabs)
+    monkeypatch.setattr(paint, "MEMORY_MAX", 1000)
+    assert re.fullmatch(
+        r"compositing 11 dabs would hold about [\d.]+ GB, over the 0 GB Nubis allows: clear or disable paint "
+        r"layers, or lower the field resolution",
+        refusal(blender, stroke=stroke([0.0, 5000.0])),
+    )
+    assert len(layer.dabs) == n
+
+
+def test_a_live_drag_to_far_away_lays_its_part_and_a_full_layer_stops_it(blender, make_scene, monkeypatch):
+    """A grazing view ray can land a drag's sample 1e12 m away: the drag lays the part over the field; a
+    sample past the float range is no sample; the dabs are counted against the layer's cap before laying."""
+    from nubis_addon.blender import paint as blender_paint
+    from nubis_addon.core import paint
+    from nubis_addon.core.errors import NubisError
+
+    scene = make_scene("default")
+    layer = blender_paint.paint_layer(scene.nubis, "COVERAGE")
+    monkeypatch.setattr(blender_paint.LiveStroke, "show", lambda _self, _rect: None)  # no view to draw into
+    live = blender_paint.LiveStroke(scene, layer, RADIUS, 1.0, "SMOOTH", "ADD")
+    live.add(0.0, 0.0, 1.0, True)
+    live.add(1e12, 0.0, 1.0, False)
+    assert live.laid == 76
+    assert live.add(float("inf"), 0.0, 1.0, False) is None and live.laid == 76
+    live.held = paint.MAX_DABS - 80
+    with pytest.raises(NubisError) as info:
+        live.add(-1e12, 0.0, 1.0, False)  # back across the field: -37500 to 37500 m, 500 m apart
+    assert str(info.value) == (
+        "the paint layer 'Paint Coverage' holds 999,996 dabs, and this stroke would lay 151 dabs, over the "
+        "1,000,000 a paint layer holds: paint shorter strokes or with a larger radius, or start a new paint layer "
+        "(Data Field > +, kind Paint)"
+    )
+    assert live.laid == 76
+    assert live.commit(layer) == 76 and len(layer.dabs) == 76
