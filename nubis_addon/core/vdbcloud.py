@@ -328,6 +328,8 @@ def _checked_block(block: np.ndarray, path: str, name: str, storage: float) -> n
 
 
 def _value_scale(path: str) -> float:
+    if not vdbfile.check(path).metadata_text:
+        return 1.0  # not a Nubis bake (it writes UTF-8), and OpenVDB's Python would abort on its text
     try:
         meta = dict(vdbfile.guarded(path, "the metadata", lambda: bundled.openvdb().readMetadata(path)))
         scale = float(meta.get("nubis_density_scale", 1.0))

@@ -49,7 +49,15 @@ MAP_BYTES = {
     "ScaleTranslateMap": 6 * 24, "TranslationMap": 24, "AffineMap": 128, "UnitaryMap": 128,
 }  # fmt: skip
 FRUSTUM_MAP = "NonlinearFrustumMap"
+FRUSTUM_BYTES = 2 * 24 + 8 + 8  # its box (two Vec3d), taper and depth
+# Metadata types OpenVDB registers with a fixed size (openvdb/Metadata.h); strings take any size.
+METADATA_BYTES = {
+    "bool": 1, "int32": 4, "int64": 8, "float": 4, "double": 8, "vec2i": 8, "vec2s": 8, "vec2d": 16,
+    "vec3i": 12, "vec3s": 12, "vec3d": 24, "vec4i": 16, "vec4s": 16, "vec4d": 32, "mat4s": 64, "mat4d": 128,
+}  # fmt: skip
 DELAYED_LOAD = "__delayedload"
+BLOSC_HEADER = 16
+BLOSC_PAD = 256
 # The least a root node's tile and child take on disk in a 5_4_3 tree: a tile's origin, value and active
 # flag; a child's origin and its two 32^3-bit masks (child and value).
 ROOT_TILE_BYTES = 12 + 1
@@ -85,6 +93,7 @@ class FileLayout:
     version: int
     library: tuple[int, int]
     grids: tuple[GridEntry, ...]
+    metadata_text: bool  # the file's own metadata is UTF-8 text where it is text: OpenVDB's Python reads it
 
     def value_type(self, grid: GridEntry) -> str:
         return tree_value_type(grid.type_name)
@@ -165,20 +174,65 @@ def _header(r: _Reader) -> tuple[int, tuple[int, int]]:
     return version, library
 
 
-def _metadata(r: _Reader, what: str) -> None:
-    """A MetaMap: a count, then each entry's name, type name and size-prefixed value."""
+def _metadata(r: _Reader, what: str) -> bool:
+    """A MetaMap: a count, then each entry's name, type name and size-prefixed value. Whether its names and
+    text values are all UTF-8 (OpenVDB's Python module aborts the process turning other bytes into text)."""
     count = r.u32(f"the count of {what}")
     if count * 12 > r.left():
         raise Damaged(f"{what} states {count} entries at byte {r.pos - 4}, more than the file can hold")
+    text = True
     for _ in range(count):
-        r.string(f"a name in {what}")
+        text = _utf8(r.string(f"a name in {what}")) and text
         kind = r.type_name(f"a type name in {what}")
         size = r.u32(f"the size of a value in {what}")
         value = r.take(size, f"a value in {what}")
-        # OpenVDB's delayed-load table states a count of nodes it sizes two arrays by (one byte and eight
-        # bytes a node) before reading them: the count must fit the value it is in.
-        if kind == DELAYED_LOAD and size >= 4 and 4 + struct.unpack_from("<I", value)[0] > size:
-            raise Damaged(f"the delayed-load table in {what} states more nodes than its {size} bytes hold")
+        # OpenVDB reads a known type's own size, whatever size the file states: a size that differs would
+        # leave it reading the rest of the file from the wrong byte.
+        if kind in METADATA_BYTES and size != METADATA_BYTES[kind]:
+            raise Damaged(f"a {kind} value in {what} states {size} bytes, not {METADATA_BYTES[kind]}")
+        if kind == DELAYED_LOAD and size and not _delayed_load_fits(value):
+            raise Damaged(f"the delayed-load table in {what} states more than its {size} bytes hold")
+        if kind == "string":
+            text = _utf8(value) and text
+    return text
+
+
+def _utf8(raw: bytes) -> bool:
+    try:
+        raw.decode("utf-8")
+    except UnicodeDecodeError:
+        return False
+    return True
+
+
+def _delayed_load_fits(value: bytes) -> bool:
+    """OpenVDB's delayed-load table (io/DelayedLoadMetadata): a node count, then a mask of one byte a node
+    and compressed sizes of eight bytes a node, each either raw (its length 0) or Blosc-compressed (its
+    length, then a Blosc header stating the bytes it expands to). OpenVDB sizes its arrays by the count and
+    by the Blosc headers before reading: all of it must agree and fit the value."""
+    if len(value) < 12:
+        return False
+    count, at = struct.unpack_from("<I", value)[0], 4
+    for item, optional in ((1, False), (8, True)):
+        if at + 4 > len(value):
+            return False
+        n = struct.unpack_from("<I", value, at)[0]
+        at += 4
+        if optional and n == 0xFFFFFFFF:  # no compressed sizes stored
+            continue
+        if n == 0:
+            at += count * item
+        elif n < BLOSC_HEADER or at + BLOSC_HEADER > len(value):
+            return False
+        else:
+            # OpenVDB pads buffers under BLOSC_PAD bytes before compressing them.
+            expands = struct.unpack_from("<I", value, at + 4)[0]
+            if not count * item <= expands <= max(count * item, BLOSC_PAD):
+                return False
+            at += n
+        if at > len(value):
+            return False
+    return True
 
 
 def _descriptor(r: _Reader, version: int) -> GridEntry:
@@ -210,8 +264,9 @@ def _grid_body(handle, grid: GridEntry, version: int, total: int) -> None:
     r.u32(f"the compression of grid '{shown}'")
     _metadata(r, f"the metadata of grid '{shown}'")
     kind = r.type_name(f"the transform of grid '{shown}'")
-    if kind == FRUSTUM_MAP:
-        return  # a frustum holds a second map; the reader refuses frustums once read
+    if kind == FRUSTUM_MAP:  # its box, taper and depth, then a linear map of its own
+        r.take(FRUSTUM_BYTES, f"the transform of grid '{shown}'")
+        kind = r.type_name(f"the frustum's second map in grid '{shown}'")
     if kind not in MAP_BYTES:
         raise Damaged(f"grid '{shown}' has a transform of type '{printable_name(kind)}', which OpenVDB does not know")
     r.take(MAP_BYTES[kind], f"the transform of grid '{shown}'")
@@ -225,10 +280,10 @@ def _grid_body(handle, grid: GridEntry, version: int, total: int) -> None:
         raise Damaged(f"grid '{shown}' states {tiles} tiles and {children} nodes, more than its data can hold")
 
 
-def _parse(handle, size: int) -> tuple[int, tuple[int, int], list[GridEntry]]:
+def _parse(handle, size: int) -> tuple[int, tuple[int, int], list[GridEntry], bool]:
     r = _Reader(handle, 0, size, size)
     version, library = _header(r)
-    _metadata(r, "the file's metadata")
+    text = _metadata(r, "the file's metadata")
     count = r.u32("the grid count")
     if count * DESCRIPTOR_BYTES > r.left():
         raise Damaged(f"it states {count} grids, more than its {size} bytes can hold")
@@ -238,7 +293,7 @@ def _parse(handle, size: int) -> tuple[int, tuple[int, int], list[GridEntry]]:
         grids.append(grid)
         _grid_body(handle, grid, version, size)
         r = _Reader(handle, grid.end_pos, size, size)
-    return version, library, grids
+    return version, library, grids, text
 
 
 _cache: OrderedDict = OrderedDict()
@@ -260,7 +315,7 @@ def check(path: str | os.PathLike) -> FileLayout:
         raise NubisError(f"'{named(path)}' is empty (0 bytes): export or copy the file again")
     try:
         with open(path, "rb") as handle:
-            version, library, grids = _parse(handle, st.st_size)
+            version, library, grids, text = _parse(handle, st.st_size)
     except NotVdb:
         raise NubisError(
             f"'{named(path)}' is not an OpenVDB file (it does not begin as one): export it as .vdb"
@@ -269,7 +324,7 @@ def check(path: str | os.PathLike) -> FileLayout:
         raise NubisError(f"'{named(path)}' is damaged ({why_damaged}): export or copy the file again") from None
     except OSError as err:
         raise NubisError(f"cannot read '{named(path)}' ({err.strerror}): check the file's permissions") from None
-    layout = FileLayout(path, st.st_size, version, library, tuple(grids))
+    layout = FileLayout(path, st.st_size, version, library, tuple(grids), text)
     _cache[key] = layout
     while len(_cache) > _CACHE_ENTRIES:
         _cache.popitem(last=False)

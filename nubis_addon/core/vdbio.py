@@ -165,7 +165,8 @@ def _check_written(tmp: Path, path: Path, grids: list) -> None:
 
 def read_grid_info(path: str | os.PathLike) -> dict[str, GridInfo]:
     vdb = bundled.openvdb()
-    vdbfile.check(path)
+    if not vdbfile.check(path).metadata_text:
+        raise NubisError(f"the metadata of '{vdbfile.named(path)}' holds text that is not UTF-8: bake it again")
     grids, _meta = vdbfile.guarded(path, "the grids", lambda: vdb.readAll(str(path)))
     info = {}
     for g in grids:
