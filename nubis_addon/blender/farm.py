@@ -23,9 +23,9 @@ import bpy
 from ..core import bundled, distributed, interrupt, sequence, vdbio
 from ..core.distributed import BakeOptions, SceneSource
 from ..core.errors import NubisError
-from ..core.fsutil import check_output_path, sync_to_disk
+from ..core.fsutil import check_output_path, shown, sync_to_disk
 from ..core.presets import load_preset
-from ..core.staging import output_set
+from ..core.staging import FolderGone, output_set
 from ..render.gpu_context import ensure_gpu_context
 from . import pipeline, scene_io, snapshot
 from .registration import ensure_registered
@@ -70,39 +70,56 @@ def bake_sequence(
     start = time.perf_counter()
     paths = [check_output_path(p, (".vdb",)) for p in sequence.sequence_paths(out, frames)]
     result = SequenceResult(engine=str(engine or ""))
-    with output_set() as outputs:
-        staged = [outputs.stage(p) for p in paths]
-        if engine is None:
-            for n, (frame, path) in enumerate(zip(frames, staged, strict=True)):
-                scene.frame_set(frame)
-                sub = _sub_progress(progress, n, len(frames))
-                r = pipeline.bake(
-                    scene,
-                    path,
-                    options.voxel_size,
-                    sub,
-                    options.camera_only,
-                    options.size,
-                    options.half,
-                    options.velocity,
-                )
-                r.path = paths[n]
-                result.results.append(r)
-        else:
-            if source is None:
-                raise NubisError("a distributed bake needs the scene's source (a preset or a saved .blend)")
-            with distributed.client(engine) as client:
-                if len(frames) == 1:
-                    scene.frame_set(frames[0])
-                    r = _bake_tiles_distributed(client, engine, scene, source, frames[0], options, staged[0], progress)
-                    r.path = paths[0]
-                    result.results.append(r)
+    try:
+        with output_set() as outputs:
+            staged = [outputs.stage(p) for p in paths]
+            try:
+                if engine is None:
+                    result.results = _bake_serial(scene, outputs, frames, staged, options, progress)
                 else:
-                    result.results.extend(
-                        _bake_frames_distributed(client, engine, source, frames, options, staged, paths, progress)
-                    )
+                    result.results = _bake_on(engine, scene, source, frames, options, staged, progress)
+            except (OSError, NubisError):
+                outputs.check()  # a write that failed because the folder went is said as that
+                raise
+    except FolderGone as gone:  # the folder went while the frames were baked (core/staging.py)
+        raise gone.said(*pipeline.BAKE_GONE) from None
+    for r, path in zip(result.results, paths, strict=True):
+        r.path = path
     result.seconds = time.perf_counter() - start
     return result
+
+
+def _bake_serial(scene, outputs, frames, staged, options: BakeOptions, progress) -> list:
+    """The frames one after the other in this process, each to its staged path."""
+    results = []
+    for n, (frame, path) in enumerate(zip(frames, staged, strict=True)):
+        outputs.check()  # a folder gone since the last frame is not made again for the next
+        scene.frame_set(frame)
+        results.append(
+            pipeline.bake(
+                scene,
+                path,
+                options.voxel_size,
+                _sub_progress(progress, n, len(frames)),
+                options.camera_only,
+                options.size,
+                options.half,
+                options.velocity,
+            )
+        )
+    return results
+
+
+def _bake_on(engine, scene, source, frames, options: BakeOptions, staged, progress) -> list:
+    """The frames as Dask tasks (or one frame's tiles), each file written here to its staged path."""
+    if source is None:
+        raise NubisError("a distributed bake needs the scene's source (a preset or a saved .blend)")
+    with distributed.client(engine) as client:
+        if len(frames) == 1:
+            scene.frame_set(frames[0])
+            return [_bake_tiles_distributed(client, engine, scene, source, frames[0], options, staged[0], progress)]
+        finals = [shown(path) for path in staged]  # where each file goes, for messages and the results
+        return _bake_frames_distributed(client, engine, source, frames, options, staged, finals, progress)
 
 
 def _sub_progress(progress: Progress | None, n: int, total: int) -> Progress | None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import traceback
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -381,7 +382,7 @@ class ModalSteps:
 
     doing = "baking"
     cancelled = "Bake cancelled: no file was written, earlier bakes are untouched"
-    _timer = None
+    _progress = None
     _work = None
 
     def jobs(self, context):
@@ -409,23 +410,41 @@ class ModalSteps:
                 return {"CANCELLED"}
             self.report({"INFO"}, message)
             return {"FINISHED"}
-        work.start(self._work)
-        wm = context.window_manager
-        self._timer = timer = wm.event_timer_add(0.01, window=context.window)
-        wm.modal_handler_add(self)
-        wm.progress_begin(0, 100)
-        self._work.on_cancel = lambda: _end_progress(timer)
+        self.start(context)
+        context.window_manager.modal_handler_add(self)
         return {"RUNNING_MODAL"}
 
+    def start(self, context) -> None:
+        """Register the work as this operator's (blender/work.py) and show its progress."""
+        work.start(self._work)
+        self._work.owner = self
+        self._progress = _Progress(context)
+        self._work.on_cancel = self._progress.end
+
     def _end(self, context) -> None:
+        """Unregister the work and close its steps (a cancelled bake writes nothing); any number of times."""
         work.finish(self._work)
-        _end_progress(self._timer)
-        self._timer = None
-        self._work.close()  # a cancelled bake writes nothing
+        try:
+            self._work.close()
+        finally:
+            if self._progress is not None:
+                self._progress.end()
+
+    def cancel(self, context) -> None:
+        """Blender ends the operator without its modal handler (its window closed): the work ends with it."""
+        self._end(context)
 
     def modal(self, context, event):
         if self._work.cancelled:  # stopped from outside (blender/work.py), which cleaned up and said why
             return {"CANCELLED"}
+        try:
+            return self._tick(context, event)
+        except Exception as err:  # whatever failed, the work ends here: left running it refuses every later one
+            self._end(context)
+            self.report({"ERROR"}, self._failure(err))
+            return {"CANCELLED"}
+
+    def _tick(self, context, event):
         if event.type == "ESC":
             self._end(context)
             self.report({"WARNING"}, self.cancelled)
@@ -433,23 +452,43 @@ class ModalSteps:
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
         label = self._work.label
-        try:
-            overall = self._work.step()
-        except NubisError as err:
-            self._end(context)
-            self.report({"ERROR"}, str(err))
-            return {"CANCELLED"}
+        overall = self._work.step()
         context.window_manager.progress_update(int(overall * 100))
-        context.workspace.status_text_set(f"Nubis: {self.doing} {label}, {overall * 100:.0f}% (Esc cancels)")
+        if context.workspace is not None:
+            context.workspace.status_text_set(f"Nubis: {self.doing} {label}, {overall * 100:.0f}% (Esc cancels)")
         if not self._work.done:
             return {"RUNNING_MODAL"}
         self._end(context)
-        try:
-            self.report({"INFO"}, self.finished(context, self._work.results))
-        except NubisError as err:
-            self.report({"ERROR"}, str(err))
-            return {"CANCELLED"}
+        self.report({"INFO"}, self.finished(context, self._work.results))
         return {"FINISHED"}
+
+    def _failure(self, err: Exception) -> str:
+        """The sentence a failed step reports: a NubisError's own, else the unexpected error, traced to the
+        console."""
+        if isinstance(err, NubisError):
+            return str(err)
+        traceback.print_exc()
+        return (
+            f"{self.doing.capitalize()} stopped on an unexpected error ({type(err).__name__}: {err}): "
+            "see the system console for details, and report it"
+        )
+
+
+class _Progress:
+    """A modal work's timer, progress bar and status text, taken down once (by its operator, or by
+    work.cancel when a file is opened)."""
+
+    def __init__(self, context):
+        wm = context.window_manager
+        self.timer = wm.event_timer_add(0.01, window=context.window)
+        wm.progress_begin(0, 100)
+        self.shown = True
+
+    def end(self) -> None:
+        if not self.shown:
+            return
+        self.shown = False
+        _end_progress(self.timer)
 
 
 def _end_progress(timer) -> None:

@@ -12,7 +12,7 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from ..core import bakeplan, camera, imageio, interrupt, limits, march, metrics, vdbio
+from ..core import bakeplan, camera, imageio, interrupt, limits, march, metrics, staging, vdbio
 from ..core import sky as skymath
 from ..core.bakeplan import (
     BakePlan,
@@ -22,7 +22,6 @@ from ..core.bakeplan import (
 )
 from ..core.errors import NubisError
 from ..core.fsutil import check_output_dir, check_output_path
-from ..core.staging import output_set
 from ..core.state import MAX_STORMS, CloudState
 from ..render import bake as gpu_bake
 from ..render import engine
@@ -68,7 +67,8 @@ def save_render(scene, path: str | os.PathLike, rgba: np.ndarray) -> Path:
 
 def check_scene(scene) -> None:
     """What a saved scene may hold beyond what the renderer serves (presets are checked on load):
-    the camera and the storms within reach, at most four storms, at most 128 field layers."""
+    the camera and the storms within reach, at most four storms, at most 128 field layers, VDB clouds that
+    can be drawn."""
     settings = scene.nubis
     limits.check_count(
         "superstorms", len(settings.storms), MAX_STORMS, f"remove {len(settings.storms) - MAX_STORMS} of them"
@@ -85,6 +85,8 @@ def check_scene(scene) -> None:
             limits.check_position(
                 f"the storm '{storm.empty.name}'", scene_io.evaluated_matrix(storm.empty).translation, "move it closer"
             )
+    # The marked VDB clouds read (and cached) now: a damaged or oversized file is refused before any work.
+    vdbclouds.placements(scene, strict=True)
 
 
 def resolution(scene, width: int | None, height: int | None) -> tuple[int, int]:
@@ -297,17 +299,26 @@ def snapshot_steps(
     return _bake_run(snap, grids, evaluate, path, half, max(1, int(tiles_per_step)), start)
 
 
+# What a bake says when its output folder goes while it runs (core/staging.py, FolderGone).
+BAKE_GONE = ("the bake ran", "bake again")
+
+
 def _bake_run(snap: BakeSnapshot, grids, evaluate, path: Path, half: bool, step: int, start: float):
     tiles = snap.plan.tiles
-    for i in range(0, len(tiles), step):
-        evaluate(tiles[i : i + step])
-        yield min(1.0, (i + step) / len(tiles))
-    names = tuple(
-        n
-        for n in ("density", "glow", "absorption", "velocity")
-        if n in grids.grids and (n == "density" or grids.active_voxels(n) > 0)
-    )
-    grids.write(path, snap.metadata(names), half=half)
+    try:
+        for i in range(0, len(tiles), step):
+            evaluate(tiles[i : i + step])
+            # A folder removed (or replaced by a file) meanwhile stops the bake here, not after its last tile.
+            staging.check_folder(path.parent)
+            yield min(1.0, (i + step) / len(tiles))
+        names = tuple(
+            n
+            for n in ("density", "glow", "absorption", "velocity")
+            if n in grids.grids and (n == "density" or grids.active_voxels(n) > 0)
+        )
+        grids.write(path, snap.metadata(names), half=half)
+    except staging.FolderGone as gone:
+        raise gone.said(*BAKE_GONE) from None
     active = grids.active_voxels("density")
     return BakeResult(path, snap.plan, active, time.perf_counter() - start, names, snap.frame)
 
@@ -487,24 +498,27 @@ def compare(
     if mode not in COMPARE_MODES:
         raise NubisError(f"unknown comparison mode '{mode}': use single or full")
     out = check_output_dir(out_dir)
-    with output_set() as outputs:
-        return _compare(
-            scene,
-            out,
-            outputs.stage,
-            width,
-            height,
-            samples,
-            mode,
-            voxel_size,
-            noise_estimate,
-            bounces,
-            reference=reference,
-            step=step or _silent,
-            voxel_floor=voxel_floor,
-            noise_target=noise_target,
-            reuse_reference=reuse_reference,
-        )
+    try:
+        with staging.output_set() as outputs:
+            return _compare(
+                scene,
+                out,
+                outputs.stage,
+                width,
+                height,
+                samples,
+                mode,
+                voxel_size,
+                noise_estimate,
+                bounces,
+                reference=reference,
+                step=step or _silent,
+                voxel_floor=voxel_floor,
+                noise_target=noise_target,
+                reuse_reference=reuse_reference,
+            )
+    except staging.FolderGone as gone:
+        raise gone.said("the comparison ran", "compare again") from None
 
 
 # The comparison bakes the cirrus as a slab two voxels thin: the viewport samples the 2D layer at one

@@ -9,7 +9,10 @@ changes its result. What the artist does to the work itself is defined here:
 - opening another file, File > New, and quitting cancel it: its steps are closed before the file goes, so
   nothing is written and an earlier file at its path stays as it was (files are written after the last
   tile, atomically);
-- Esc cancels it (the operator's modal handler).
+- Esc cancels it (the operator's modal handler);
+- a step that fails ends it: the operator says the sentence and clears it, and a work whose operator is
+  gone all the same (Blender freed it after an error) is cleared when the next one starts, so a failed
+  bake never leaves every later one refused.
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ class Work:
         self.results: list = []
         self.cancelled = ""  # why it was stopped from outside, once it was
         self.on_cancel: Callable[[], None] | None = None  # the operator's clean-up (timer, progress)
+        self.owner = None  # the operator stepping it (None when a script steps it)
 
     @property
     def label(self) -> str:
@@ -63,9 +67,9 @@ class Work:
 
     def close(self) -> None:
         """Close every job's steps: a bake not finished writes nothing, a render leaves its image alone."""
-        for _label, steps in self.jobs:
+        jobs, self.jobs = self.jobs, []
+        for _label, steps in jobs:
             steps.close()
-        self.jobs = []
 
 
 def bake_jobs(
@@ -117,7 +121,32 @@ _current: list[Work] = []
 
 
 def current() -> Work | None:
+    """The running work; one whose operator is gone is cleared first (it can step no more)."""
+    while _current and _orphaned(_current[0]):
+        _clear(_current[0])
     return _current[0] if _current else None
+
+
+def _orphaned(work: Work) -> bool:
+    """Its operator was freed without ending it: any look at a freed operator raises ReferenceError."""
+    if work.owner is None:
+        return False
+    try:
+        getattr(work.owner, "_work", None)
+    except ReferenceError:
+        return True
+    return False
+
+
+def _clear(work: Work) -> None:
+    """Unregister `work`, close its steps (nothing is written) and take its operator's progress down."""
+    finish(work)
+    work.close()
+    if work.on_cancel is not None:
+        try:
+            work.on_cancel()
+        except (ReferenceError, RuntimeError):
+            pass  # the window it showed progress in is gone
 
 
 def start(work: Work) -> Work:
@@ -148,13 +177,7 @@ def cancel(reason: str) -> Work | None:
     if work is None:
         return None
     work.cancelled = reason
-    finish(work)
-    work.close()
-    if work.on_cancel is not None:
-        try:
-            work.on_cancel()
-        except (ReferenceError, RuntimeError):
-            pass  # the window it showed progress in is gone
+    _clear(work)
     mainthread.report(f"{work.doing.capitalize()} cancelled ({reason}): nothing was written", "WARNING")
     return work
 

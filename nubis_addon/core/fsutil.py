@@ -110,9 +110,20 @@ def printable_name(name: str, keep: int = 40) -> str:
     return name if len(name) <= 2 * keep else f"{name[:keep]}...{name[-keep:]}"
 
 
+def _check_staging_left(folder: Path) -> None:
+    """A folder inside a staging folder (staging.py) that has gone: its output folder was removed or replaced
+    meanwhile, and nothing is made again in its place (staging.FolderGone)."""
+    for part in (folder, *folder.parents):
+        if part.name.startswith(staging.PREFIX):
+            if not part.is_dir():
+                raise staging.FolderGone(part)
+            return
+
+
 def check_output_dir(folder: str | os.PathLike, create: bool = True) -> Path:
     d = Path(folder).expanduser()
     check_utf8_name("the output folder", d)
+    _check_staging_left(d)
     if create:
         try:
             d.mkdir(parents=True, exist_ok=True)
@@ -133,6 +144,14 @@ def check_output_dir(folder: str | os.PathLike, create: bool = True) -> Path:
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path (in a private staging folder beside ``path``); it replaces ``path`` only
     if the block succeeds. A failed or interrupted write therefore never leaves a half-written file
-    where a good one was, nor a temporary file (staging.py)."""
+    where a good one was, nor a temporary file (staging.py). A writer that fails because the folder went
+    meanwhile (removed, or replaced by a file) is said as that (staging.FolderGone), not as its own error."""
     with staging.output_set() as outputs:
-        yield outputs.stage(path)
+        staged = outputs.stage(path)
+        try:
+            yield staged
+        except (OSError, NubisError):
+            gone = outputs.gone()
+            if gone is None:
+                raise
+            raise gone from None

@@ -6,7 +6,9 @@ keeps the earlier set of outputs whole. The commit itself is a handful of rename
 folders (atomic each, on one file system) run with interrupts deferred, so SIGINT and SIGTERM
 cannot split a set. Staging folders are private (mode 0700): after a SIGKILL nothing readable sits
 under an output's name, and the next run into that folder removes folders whose process is gone
-(only this machine's: a shared folder may hold another machine's run in progress).
+(only this machine's: a shared folder may hold another machine's run in progress). An output folder
+removed, or replaced by a file, while the work runs is said as such (FolderGone), never as a missing file
+or a writer's failure; nothing is made again in its place.
 """
 
 from __future__ import annotations
@@ -25,6 +27,36 @@ PREFIX = ".nubis-tmp-"
 _HOST = interrupt.HOST
 _STALE = re.compile(re.escape(f"{PREFIX}{_HOST}-") + r"(\d+)-")
 _alive = interrupt.process_alive
+
+
+class FolderGone(NubisError):
+    """An output folder was removed, or replaced by a file, while the work ran: nothing was written."""
+
+    def __init__(self, folder: str | os.PathLike, doing: str = "", again: str = ""):
+        self.folder = _shown_folder(Path(folder))
+        replaced = os.path.lexists(self.folder) and not self.folder.is_dir()
+        self.how = "replaced by a file" if replaced else "removed"
+        fix = "move the file away, make the folder again" if replaced else "make the folder again"
+        when = f"while {doing}" if doing else "before Nubis could write into it"
+        super().__init__(
+            f"the output folder '{self.folder}' was {self.how} {when}: nothing was written; "
+            f"{fix} and {again or 'try again'}"
+        )
+
+    def said(self, doing: str, again: str) -> FolderGone:
+        """The same failure in the words of the work that met it ("the bake ran", "bake again")."""
+        return FolderGone(self.folder, doing, again)
+
+
+def _shown_folder(folder: Path) -> Path:
+    """The folder a message names: a staging folder is named by the output folder that holds it."""
+    return folder.parent if folder.name.startswith(PREFIX) else folder
+
+
+def check_folder(folder: str | os.PathLike) -> None:
+    """Raise FolderGone when the output folder (or the staging folder a file is written into) is gone."""
+    if not os.path.isdir(folder):
+        raise FolderGone(folder)
 
 
 def _prefix() -> str:
@@ -75,12 +107,7 @@ class OutputSet:
         _check_replaceable(final)  # say so before the file is made, when the folder is already there
         if folder not in self._dirs:
             sweep_stale(folder)
-            # Made and registered under the interrupt lock: a signal between the two would leave the
-            # folder behind (the watcher removes only what is registered).
-            with interrupt.deferred():
-                staging = Path(tempfile.mkdtemp(prefix=_prefix(), dir=folder))
-                interrupt.register(staging)
-            self._dirs[folder] = staging
+            self._dirs[folder] = _make_staging(folder)
         staged = self._dirs[folder] / final.name
         self._files[final] = staged
         return staged
@@ -90,6 +117,8 @@ class OutputSet:
         mode = _file_mode()
         with interrupt.deferred():
             interrupted = interrupt.pending()
+            if not interrupted:
+                self.check()
             missing = [str(f) for f, s in self._files.items() if not s.is_file()]
             if missing and not interrupted:
                 raise RuntimeError(f"staged outputs were never written: {', '.join(missing)}")
@@ -98,8 +127,7 @@ class OutputSet:
                 for final in self._files:
                     _check_replaceable(final)
                 for final, staged in self._files.items():
-                    os.chmod(staged, mode)  # mkstemp-style 0600 files get a normal file's permissions
-                    os.replace(staged, final)
+                    self._move(staged, final, mode)
             done = list(self._files)
             self._files.clear()
             self.discard()
@@ -107,10 +135,32 @@ class OutputSet:
             interrupt.stop()
         return done
 
+    def _move(self, staged: Path, final: Path, mode: int) -> None:
+        try:
+            os.chmod(staged, mode)  # mkstemp-style 0600 files get a normal file's permissions
+            os.replace(staged, final)
+        except (FileNotFoundError, NotADirectoryError):
+            self.check()  # its folder went between the check and the rename
+            raise
+
+    def gone(self) -> FolderGone | None:
+        """The failure to say when an output folder, or a staging folder in it, is gone (else None)."""
+        for folder, staging in self._dirs.items():
+            for path in (folder, staging):
+                if not os.path.isdir(path):
+                    return FolderGone(path)
+        return None
+
+    def check(self) -> None:
+        """Raise FolderGone when an output folder went since its files were staged: before the commit,
+        and before more work into a set whose folder may have gone (a sequence's next frame)."""
+        gone = self.gone()
+        if gone is not None:
+            raise gone
+
     def discard(self) -> None:
         for staging in self._dirs.values():
-            interrupt.remove_path(staging)
-            interrupt.unregister(staging)
+            _remove_staging(staging)
         self._dirs.clear()
         self._files.clear()
 
@@ -122,6 +172,51 @@ def _check_replaceable(final: Path) -> None:
         raise NubisError(
             f"cannot write '{final}': a folder has that name, move or remove it, or choose another output folder"
         )
+
+
+@contextlib.contextmanager
+def private_folder(folder: str | os.PathLike) -> Iterator[Path]:
+    """A private folder inside the output folder `folder`, for work that writes whole folders of files
+    before they are moved into place (an OutputSet each): named as a staging folder (swept after a kill),
+    registered for an interrupt, and removed at the end with whatever it still holds."""
+    path = _make_staging(folder)
+    try:
+        yield path
+    finally:
+        _remove_staging(path)
+
+
+_held: dict[Path, int] = {}  # staging folder -> an open descriptor of it, to find it wherever it went
+
+
+def _make_staging(folder: Path | str) -> Path:
+    """A private staging folder in `folder`. Made and registered under the interrupt lock: a signal between
+    the two would leave it behind (the watcher removes only what is registered)."""
+    with interrupt.deferred():
+        try:
+            path = Path(tempfile.mkdtemp(prefix=_prefix(), dir=folder))
+        except (FileNotFoundError, NotADirectoryError):
+            raise FolderGone(folder) from None
+        interrupt.register(path)
+    with contextlib.suppress(OSError):  # not every system opens folders
+        _held[path] = os.open(path, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    return path
+
+
+def _remove_staging(path: Path) -> None:
+    """Remove a staging folder with what it holds, also where it went when its output folder was moved
+    away while the work ran (`mv out elsewhere`: found by its open descriptor, where the system says)."""
+    fd = _held.pop(path, None)
+    where = None
+    if fd is not None:
+        with contextlib.suppress(OSError):
+            where = os.readlink(f"/proc/self/fd/{fd}")
+        os.close(fd)
+    interrupt.remove_path(path)
+    # A removed folder reads "... (deleted)"; only a folder of the same (unique) name is this one.
+    if where and where != os.fspath(path) and os.path.basename(where) == path.name and os.path.isdir(where):
+        interrupt.remove_path(where)
+    interrupt.unregister(path)
 
 
 @contextlib.contextmanager
