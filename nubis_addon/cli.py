@@ -1,19 +1,25 @@
 """The headless command line, a stable contract:
 
     python -m nubis_addon render  [--preset NAME | --blend FILE] --out PATH [--width W --height H --frame F]
-    python -m nubis_addon bake    [--preset NAME | --blend FILE] --out PATH.vdb [--voxel-size METRES --camera-only
-                                  --half --velocity --frames A-B --distributed local:N|tcp://HOST:PORT]
+                                  [--passes N --motion PATH.exr] [--vdb FILE ... --with-cloudscape]
+    python -m nubis_addon bake    [--preset NAME | --blend FILE] --out PATH.vdb [--frame F --voxel-size METRES
+                                  --camera-only --half --velocity --frames A-B --distributed local:N|tcp://HOST:PORT]
     python -m nubis_addon cycles  [--preset NAME | --blend FILE] --out PATH [--samples N --width W --height H]
+                                  [--frame F --bounces N --voxel-size METRES]
     python -m nubis_addon compare [--preset NAME | --blend FILE] --out DIR [--samples N --width W --height H]
+                                  [--frame F --mode single|full --bounces N --voxel-size METRES --noise-estimate
+                                  --noise-target PERCENT --reuse-reference --draft] [--vdb FILE ... --with-cloudscape]
     python -m nubis_addon preview [--preset NAME | --blend FILE] --out DIR [--width W --height H --frames A-B
                                   --redraws N --orbit DEG --quality Q --naive]
     python -m nubis_addon benchmark [--preset NAME | --blend FILE] --out DIR [--width W --height H --quality Q]
+                                    [--vdb FILE ... --with-cloudscape]
     python -m nubis_addon panorama [--preset NAME | --blend FILE] --out PATH.exr [--width W --frame F]
 
 and the same as ``blender -b [FILE.blend] --command nubis ...``. Each command prints a one-line summary and
 exits 0, or prints a one-line error that says what to do and exits non-zero: 1 for a user error, 2 for a
 bad command line, 3 for an internal fault (its log named in the message), 130 and 143 for SIGINT and
-SIGTERM. A command's outputs appear together or not at all (core/staging.py).
+SIGTERM. A command's outputs appear together or not at all (core/staging.py). The full reference, every
+option explained: docs/cli.md.
 """
 
 from __future__ import annotations

@@ -6,13 +6,15 @@ from __future__ import annotations
 import contextlib
 import os
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import bpy
 
-from ..core import console, distributed, fields, imageio, interrupt, limits, sequence, staging
+from ..core import console, distributed, fields, interrupt, limits, sequence, staging
 from ..core.errors import NubisError
 from ..core.fsutil import check_output_dir, not_a_file
+from ..core.jobs import BakeOptions, BenchmarkOptions, CompareOptions, PreviewOptions, RenderOptions
 from ..core.presets import load_preset
 from ..render.gpu_context import ensure_gpu_context
 from . import farm, pipeline, preview, registration, scene_io, scene_render, snapshot, vdbclouds
@@ -78,81 +80,113 @@ def _add_vdb_clouds(scene, paths, with_cloudscape: bool) -> None:
         scene_io.generate_fields(scene)
 
 
+@dataclass(frozen=True)
+class Job:
+    """One command's run: its parsed arguments, the scene it works on, where it writes and Blender's log."""
+
+    args: object
+    scene: object
+    out: Path
+    log: Path
+    start: float
+
+    @property
+    def label(self) -> str:
+        return self.scene.nubis.preset or "scene"
+
+    def seconds(self) -> float:
+        return time.perf_counter() - self.start
+
+    def size(self) -> tuple[int, int]:
+        return pipeline.resolution(self.scene, getattr(self.args, "width", None), getattr(self.args, "height", None))
+
+    def bake_options(self) -> BakeOptions:
+        a = self.args
+        return BakeOptions(voxel_size=a.voxel_size, camera_only=a.camera_only, half=a.half, velocity=a.velocity)
+
+
 def execute(args, in_blender: bool, log: Path, out: Path) -> str:
     """Run one checked command writing to `out`; Blender's own output goes to `log`."""
     start = time.perf_counter()
-    cmd = args.command
-    voxel = getattr(args, "voxel_size", None)
     with console.quiet(log):
         interrupt.track_blender_tempdir()
         scene = load_scene(args, in_blender)
-        if getattr(args, "vdb", None) and cmd != "benchmark":  # the benchmark times the sky without them first
+        if getattr(args, "vdb", None) and args.command != "benchmark":  # the benchmark times the sky first
             _add_vdb_clouds(scene, args.vdb, args.with_cloudscape)
         if getattr(args, "frame", None) is not None:
             scene.frame_set(args.frame)
         pipeline.check_scene(scene)
         ensure_gpu_context()
-    label = scene.nubis.preset or "scene"
+    return COMMANDS[args.command](Job(args, scene, out, log, start))
 
-    if cmd == "render":
-        w, h = pipeline.resolution(scene, args.width, args.height)
-        with console.quiet(log), staging.output_set() as outputs:  # the image and its motion vectors together
-            rgba = pipeline.render_viewport(scene, w, h, passes=args.passes, progress=console.progress("rendering"))
-            pipeline.save_render(scene, outputs.stage(out), rgba)
-            if args.motion:
-                imageio.write_image(outputs.stage(args.motion), pipeline.render_motion(scene, w, h))
-        cover = float((rgba[..., 3] > 0.05).mean()) * 100
-        return f"rendered {label} at {w}x{h} ({cover:.0f}% cloud cover) in {time.perf_counter() - start:.1f} s -> {out}"
-    if cmd == "bake" and (args.frames or args.distributed or "#" in out.name):
-        return _bake_sequence(args, scene, out, voxel, log, label)
-    if cmd == "bake":
-        progress = console.progress("baking")
-        with console.quiet(log):
-            result = pipeline.bake(
-                scene, out, voxel, progress, camera_only=args.camera_only, half=args.half, velocity=args.velocity
-            )
-        nx, ny, nz = result.plan.dims
-        return (
-            f"baked {label}: {nx}x{ny}x{nz} voxels of {result.plan.voxel_size:g} m, "
-            f"{result.active_voxels} active, in {result.seconds:.1f} s -> {out}"
-        )
-    if cmd == "panorama":
-        with console.quiet(log):
-            scene_render.panorama(scene, out, args.width)
-        return (
-            f"panorama of {label} at {args.width}x{max(args.width // 2, 2)} "
-            f"in {time.perf_counter() - start:.1f} s -> {out}"
-        )
-    w, h = pipeline.resolution(scene, args.width, args.height)
-    if cmd in ("preview", "benchmark"):
-        return _realtime(cmd, args, scene, out, w, h, log, label, start)
-    if cmd == "cycles":
-        with console.quiet(log):
-            rgba = pipeline.render_cycles(scene, w, h, args.samples, voxel_size=voxel, bounces=args.bounces)
-            pipeline.save_render(scene, out, rgba)
-        return f"rendered {label} with Cycles at {w}x{h} in {time.perf_counter() - start:.1f} s -> {out}"
+
+def _render(job: Job) -> str:
+    args, scene, out = job.args, job.scene, job.out
+    w, h = job.size()
+    options = RenderOptions(w, h, passes=args.passes, motion=args.motion)
+    with console.quiet(job.log):
+        rgba = pipeline.render_files(scene, out, options, progress=console.progress("rendering"))
+    cover = float((rgba[..., 3] > 0.05).mean()) * 100
+    return f"rendered {job.label} at {w}x{h} ({cover:.0f}% cloud cover) in {job.seconds():.1f} s -> {out}"
+
+
+def _bake(job: Job) -> str:
+    args = job.args
+    if args.frames or args.distributed or "#" in job.out.name:
+        return _bake_sequence(job)
+    progress = console.progress("baking")
+    with console.quiet(job.log):
+        result = pipeline.bake(job.scene, job.out, job.bake_options(), progress)
+    nx, ny, nz = result.plan.dims
+    return (
+        f"baked {job.label}: {nx}x{ny}x{nz} voxels of {result.plan.voxel_size:g} m, "
+        f"{result.active_voxels} active, in {result.seconds:.1f} s -> {job.out}"
+    )
+
+
+def _panorama(job: Job) -> str:
+    with console.quiet(job.log):
+        scene_render.panorama(job.scene, job.out, job.args.width)
+    width = job.args.width
+    return f"panorama of {job.label} at {width}x{max(width // 2, 2)} in {job.seconds():.1f} s -> {job.out}"
+
+
+def _cycles(job: Job) -> str:
+    args, scene = job.args, job.scene
+    w, h = job.size()
+    with console.quiet(job.log):
+        rgba = pipeline.render_cycles(scene, w, h, args.samples, voxel_size=args.voxel_size, bounces=args.bounces)
+        pipeline.save_render(scene, job.out, rgba)
+    return f"rendered {job.label} with Cycles at {w}x{h} in {job.seconds():.1f} s -> {job.out}"
+
+
+def _compare(job: Job) -> str:
+    args = job.args
+    w, h = job.size()
     if args.draft:
         w = args.width or max(w // 2, limits.SIZE_RANGE[0])
         h = args.height or max(h // 2, limits.SIZE_RANGE[0])
-    with console.quiet(log):
-        m = pipeline.compare(
-            scene,
-            out,
-            w,
-            h,
-            args.samples,
-            args.mode,
-            voxel,
-            args.noise_estimate,
-            args.bounces,
-            reference=not args.draft,
-            step=lambda text: console.current().line(f"{PROG}: {text}"),
-            voxel_floor=DRAFT_VOXEL if args.draft else 0.0,
-            noise_target=args.noise_target,
-            reuse_reference=args.reuse_reference,
-        )
+    options = CompareOptions(
+        width=w,
+        height=h,
+        samples=args.samples,
+        mode=args.mode,
+        voxel_size=args.voxel_size,
+        noise_estimate=args.noise_estimate,
+        bounces=args.bounces,
+        reference=not args.draft,
+        voxel_floor=DRAFT_VOXEL if args.draft else 0.0,
+        noise_target=args.noise_target,
+        reuse_reference=args.reuse_reference,
+    )
+    with console.quiet(job.log):
+        m = pipeline.compare(job.scene, job.out, options, step=lambda text: console.current().line(f"{PROG}: {text}"))
+    return _compare_summary(job, options, m)
+
+
+def _compare_summary(job: Job, options: CompareOptions, m: dict) -> str:
     capped = (
-        f" (reference march in {m['reference_view_steps']} of {scene.nubis.march_steps_max} view steps: "
+        f" (reference march in {m['reference_view_steps']} of {job.scene.nubis.march_steps_max} view steps: "
         "the shader loop limit)"
         if m.get("reference_steps_capped")
         else ""
@@ -161,26 +195,27 @@ def execute(args, in_blender: bool, log: Path, out: Path) -> str:
     ref = m["cycles_reference"]
     cycles_time = "Cycles' image reused" if ref["reused"] else f"{m['seconds']['cycles_s']:.0f} s"
     return (
-        f"compared {label} ({args.mode}) at {w}x{h}: alpha RMSE {m['alpha_rmse']:.4f}, luminance error "
-        f"{m['luminance_rel_error'] * 100:.1f}%, silhouette IoU {m['silhouette_iou']:.3f}{capped} "
-        f"against Cycles at {m['samples']} samples{noise}, {m['volume_bounces']} volume bounces "
-        f"({cycles_time}, {time.perf_counter() - start:.0f} s in all) -> {out}"
+        f"compared {job.label} ({options.mode}) at {options.width}x{options.height}: alpha RMSE "
+        f"{m['alpha_rmse']:.4f}, luminance error {m['luminance_rel_error'] * 100:.1f}%, silhouette IoU "
+        f"{m['silhouette_iou']:.3f}{capped} against Cycles at {m['samples']} samples{noise}, "
+        f"{m['volume_bounces']} volume bounces ({cycles_time}, {job.seconds():.0f} s in all) -> {job.out}"
     )
 
 
-def _bake_sequence(args, scene, out: Path, voxel, log: Path, label: str) -> str:
+def _bake_sequence(job: Job) -> str:
     """`bake --frames A-B` (files named with # padding) and `bake --distributed` (core/distributed.py)."""
+    args, scene, out = job.args, job.scene, job.out
+    options = job.bake_options()
     frames = sequence.parse_frames(args.frames) if args.frames else [scene.frame_current]
     if len(frames) > 1:  # the disk the whole set takes, before any frame is baked
-        with console.quiet(log):
-            _state, plan = snapshot.bake_plan(scene, voxel, args.camera_only, None, args.velocity, wait=False)
+        with console.quiet(job.log):
+            _state, plan = snapshot.bake_plan(scene, options, wait=False)
         note = sequence.check_disk_space(out, frames, plan.file_bytes_estimate(args.half), args.half)
         if note:
             console.current().line(note)
     engine = distributed.parse_engine(args.distributed) if args.distributed else None
-    options = farm.BakeOptions(voxel, args.camera_only, None, args.half, args.velocity)
     progress = console.progress("baking")
-    with console.quiet(log):
+    with console.quiet(job.log):
         source = farm.source_of(scene, args.preset, args.blend) if engine else None
         r = farm.bake_sequence(scene, out, frames, options, engine, source, progress)
     first = r.results[0]
@@ -188,59 +223,66 @@ def _bake_sequence(args, scene, out: Path, voxel, log: Path, label: str) -> str:
     on = f" on {r.engine}" if r.engine else ""
     where = first.path if len(frames) == 1 else f"{first.path.parent / out.name} ({len(frames)} files)"
     return (
-        f"baked {label}, frame{'s' if len(frames) > 1 else ''} {args.frames or frames[0]}: {nx}x{ny}x{nz} voxels "
+        f"baked {job.label}, frame{'s' if len(frames) > 1 else ''} {args.frames or frames[0]}: {nx}x{ny}x{nz} voxels "
         f"of {first.plan.voxel_size:g} m, {sum(x.active_voxels for x in r.results)} active{on}, "
         f"in {r.seconds:.1f} s -> {where}"
     )
 
 
-def _realtime(cmd: str, args, scene, out: Path, w: int, h: int, log: Path, label: str, start: float) -> str:
-    if cmd == "preview":
-        frames = preview.parse_frames(args.frames, scene.frame_current)
-        progress = console.progress("preview")
-        with console.quiet(log):
-            r = preview.preview(
-                scene, out, w, h, frames, args.redraws, args.orbit, args.naive, args.quality, progress=progress
-            )
-        ms = sorted(x for frame in r.redraw_ms for x in frame)
-        median = ms[len(ms) // 2]
-        naive = f", naive {sorted(r.naive_ms)[len(r.naive_ms) // 2]:.0f} ms" if r.naive_ms else ""
-        return (
-            f"previewed {label} at {w}x{h} ({r.quality}): {len(frames)} frame(s) x {args.redraws} redraw(s), "
-            f"median redraw {median:.1f} ms{naive}, in {time.perf_counter() - start:.1f} s -> {out}"
-        )
-    with console.quiet(log):
-        try:
-            if args.vdb:
-                result = _benchmark_vdb(scene, args, out, w, h)
-            else:
-                result = preview.benchmark(scene, out, w, h, args.quality)
-        except staging.FolderGone as gone:
-            raise gone.said("the benchmark ran", "run the benchmark again") from None
-    print(preview.table(result))
-    if args.vdb:
-        return (
-            f"benchmarked {label} with {len(args.vdb)} VDB cloud(s) at {w}x{h} ({result['quality']}): redraw "
-            f"{result['redraw_ms']:.1f} ms, {result['redraw_ms'] / result['baseline_redraw_ms']:.2f}x the "
-            f"cloudscape's {result['baseline_redraw_ms']:.1f} ms; VDB clouds on the GPU "
-            f"{sequence.human_bytes(result['vdb_gpu_bytes'])} in {time.perf_counter() - start:.1f} s -> {out}"
-        )
+def _preview(job: Job) -> str:
+    args, scene = job.args, job.scene
+    w, h = job.size()
+    frames = preview.parse_frames(args.frames, scene.frame_current)
+    options = PreviewOptions(w, h, tuple(frames), args.redraws, args.orbit, args.naive, args.quality)
+    progress = console.progress("preview")
+    with console.quiet(job.log):
+        r = preview.preview(scene, job.out, options, progress=progress)
+    ms = sorted(x for frame in r.redraw_ms for x in frame)
+    median = ms[len(ms) // 2]
+    naive = f", naive {sorted(r.naive_ms)[len(r.naive_ms) // 2]:.0f} ms" if r.naive_ms else ""
     return (
-        f"benchmarked {label} at {w}x{h} ({result['quality']}): naive {result['naive_ms']:.0f} ms, redraw "
-        f"{result['redraw_ms']:.1f} ms ({result['naive_over_redraw']:.1f}x), EEVEE {result['eevee_ms']:.0f} ms "
-        f"({result['eevee_over_redraw']:.0f}x) in {time.perf_counter() - start:.1f} s -> {out}"
+        f"previewed {job.label} at {w}x{h} ({r.quality}): {len(frames)} frame(s) x {args.redraws} redraw(s), "
+        f"median redraw {median:.1f} ms{naive}, in {job.seconds():.1f} s -> {job.out}"
     )
 
 
-def _benchmark_vdb(scene, args, out: Path, w: int, h: int) -> dict:
+def _benchmark(job: Job) -> str:
+    args = job.args
+    options = BenchmarkOptions(*job.size(), quality=args.quality)
+    with console.quiet(job.log):
+        try:
+            if args.vdb:
+                result = _benchmark_vdb(job, options.but(eevee=False))
+            else:
+                result = preview.benchmark(job.scene, job.out, options)
+        except staging.FolderGone as gone:
+            raise gone.said("the benchmark ran", "run the benchmark again") from None
+    print(preview.table(result))
+    size = f"{options.width}x{options.height} ({result['quality']})"
+    if args.vdb:
+        return (
+            f"benchmarked {job.label} with {len(args.vdb)} VDB cloud(s) at {size}: redraw "
+            f"{result['redraw_ms']:.1f} ms, {result['redraw_ms'] / result['baseline_redraw_ms']:.2f}x the "
+            f"cloudscape's {result['baseline_redraw_ms']:.1f} ms; VDB clouds on the GPU "
+            f"{sequence.human_bytes(result['vdb_gpu_bytes'])} in {job.seconds():.1f} s -> {job.out}"
+        )
+    return (
+        f"benchmarked {job.label} at {size}: naive {result['naive_ms']:.0f} ms, redraw "
+        f"{result['redraw_ms']:.1f} ms ({result['naive_over_redraw']:.1f}x), EEVEE {result['eevee_ms']:.0f} ms "
+        f"({result['eevee_over_redraw']:.0f}x) in {job.seconds():.1f} s -> {job.out}"
+    )
+
+
+def _benchmark_vdb(job: Job, options: BenchmarkOptions) -> dict:
     """`benchmark --vdb`: the preset's own cloudscape on the same view first (its files in out/cloudscape),
     then with the VDB clouds: one run, one machine. Both run in a private folder inside `out`, and their
     files move into place together at the end: a failure of either leaves no file of this run, and an
     earlier run's files as they were (core/staging.py)."""
+    scene, out, args = job.scene, job.out, job.args
     with staging.private_folder(out) as work:
-        baseline = preview.benchmark(scene, work / "cloudscape", w, h, args.quality, eevee=False)
+        baseline = preview.benchmark(scene, work / "cloudscape", options)
         _add_vdb_clouds(scene, args.vdb, args.with_cloudscape)
-        result = preview.benchmark(scene, work / "vdb", w, h, args.quality, eevee=False, baseline=baseline)
+        result = preview.benchmark(scene, work / "vdb", options, baseline=baseline)
         made = not (out / "cloudscape").exists()
         try:
             with staging.output_set() as outputs:
@@ -253,3 +295,14 @@ def _benchmark_vdb(scene, args, out: Path, w: int, h: int) -> dict:
                     (out / "cloudscape").rmdir()
             raise
     return result
+
+
+COMMANDS = {
+    "render": _render,
+    "bake": _bake,
+    "panorama": _panorama,
+    "cycles": _cycles,
+    "compare": _compare,
+    "preview": _preview,
+    "benchmark": _benchmark,
+}

@@ -21,9 +21,10 @@ from pathlib import Path
 import bpy
 
 from ..core import bundled, distributed, interrupt, sequence, vdbio
-from ..core.distributed import BakeOptions, SceneSource
+from ..core.distributed import SceneSource
 from ..core.errors import NubisError
 from ..core.fsutil import check_output_path, shown, sync_to_disk
+from ..core.jobs import BakeOptions
 from ..core.presets import load_preset
 from ..core.staging import FolderGone, output_set
 from ..render.gpu_context import ensure_gpu_context
@@ -95,18 +96,7 @@ def _bake_serial(scene, outputs, frames, staged, options: BakeOptions, progress)
     for n, (frame, path) in enumerate(zip(frames, staged, strict=True)):
         outputs.check()  # a folder gone since the last frame is not made again for the next
         scene.frame_set(frame)
-        results.append(
-            pipeline.bake(
-                scene,
-                path,
-                options.voxel_size,
-                _sub_progress(progress, n, len(frames)),
-                options.camera_only,
-                options.size,
-                options.half,
-                options.velocity,
-            )
-        )
+        results.append(pipeline.bake(scene, path, options, _sub_progress(progress, n, len(frames))))
     return results
 
 
@@ -168,7 +158,7 @@ def _write(path: Path, final: Path, data: bytes) -> None:
 
 def _bake_tiles_distributed(client, engine, scene, source, frame, options, staged, progress):
     start = time.perf_counter()
-    snap = snapshot.take(scene, options.voxel_size, options.camera_only, options.size, options.velocity)
+    snap = snapshot.take(scene, options)
     plan = snap.plan
     busy = [n for n, t in enumerate(plan.tiles) if t.spans]
     workers = max(1, sum(client.nthreads().values()))
@@ -279,28 +269,12 @@ def _remove_blender_tempdir() -> None:
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-def _options(options: BakeOptions | dict) -> BakeOptions:
-    if isinstance(options, dict):
-        size = options.get("size")
-        return BakeOptions(**{**options, "size": tuple(size) if size else None})
-    return options
-
-
 def worker_bake_frame(source: SceneSource | dict, frame: int, options: BakeOptions | dict) -> dict:
     """One whole frame, baked on this worker: the file's bytes and its summary."""
-    options = _options(options)
+    options = BakeOptions.of(options)
     scene = _worker_scene(source, frame)
     with tempfile.TemporaryDirectory(prefix="nubis-worker-") as tmp:
-        r = pipeline.bake(
-            scene,
-            Path(tmp) / "frame.vdb",
-            options.voxel_size,
-            None,
-            options.camera_only,
-            options.size,
-            options.half,
-            options.velocity,
-        )
+        r = pipeline.bake(scene, Path(tmp) / "frame.vdb", options)
         data = r.path.read_bytes()
     return {"data": data, "plan": r.plan, "active": r.active_voxels, "seconds": r.seconds, "grids": list(r.grids)}
 
@@ -309,9 +283,9 @@ def worker_bake_tiles(
     source: SceneSource | dict, frame: int, options: BakeOptions | dict, ids: list[int], dims
 ) -> bytes:
     """Some tiles of one frame, baked on this worker: a partial VDB (no metadata) of their voxels."""
-    options = _options(options)
+    options = BakeOptions.of(options)
     scene = _worker_scene(source, frame)
-    snap = snapshot.take(scene, options.voxel_size, options.camera_only, options.size, options.velocity)
+    snap = snapshot.take(scene, options)
     plan = snap.plan
     if tuple(plan.dims) != tuple(dims):
         raise NubisError(f"this worker planned a {plan.dims} bake, not {tuple(dims)}: it reads a different scene")

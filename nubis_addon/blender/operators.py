@@ -13,6 +13,7 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, St
 
 from ..core import noise, presets, quality, storms, userpresets
 from ..core.errors import NubisError
+from ..core.jobs import BenchmarkOptions
 from ..core.limits import MAX_LAYERS
 from ..core.state import MAX_STORMS
 from . import cycles_setup, preview, runtime, scene_io, status, viewport, work
@@ -633,7 +634,7 @@ class NUBIS_OT_benchmark(NeedsCloudscape, NubisOperator, bpy.types.Operator):
         wm = context.window_manager
         wm.progress_begin(0, 1)
         try:
-            result = preview.benchmark(scene, out, self.width, self.height, eevee=self.eevee)
+            result = preview.benchmark(scene, out, BenchmarkOptions(self.width, self.height, eevee=self.eevee))
         finally:
             wm.progress_end()
         status.last_benchmark[:] = preview.sidebar_rows(result)

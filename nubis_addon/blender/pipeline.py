@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import time
@@ -22,6 +23,7 @@ from ..core.bakeplan import (
 )
 from ..core.errors import NubisError
 from ..core.fsutil import check_output_dir, check_output_path
+from ..core.jobs import BakeOptions, CompareOptions, RenderOptions
 from ..core.state import MAX_STORMS, CloudState
 from ..render import bake as gpu_bake
 from ..render import engine
@@ -192,14 +194,12 @@ def render_viewport(
     height: int,
     light_mode: int = 0,
     mode: str = "",
-    clip_box: tuple | None = None,
     passes: int = 1,
-    first_pass: int = 0,
     progress: Progress | None = None,
 ) -> np.ndarray:
-    """The viewport's clouds from the scene camera: premultiplied scene-linear RGBA, top row first."""
-    shot = viewport_shot(scene, width, height, light_mode, mode, clip_box)
-    return render_shot(shot, passes, first_pass, progress)
+    """The viewport's clouds from the scene camera: premultiplied scene-linear RGBA, top row first (a
+    clipped or partial render: render_shot of a viewport_shot)."""
+    return render_shot(viewport_shot(scene, width, height, light_mode, mode), passes, progress=progress)
 
 
 def downsample(rgba: np.ndarray, factor: int) -> np.ndarray:
@@ -208,6 +208,17 @@ def downsample(rgba: np.ndarray, factor: int) -> np.ndarray:
         return rgba
     h, w, c = rgba.shape
     return rgba.reshape(h // factor, factor, w // factor, factor, c).mean(axis=(1, 3))
+
+
+def render_files(scene, out: str | os.PathLike, options: RenderOptions, progress: Progress | None = None) -> np.ndarray:
+    """The viewport's clouds to `out` (and their motion vectors to `options.motion`), the files together
+    or not at all; returns the image (premultiplied scene-linear RGBA)."""
+    with staging.output_set() as outputs:
+        rgba = render_viewport(scene, options.width, options.height, passes=options.passes, progress=progress)
+        save_render(scene, outputs.stage(out), rgba)
+        if options.motion:
+            imageio.write_image(outputs.stage(options.motion), render_motion(scene, options.width, options.height))
+    return rgba
 
 
 def render_motion(scene, width: int, height: int) -> np.ndarray:
@@ -264,29 +275,15 @@ def _bake_evaluator(snap: BakeSnapshot):
 TILES_PER_STEP = 8
 
 
-def bake_steps(
-    scene,
-    path: str | os.PathLike,
-    voxel_size: float | None = None,
-    camera_only: bool = False,
-    size: tuple[int, int] | None = None,
-    half: bool = False,
-    velocity: bool = False,
-    thin_cirrus: bool = False,
-    tiles_per_step: int = TILES_PER_STEP,
-    active_share: float = 1.0,
-    vdb: bool = True,
-):
+def bake_steps(scene, path: str | os.PathLike, options: BakeOptions, tiles_per_step: int = TILES_PER_STEP):
     """The bake in steps, for the interface: the scene is read now, into a snapshot (blender/snapshot.py),
     and the generator returned yields the fraction done after each group of tiles, evaluated from that
     snapshot whatever the scene, the timeline or the viewport do meanwhile; the file is written
     (atomically) after the last, and the generator returns the BakeResult. Closing it early cancels:
-    nothing is written, an earlier file at `path` stays as it was. `active_share` as in plan_bake."""
+    nothing is written, an earlier file at `path` stays as it was."""
     path = check_output_path(path, (".vdb",))
-    snap = snapshot.take(
-        scene, voxel_size, camera_only, size, velocity, thin_cirrus, active_share=active_share, vdb=vdb
-    )
-    return snapshot_steps(snap, path, half, tiles_per_step)
+    snap = snapshot.take(scene, options)
+    return snapshot_steps(snap, path, options.half, tiles_per_step)
 
 
 def snapshot_steps(
@@ -345,7 +342,7 @@ def bake_estimate(scene, voxel_size: float | None = None) -> tuple[int, int]:
     )
     if key not in _estimates:
         _estimates.clear()
-        _state, plan = snapshot.bake_plan(scene, voxel_size, s.bake_camera_only, None, s.bake_velocity, wait=False)
+        _state, plan = snapshot.bake_plan(scene, snapshot.scene_options(scene, voxel_size), wait=False)
         _estimates[key] = (plan.evaluated_voxels, plan.bytes_estimate)
     return _estimates[key]
 
@@ -380,7 +377,7 @@ def probe_share(scene, voxel_size: float, size: tuple[int, int], thin_cirrus: bo
     """The BakePlan.active_share measured_share allows, from a camera-only bake at `voxel_size` that only
     counts its cloudy voxels: a fine bake the bound refuses may fit by what the clouds really fill
     (core/bakeplan.py, SHARE_MARGIN)."""
-    snap = snapshot.take(scene, voxel_size, True, size, thin_cirrus=thin_cirrus)
+    snap = snapshot.take(scene, BakeOptions(voxel_size, camera_only=True, size=size, thin_cirrus=thin_cirrus))
     plan = snap.plan
     clouds = snap.gpu_inputs()
     packed = plan.extra_grids == 0
@@ -413,28 +410,11 @@ def _grid_sink(grids, velocity: bool, fps: float, packed: bool = False):
 
 
 def bake(
-    scene,
-    path: str | os.PathLike,
-    voxel_size: float | None = None,
-    progress: Progress | None = None,
-    camera_only: bool = False,
-    size: tuple[int, int] | None = None,
-    half: bool = False,
-    velocity: bool = False,
-    thin_cirrus: bool = False,
-    active_share: float = 1.0,
-    vdb: bool = True,
+    scene, path: str | os.PathLike, options: BakeOptions | None = None, progress: Progress | None = None
 ) -> BakeResult:
     """Bake the viewport's density to an OpenVDB `density` grid in world space (atomic write): sparse
-    and tiled, so memory follows the clouds rather than the box (docs/bake.md).
-
-    `camera_only` bakes just the part of the sky the scene camera sees, which allows finer voxels;
-    `half` stores the float grids as half floats; `velocity` adds the `velocity` grid; `active_share`
-    plans the memory by a measured share of active voxels (probe_share), guarded while baking."""
-    steps = bake_steps(
-        scene, path, voxel_size, camera_only, size, half, velocity, thin_cirrus, active_share=active_share, vdb=vdb
-    )
-    return run_steps(steps, progress)
+    and tiled, so memory follows the clouds rather than the box (docs/bake.md; the options: core/jobs.py)."""
+    return run_steps(bake_steps(scene, path, options or BakeOptions()), progress)
 
 
 def render_cycles(
@@ -451,7 +431,8 @@ def render_cycles(
     with interrupt.temporary_dir("nubis-cycles-") as tmp:
         if vdb_path is None:
             vdb_path = str(Path(tmp) / "clouds.vdb")
-            bake(scene, vdb_path, voxel_size, vdb=False)  # the VDB clouds render from their own files
+            # The VDB clouds render from their own files (vdbclouds.native).
+            bake(scene, vdb_path, BakeOptions(voxel_size=voxel_size, vdb=False))
         cycles_setup.import_volume(scene, vdb_path)
         exr = Path(tmp) / "cycles.exr"
         cycles_setup.configure_render(scene, width, height, samples, bounces, exact_samples)
@@ -473,64 +454,34 @@ def bake_clip_box(plan: BakePlan) -> tuple[float, float, float, float]:
 
 
 def compare(
-    scene,
-    out_dir: str | os.PathLike,
-    width: int,
-    height: int,
-    samples: int | None = None,
-    mode: str = "full",
-    voxel_size: float | None = None,
-    noise_estimate: bool = False,
-    bounces: int | None = None,
-    reference: bool = True,
-    step: Callable[[str], None] | None = None,
-    voxel_floor: float = 0.0,
-    noise_target: float | None = None,
-    reuse_reference: bool = False,
+    scene, out_dir: str | os.PathLike, options: CompareOptions, step: Callable[[str], None] | None = None
 ) -> dict:
     """Viewport and Cycles renders of the same shot, their side-by-side, a difference image and
     metrics.json (computed on the scene-linear EXR values); the bake Cycles rendered is kept as
     clouds.vdb. Only the part of the sky the camera sees is baked, with voxels of one pixel's footprint
-    at the nearest cloud (down to 20 m) unless `voxel_size` is given, and the cirrus as a slab two
-    voxels thin. The eight files replace an earlier comparison together or not at all. `reference` adds
-    the real-time light march against the reference march (the slowest part after Cycles); `step` is
-    told what each stage is about to do; `voxel_floor` keeps the automatic voxel size at least this big."""
-    if mode not in COMPARE_MODES:
-        raise NubisError(f"unknown comparison mode '{mode}': use single or full")
+    at the nearest cloud (down to 20 m) unless `options.voxel_size` is given, and the cirrus as a slab two
+    voxels thin. The eight files replace an earlier comparison together or not at all. `options.reference`
+    adds the real-time light march against the reference march (the slowest part after Cycles); `step` is
+    told what each stage is about to do (core/jobs.py has the options)."""
+    if options.mode not in COMPARE_MODES:
+        raise NubisError(f"unknown comparison mode '{options.mode}': use single or full")
     out = check_output_dir(out_dir)
     try:
         with staging.output_set() as outputs:
-            return _compare(
-                scene,
-                out,
-                outputs.stage,
-                width,
-                height,
-                samples,
-                mode,
-                voxel_size,
-                noise_estimate,
-                bounces,
-                reference=reference,
-                step=step or _silent,
-                voxel_floor=voxel_floor,
-                noise_target=noise_target,
-                reuse_reference=reuse_reference,
-            )
+            stages = 4 if options.mode == "full" and options.reference else 3
+            run = _CompareRun(scene, out, outputs.stage, options, step or _silent, stages)
+            return _compare(run)
     except staging.FolderGone as gone:
         raise gone.said("the comparison ran", "compare again") from None
 
 
 # The comparison bakes the cirrus as a slab two voxels thin: the viewport samples the 2D layer at one
-# point, and a ray crossing the default 400 m slab at a grazing angle averages kilometres of it
-# (measured at the default camera, 160x90, single mode: alpha RMSE 0.023 with the 400 m slab, 0.016
-# with a 48 m one).
+# point, and a ray crossing a thick slab at a grazing angle averages kilometres of it
+# (docs/sources.md#comparison-set-up).
 THIN_CIRRUS = True
 
-# Jittered passes the comparison's viewport accumulates (in two halves). Measured at the default camera,
-# 160x90, single mode, before the other changes of docs/sources.md#comparison-set-up: 2 passes left the
-# luminance error at 6.6 %, 8 passes 6.1 %, with Cycles' own noise 3.6 %; 4 are most of the way for
-# half the time of 8.
+# Jittered passes the comparison's viewport accumulates (in two halves): most of the way to converged for
+# half the time of 8 (docs/sources.md#comparison-set-up).
 COMPARE_PASSES = 4
 
 
@@ -538,121 +489,122 @@ def _silent(_text: str) -> None:
     pass
 
 
-def _cycles_samples(scene, width, height, total, bounces, vdb, split, target, step):
-    """Cycles' image of the bake, its noise (None unless `split`) and the samples taken. Split, the
-    samples go to two seeds (their mean is the reference, half their difference its noise, at no extra
-    cost); with a target, seed pairs are added until the noise is under it (blender/reference.py)."""
+@dataclass
+class _CompareRun:
+    """One comparison: where it writes (`stage` names a file's staged path), its options and what it has
+    found so far."""
 
-    def render(n: int, seed_offset: int) -> np.ndarray:
-        scene.cycles.seed += seed_offset
-        try:
-            return render_cycles(scene, width, height, n, str(vdb), bounces=bounces, exact_samples=True)
-        finally:
-            scene.cycles.seed -= seed_offset
+    scene: object
+    out: Path
+    stage: Callable[[Path], Path]
+    options: CompareOptions
+    step: Callable[[str], None]
+    stages: int
+    timings: dict = dataclasses.field(default_factory=dict)
 
-    if not split:
-        return render(total, 0), None, total
-    return cycles_reference.sample_to_target(render, total, target, lambda text: step(f"   {text}"))
+    def say(self, n: int, text: str) -> None:
+        self.step(f"{n}/{self.stages} {text}")
 
 
-def _compare(
-    scene,
-    out: Path,
-    stage,
-    width,
-    height,
-    samples,
-    mode,
-    voxel_size,
-    noise_estimate,
-    bounces,
-    *,
-    reference,
-    step,
-    voxel_floor,
-    noise_target,
-    reuse_reference,
-) -> dict:
-    stages = 4 if mode == "full" and reference else 3
-    timings = {}
+def _compare(run: _CompareRun) -> dict:
+    baked = _compare_bake(run)
+    clip = bake_clip_box(baked.plan)  # the viewport keeps only the baked clouds (Cycles sees no others)
+    viewport, halves, ss = _compare_viewport(run, clip)
+    cycles, result = _compare_cycles(run, baked, viewport)
+    result["viewport_noise"] = cycles_reference.noise_of(halves[0], halves[1])
+    if run.stages == 4:
+        result["cone_march_vs_reference"] = _compare_reference(run, viewport, clip, ss)
+    _describe(run, result, baked, clip, ss)
+    _write_comparison(run, viewport, cycles, result)
+    return result
+
+
+def _compare_voxels(run: _CompareRun) -> tuple[float, float, float | None]:
+    """The bake's voxel size, the active share its memory bound may count on, and the size to fall back to
+    if the clouds fill more than that share (None: no fallback needed)."""
+    o, scene = run.options, run.scene
+    if o.voxel_size is not None:
+        return o.voxel_size, 1.0, None
+    # The sparse bake's memory follows the clouds, so the voxels can be as fine as the camera needs.
+    state = scene_io.state_from_scene(scene)
+    inv = np.array(scene_io.camera_inv_view_proj(scene, o.width, o.height))
+    wanted = max(camera_footprint_voxel(state, inv, o.width, o.height, scene.nubis.bake_voxel_size), o.voxel_floor)
+    voxel = max(camera_fitting_voxel(state, inv, wanted), o.voxel_floor)
+    if wanted >= voxel:
+        return voxel, 1.0, None
+    # The memory bound (every evaluated voxel active) holds the bake coarser than the camera asks: what the
+    # clouds really fill, counted at the size that fits, may allow finer voxels. A coarse reference is not
+    # converged in its voxels (docs/bake.md#memory).
+    run.say(1, f"counting what the clouds fill of a {voxel:.3g} m bake")
+    probe = probe_share(scene, voxel, (o.width, o.height), THIN_CIRRUS)
+    finer = max(camera_fitting_voxel(state, inv, wanted, active_share=probe), o.voxel_floor)
+    return (finer, probe, voxel) if finer < voxel else (voxel, 1.0, None)
+
+
+def _compare_bake(run: _CompareRun) -> BakeResult:
     t = time.perf_counter()
-    share, safe = 1.0, None
-    if voxel_size is None:
-        # The sparse bake's memory follows the clouds, so the voxels can be as fine as the camera needs.
-        state = scene_io.state_from_scene(scene)
-        inv = np.array(scene_io.camera_inv_view_proj(scene, width, height))
-        wanted = max(camera_footprint_voxel(state, inv, width, height, scene.nubis.bake_voxel_size), voxel_floor)
-        voxel_size = max(camera_fitting_voxel(state, inv, wanted), voxel_floor)
-        if wanted < voxel_size:
-            # The memory bound (every evaluated voxel active) holds the bake coarser than the camera asks:
-            # what the clouds really fill, counted at the size that fits, may allow finer voxels. A coarse
-            # reference is not converged in its voxels: the superstorm's Cycles image moved 10 % per pixel
-            # from 34 m to 15 m (docs/bake.md#memory).
-            step(f"1/{stages} counting what the clouds fill of a {voxel_size:.3g} m bake")
-            probe = probe_share(scene, voxel_size, (width, height), THIN_CIRRUS)
-            finer = max(camera_fitting_voxel(state, inv, wanted, active_share=probe), voxel_floor)
-            if finer < voxel_size:
-                voxel_size, share, safe = finer, probe, voxel_size
-    step(f"1/{stages} baking what the camera sees, {voxel_size:.3g} m voxels")
-
-    def bake_at(voxel: float, active_share: float) -> BakeResult:
-        return bake(
-            scene,
-            stage(out / "clouds.vdb"),
-            voxel,
-            camera_only=True,
-            size=(width, height),
-            thin_cirrus=THIN_CIRRUS,
-            active_share=active_share,
-            vdb=False,  # Cycles renders the VDB clouds' own files (vdbclouds.native)
-        )
-
+    voxel, share, safe = _compare_voxels(run)
+    run.say(1, f"baking what the camera sees, {voxel:.3g} m voxels")
+    options = BakeOptions(
+        voxel_size=voxel,
+        camera_only=True,
+        size=(run.options.width, run.options.height),
+        thin_cirrus=THIN_CIRRUS,
+        active_share=share,
+        vdb=False,  # Cycles renders the VDB clouds' own files (vdbclouds.native)
+    )
     try:
-        baked = bake_at(voxel_size, share)
+        baked = bake(run.scene, run.stage(run.out / "clouds.vdb"), options)
     except bakeplan.BakeTooLarge:
         if safe is None:
             raise
         # The clouds filled more than the probe measured (its bake stopped before its trees outgrew the
         # memory): the size the bound allows instead.
-        step(f"1/{stages} the clouds fill more than measured: baking at {safe:.3g} m voxels")
-        baked = bake_at(safe, 1.0)
-    timings["bake_s"] = time.perf_counter() - t
-    # The viewport keeps only the baked clouds: sky light from beyond the box would otherwise be
-    # shadowed by clouds Cycles never sees.
-    clip = bake_clip_box(baked.plan)
+        run.say(1, f"the clouds fill more than measured: baking at {safe:.3g} m voxels")
+        baked = bake(run.scene, run.stage(run.out / "clouds.vdb"), options.but(voxel_size=safe, active_share=1.0))
+    run.timings["bake_s"] = time.perf_counter() - t
+    return baked
+
+
+def _supersampling(options: CompareOptions) -> int:
+    """Cycles integrates each pixel's area (a box filter); the viewport samples the pixel centre:
+    supersampled, both estimate the same pixel value."""
+    return max(1, min(4, 1024 // max(options.width, options.height)))
+
+
+def _compare_viewport(run: _CompareRun, clip) -> tuple[np.ndarray, list[np.ndarray], int]:
+    """The viewport converged as its accumulation converges when the view stands still: two halves of
+    COMPARE_PASSES jittered passes, whose difference measures the grain left."""
+    o = run.options
+    ss = _supersampling(o)
     t = time.perf_counter()
-    # Cycles integrates each pixel's area (box filter below); the viewport samples the pixel centre.
-    # Supersampling the viewport makes both estimate the same pixel value.
-    ss = max(1, min(4, 1024 // max(width, height)))
-    step(f"2/{stages} the viewport's march, {width * ss}x{height * ss} pixels, {COMPARE_PASSES} passes")
-    # The viewport converged as its accumulation converges when the view stands still: two halves of
-    # COMPARE_PASSES jittered passes, whose difference measures what grain is left.
-    halves = [
-        downsample(render_viewport(scene, width * ss, height * ss, 0, mode, clip, COMPARE_PASSES // 2, i), ss)
-        for i in (0, COMPARE_PASSES // 2)
-    ]
-    viewport = (halves[0] + halves[1]) / 2
-    timings["viewport_s"] = time.perf_counter() - t
+    run.say(2, f"the viewport's march, {o.width * ss}x{o.height * ss} pixels, {COMPARE_PASSES} passes")
+    w, h, half = o.width * ss, o.height * ss, COMPARE_PASSES // 2
+    shot = viewport_shot(run.scene, w, h, 0, o.mode, clip)
+    halves = [downsample(render_shot(shot, half, first), ss) for first in (0, half)]
+    run.timings["viewport_s"] = time.perf_counter() - t
+    return (halves[0] + halves[1]) / 2, halves, ss
+
+
+def _compare_cycles(run: _CompareRun, baked: BakeResult, viewport: np.ndarray) -> tuple[np.ndarray, dict]:
+    """Cycles' image of the bake (or an earlier run's of the same view) and the metrics against it."""
+    o, scene = run.options, run.scene
     # Cycles counts bounces after the first scattering: 0 volume bounces is single scattering.
-    if mode == "single":
-        bounces = 0
-    elif bounces is None:
-        bounces = REFERENCE_BOUNCES
+    bounces = 0 if o.mode == "single" else (REFERENCE_BOUNCES if o.bounces is None else o.bounces)
     t = time.perf_counter()
-    total = samples or scene.cycles.samples
-    target = noise_target / 100 if noise_target is not None else None
-    ref_key = cycles_reference.key(scene, baked.path, width, height, bounces)
-    earlier = cycles_reference.reusable(out, ref_key, total, target) if reuse_reference else None
+    total = o.samples or scene.cycles.samples
+    target = o.noise_target / 100 if o.noise_target is not None else None
+    ref_key = cycles_reference.key(scene, baked.path, o.width, o.height, bounces)
+    earlier = cycles_reference.reusable(run.out, ref_key, total, target) if o.reuse_reference else None
     if earlier is not None:
         cycles, info = earlier
         taken, noise = info["samples"], info["cycles_noise"]
-        step(f"3/{stages} Cycles: the earlier reference in {out} ({taken} samples, same bake and scene)")
+        run.say(3, f"Cycles: the earlier reference in {run.out} ({taken} samples, same bake and scene)")
     else:
-        step(f"3/{stages} Cycles, {width}x{height} pixels, {total} samples, {bounces} volume bounces")
-        cycles, noise, taken = _cycles_samples(
-            scene, width, height, total, bounces, baked.path, noise_estimate or target is not None, target, step
-        )
-    timings["cycles_s"] = time.perf_counter() - t
+        run.say(3, f"Cycles, {o.width}x{o.height} pixels, {total} samples, {bounces} volume bounces")
+        split = o.noise_estimate or target is not None
+        cycles, noise, taken = _cycles_samples(run, total, bounces, baked.path, split, target)
+    run.timings["cycles_s"] = time.perf_counter() - t
     result = metrics.compare(viewport, cycles)
     if noise is not None:
         result["cycles_noise"] = noise
@@ -660,42 +612,71 @@ def _compare(
         "key": ref_key,
         "samples": taken,
         "reused": earlier is not None,
-        "cycles_s": earlier[1]["cycles_s"] if earlier is not None else timings["cycles_s"],
+        "cycles_s": earlier[1]["cycles_s"] if earlier is not None else run.timings["cycles_s"],
     }
+    result["volume_bounces"] = bounces
     scene.cycles.samples = taken
-    result["viewport_noise"] = cycles_reference.noise_of(halves[0], halves[1])
-    if stages == 4:
-        # The real-time cone march against the reference march, everything else equal.
-        step(f"4/{stages} the reference light march, {width * ss}x{height * ss} pixels")
-        t = time.perf_counter()
-        reference = downsample(render_viewport(scene, width * ss, height * ss, 1, mode, clip, COMPARE_PASSES), ss)
-        cone = metrics.compare(viewport, reference)
-        result["cone_march_vs_reference"] = {
-            k: cone[k] for k in ("alpha_rmse", "luminance_rel_error", "luminance_bias")
-        }
-        timings["reference_s"] = time.perf_counter() - t
+    return cycles, result
+
+
+def _cycles_samples(run: _CompareRun, total: int, bounces: int, vdb, split: bool, target: float | None):
+    """Cycles' image of the bake, its noise (None unless `split`) and the samples taken. Split, the
+    samples go to two seeds (their mean is the reference, half their difference its noise, at no extra
+    cost); with a target, seed pairs are added until the noise is under it (blender/reference.py)."""
+    scene, o = run.scene, run.options
+
+    def render(n: int, seed_offset: int) -> np.ndarray:
+        scene.cycles.seed += seed_offset
+        try:
+            return render_cycles(scene, o.width, o.height, n, str(vdb), bounces=bounces, exact_samples=True)
+        finally:
+            scene.cycles.seed -= seed_offset
+
+    if not split:
+        return render(total, 0), None, total
+    return cycles_reference.sample_to_target(render, total, target, lambda text: run.step(f"   {text}"))
+
+
+def _compare_reference(run: _CompareRun, viewport: np.ndarray, clip, ss: int) -> dict:
+    """The real-time cone march against the reference march, everything else equal."""
+    o = run.options
+    run.say(4, f"the reference light march, {o.width * ss}x{o.height * ss} pixels")
+    t = time.perf_counter()
+    shot = viewport_shot(run.scene, o.width * ss, o.height * ss, 1, o.mode, clip)
+    march_ref = render_shot(shot, COMPARE_PASSES)
+    cone = metrics.compare(viewport, downsample(march_ref, ss))
+    run.timings["reference_s"] = time.perf_counter() - t
+    return {k: cone[k] for k in ("alpha_rmse", "luminance_rel_error", "luminance_bias")}
+
+
+def _describe(run: _CompareRun, result: dict, baked: BakeResult, clip, ss: int) -> None:
+    """What was compared, into the metrics."""
+    scene, o = run.scene, run.options
     # The reference march keeps within the shader loop limit by taking longer steps (core/march.py).
     steps_max = scene.nubis.march_steps_max
     storms = len(scene_io.storm_lights(scene.nubis))
     result["reference_view_steps"] = min(
-        steps_max, march.max_steps(scene.nubis.march_light_samples, storms, 2 if mode == "full" else 1)
+        steps_max, march.max_steps(scene.nubis.march_light_samples, storms, 2 if o.mode == "full" else 1)
     )
     result["reference_steps_capped"] = result["reference_view_steps"] < steps_max
     result.update(
-        mode=mode,
+        mode=o.mode,
         viewport_supersampling=ss,
-        width=width,
-        height=height,
+        width=o.width,
+        height=o.height,
         samples=scene.cycles.samples,
-        volume_bounces=bounces,
         preset=scene.nubis.preset,
         voxel_size=baked.plan.voxel_size,
         bake_dims=list(baked.plan.dims),
         # 1: the bake fitted the memory bound; below: it counted on this share, measured by a probe.
         bake_active_share=baked.plan.active_share,
         clip_box=list(clip),
-        seconds=timings,
+        seconds=run.timings,
     )
+
+
+def _write_comparison(run: _CompareRun, viewport: np.ndarray, cycles: np.ndarray, result: dict) -> None:
+    scene, out, stage = run.scene, run.out, run.stage
     save_render(scene, stage(out / "viewport.exr"), viewport)
     save_render(scene, stage(out / "cycles.exr"), cycles)
     view_png, cyc_png = display_image(scene, viewport), display_image(scene, cycles)
@@ -705,4 +686,3 @@ def _compare(
     imageio.write_image(stage(out / "difference.png"), diff)
     imageio.write_image(stage(out / "side_by_side.png"), metrics.side_by_side(view_png, cyc_png, diff))
     stage(out / "metrics.json").write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")  # moved last
-    return result

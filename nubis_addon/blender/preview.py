@@ -20,6 +20,7 @@ from ..core import camera, imageio, interrupt, quality, sequence, staging
 from ..core.bakeplan import comparison_voxel_size, view_footprint
 from ..core.errors import NubisError
 from ..core.fsutil import check_output_dir
+from ..core.jobs import BakeOptions, BenchmarkOptions, PreviewOptions
 from ..render import engine, temporal
 from ..render.gpu_context import renderer_name
 from . import cycles_setup, pipeline, runtime, scene_io
@@ -89,28 +90,20 @@ class PreviewResult:
     size: tuple[int, int] = (0, 0)
 
 
-def preview(
-    scene,
-    out_dir,
-    width: int,
-    height: int,
-    frames: list[int],
-    redraws: int = 1,
-    orbit: float = 0.0,
-    naive: bool = False,
-    quality_name: str | None = None,
-    progress: Progress | None = None,
-) -> PreviewResult:
+def preview(scene, out_dir, options: PreviewOptions, progress: Progress | None = None) -> PreviewResult:
     """Replay the viewport's draw path from the scene camera: for each frame, `redraws` redraws of the
     temporal viewport (the draw handler's own code), the camera turned by `orbit` degrees per frame.
     Writes NNNN.exr and NNNN.png per frame (and NNNN_naive.* with `naive`) and preview.json."""
+    width, height, frames, redraws, orbit, naive = (
+        options.width, options.height, list(options.frames), options.redraws, options.orbit, options.naive
+    )  # fmt: skip
     if not 1 <= redraws <= MAX_REDRAWS:
         raise NubisError(f"--redraws must be between 1 and {MAX_REDRAWS}, not {redraws}")
     if not math.isfinite(orbit) or abs(orbit) > 360:
         raise NubisError(f"--orbit must be a number of degrees between -360 and 360, not {orbit}")
     out = check_output_dir(out_dir)
     engine.check_offscreen(width, height)  # the full-size image read at the end, refused before the minutes of drawing
-    q = apply_quality(scene, quality_name)
+    q = apply_quality(scene, options.quality)
     s = scene.nubis
     result = PreviewResult(frames, quality=q, size=(width, height))
     tv = temporal.TemporalViewport()
@@ -246,33 +239,61 @@ def render_eevee(scene, width: int, height: int, vdb_path: str, samples: int = 1
     return rgba, seconds
 
 
-def benchmark(
-    scene,
-    out_dir,
-    width: int,
-    height: int,
-    quality_name: str | None = None,
-    eevee: bool = True,
-    rounds: int = 3,
-    baseline: dict | None = None,
-) -> dict:
+def benchmark(scene, out_dir, options: BenchmarkOptions, baseline: dict | None = None) -> dict:
     """Naive march, temporal redraws and EEVEE on the same view in one run; writes benchmark.json,
     naive.png and converged.png (after 16 redraws). `baseline`: an earlier benchmark of the same view in
     this run (the procedural cloudscape before VDB clouds were added), whose redraw the result names."""
     out = check_output_dir(out_dir)
-    q = apply_quality(scene, quality_name)
-    s = scene.nubis
-    clouds = runtime.cloud_gpu(s.noise_seed)
-    view = camera_view(scene, width, height)
+    q = apply_quality(scene, options.quality)
+    clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
+    view = camera_view(scene, options.width, options.height)
     state = _with_footprint(scene_io.state_from_scene(scene), view)
     clouds.update(state)
+    stats = _fetch_stats(clouds, view, options)
+    timed = _timed_rounds(scene, clouds, state, view, options.rounds)
+    result = _benchmark_result(scene, q, options, timed, stats)
+    if state.vdb_clouds:
+        # GPU memory of the VDB clouds' bricks against their dense boxes at the same half floats.
+        result["vdb_gpu_bytes"] = clouds.vdb.bytes
+        result["vdb_active_voxels"] = sum(p.cloud.active_voxels for p in state.vdb_clouds)
+        result["vdb_dense_box_bytes"] = sum(
+            2 * int(np.prod(np.subtract(p.cloud.bounds[1], p.cloud.bounds[0]) + 1)) for p in state.vdb_clouds
+        )
+    if baseline is not None:
+        result["baseline_redraw_ms"] = baseline["redraw_ms"]
+        result["baseline_preset"] = baseline["preset"]
+    images = {
+        "naive.png": pipeline.display_image(scene, timed.naive),
+        "converged.png": pipeline.display_image(scene, timed.converged),
+    }
+    result["converged_psnr_db"] = psnr(images["converged.png"], images["naive.png"])
+    if options.eevee:
+        images["eevee.png"] = _benchmark_eevee(scene, view, options, result)
+    with staging.output_set() as outputs:
+        for name, image in images.items():
+            imageio.write_image(outputs.stage(out / name), image)
+        outputs.stage(out / "benchmark.json").write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+    return result
+
+
+# The light march's far part as the light volumes give it, and as its long tap (docs/viewport.md#light-volumes).
+_VARIANTS = (("volumes", 1), ("long_tap", 0))
+
+
+def _fetch_stats(clouds, view, options: BenchmarkOptions) -> dict:
+    """Texture fetches and samples per pixel of the coarse-to-fine and the naive march, per variant."""
     stats = {}
-    variants = (("volumes", 1), ("long_tap", 0))  # the light march's far part (docs/viewport.md#light-volumes)
-    for variant, volume in variants:
+    for variant, volume in _VARIANTS:
         clouds.switches["NUBIS_LIGHT_VOLUME"] = volume
         for label, switches in (("coarse_to_fine", {}), ("naive", {"NUBIS_NAIVE": 1})):
             px = engine.render_offscreen(
-                clouds, mathutils.Matrix(view.inv_view_proj), view.eye, width, height, NUBIS_FETCH_STATS=1, **switches
+                clouds,
+                mathutils.Matrix(view.inv_view_proj),
+                view.eye,
+                options.width,
+                options.height,
+                NUBIS_FETCH_STATS=1,
+                **switches,
             )
             key = label if variant == "volumes" else f"{label}_{variant}"
             stats[key] = {
@@ -280,17 +301,30 @@ def benchmark(
                 "view_samples_per_pixel": float(px[..., 1].mean()),
                 "density_samples_per_pixel": float(px[..., 2].mean()),
             }
-    # Rounds of one naive march and one convergence (16 redraws from a restart) per variant alternate,
-    # so a load that comes and goes on the machine weighs on all alike; each reports its median.
+    return stats
+
+
+@dataclass
+class _Timed:
+    times: dict  # milliseconds of each run, by what was run
+    fills: list  # milliseconds to fill the light volumes once
+    naive: np.ndarray  # the naive march's image (light volumes on)
+    converged: np.ndarray  # the temporal viewport's after a convergence
+
+
+def _timed_rounds(scene, clouds, state, view, rounds: int) -> _Timed:
+    """Rounds of one naive march and one convergence (16 redraws from a restart) per variant, alternating,
+    so a load that comes and goes on the machine weighs on all alike; then the light volumes' fills."""
+    s = scene.nubis
     tv = temporal.TemporalViewport()
     times: dict[str, list[float]] = {}
     try:
-        for _variant, volume in variants:
+        for _variant, volume in _VARIANTS:
             clouds.switches["NUBIS_LIGHT_VOLUME"] = volume
             _naive(clouds, view)  # compiles the permutation
             tv.redraw(clouds, state, view, s.viewport_resolution, 64)  # allocates and compiles
         for _ in range(rounds):
-            for variant, volume in variants:
+            for variant, volume in _VARIANTS:
                 clouds.switches["NUBIS_LIGHT_VOLUME"] = volume
                 clouds.update(state)  # the redraws leave their own block behind (the history's footprint)
                 t = time.perf_counter()
@@ -305,70 +339,65 @@ def benchmark(
                 if volume:
                     converged = temporal.render_view(tv, clouds, view, s.viewport_blur)
                     volume_naive = naive_img
-        # Filling the two volumes once (a change of the field, the sun or the wind's drift): here the sun moves.
-        fills = []
-        for i in range(rounds):
-            t = time.perf_counter()
-            sun = np.asarray(state.sun_direction, np.float64) + (0.0, 0.0, 1e-3 * (i + 1))
-            clouds.update(replace(state, sun_direction=tuple(sun / np.linalg.norm(sun))))
-            clouds.volumes["sky_volume"].read()  # waits for both fills (the sky's is dispatched last)
-            fills.append((time.perf_counter() - t) * 1000.0)
+        fills = _volume_fills(clouds, state, rounds)
     finally:
         clouds.switches["NUBIS_LIGHT_VOLUME"] = 1
         clouds.update(state)
         tv.free()
-    naive_img = volume_naive
+    return _Timed(times, fills, volume_naive, converged)
+
+
+def _volume_fills(clouds, state, rounds: int) -> list[float]:
+    """Filling the two light volumes once (a change of the field, the sun or the wind's drift): the sun moves."""
+    fills = []
+    for i in range(rounds):
+        t = time.perf_counter()
+        sun = np.asarray(state.sun_direction, np.float64) + (0.0, 0.0, 1e-3 * (i + 1))
+        clouds.update(replace(state, sun_direction=tuple(sun / np.linalg.norm(sun))))
+        clouds.volumes["sky_volume"].read()  # waits for both fills (the sky's is dispatched last)
+        fills.append((time.perf_counter() - t) * 1000.0)
+    return fills
+
+
+def _benchmark_result(scene, quality_name: str, options: BenchmarkOptions, timed: _Timed, stats: dict) -> dict:
+    times = timed.times
     naive_runs, redraws = times["naive_volumes"], times["redraw_volumes"]
     result = {
-        "preset": s.preset,
-        "quality": q,
-        "width": width,
-        "height": height,
+        "preset": scene.nubis.preset,
+        "quality": quality_name,
+        "width": options.width,
+        "height": options.height,
         "renderer": renderer_name(),
         "naive_ms": statistics.median(naive_runs),
         "redraw_ms": statistics.median(redraws),
         "naive_ms_long_tap": statistics.median(times["naive_long_tap"]),
         "redraw_ms_long_tap": statistics.median(times["redraw_long_tap"]),
-        "volume_fill_ms": statistics.median(fills),
+        "volume_fill_ms": statistics.median(timed.fills),
         "naive_ms_all": [round(x, 3) for x in naive_runs],
         "redraw_ms_all": [round(x, 3) for x in redraws],
         "fetches": stats,
     }
-    if state.vdb_clouds:
-        # GPU memory of the VDB clouds' bricks against their dense boxes at the same half floats.
-        result["vdb_gpu_bytes"] = clouds.vdb.bytes
-        result["vdb_active_voxels"] = sum(p.cloud.active_voxels for p in state.vdb_clouds)
-        result["vdb_dense_box_bytes"] = sum(
-            2 * int(np.prod(np.subtract(p.cloud.bounds[1], p.cloud.bounds[0]) + 1)) for p in state.vdb_clouds
-        )
-    if baseline is not None:
-        result["baseline_redraw_ms"] = baseline["redraw_ms"]
-        result["baseline_preset"] = baseline["preset"]
     result["naive_over_redraw"] = result["naive_ms"] / result["redraw_ms"]
     c2f, nv = stats["coarse_to_fine"]["fetches_3d_per_pixel"], stats["naive"]["fetches_3d_per_pixel"]
     result["fetch_saving"] = 1.0 - c2f / nv if nv else 0.0
-    display_naive = pipeline.display_image(scene, naive_img)
-    display_converged = pipeline.display_image(scene, converged)
-    result["converged_psnr_db"] = psnr(display_converged, display_naive)
-    if eevee:
-        with interrupt.temporary_dir("nubis-bench-") as tmp:
-            st = scene_io.state_from_scene(scene)
-            region = view_footprint(st, np.array(view.inv_view_proj))
-            voxel = comparison_voxel_size(st, s.bake_voxel_size, region)
-            baked = pipeline.bake(scene, Path(tmp) / "clouds.vdb", voxel, camera_only=True, size=(width, height))
-            # Twice: the first render also compiles EEVEE's shaders; the faster one is EEVEE's own cost.
-            runs = [render_eevee(scene, width, height, str(baked.path), 16) for _ in range(2)]
-        eevee_img, seconds = min(runs, key=lambda r: r[1])
-        result["eevee_ms"] = seconds * 1000.0
-        result["eevee_voxel_size"] = baked.plan.voxel_size
-        result["eevee_over_redraw"] = result["eevee_ms"] / result["redraw_ms"]
-    with staging.output_set() as outputs:
-        imageio.write_image(outputs.stage(out / "naive.png"), display_naive)
-        imageio.write_image(outputs.stage(out / "converged.png"), display_converged)
-        if eevee:
-            imageio.write_image(outputs.stage(out / "eevee.png"), pipeline.display_image(scene, eevee_img))
-        outputs.stage(out / "benchmark.json").write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
     return result
+
+
+def _benchmark_eevee(scene, view, options: BenchmarkOptions, result: dict) -> np.ndarray:
+    """EEVEE rendering the bake of the same view; its time into `result`, its display image returned."""
+    with interrupt.temporary_dir("nubis-bench-") as tmp:
+        st = scene_io.state_from_scene(scene)
+        region = view_footprint(st, np.array(view.inv_view_proj))
+        voxel = comparison_voxel_size(st, scene.nubis.bake_voxel_size, region)
+        bake_options = BakeOptions(voxel, camera_only=True, size=(options.width, options.height))
+        baked = pipeline.bake(scene, Path(tmp) / "clouds.vdb", bake_options)
+        # Twice: the first render also compiles EEVEE's shaders; the faster one is EEVEE's own cost.
+        runs = [render_eevee(scene, options.width, options.height, str(baked.path), 16) for _ in range(2)]
+    eevee_img, seconds = min(runs, key=lambda r: r[1])
+    result["eevee_ms"] = seconds * 1000.0
+    result["eevee_voxel_size"] = baked.plan.voxel_size
+    result["eevee_over_redraw"] = result["eevee_ms"] / result["redraw_ms"]
+    return pipeline.display_image(scene, eevee_img)
 
 
 def psnr(a: np.ndarray, b: np.ndarray) -> float:

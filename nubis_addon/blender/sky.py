@@ -22,9 +22,9 @@ WORLD_NAME = "Nubis Sky"
 SKY_NODE = "Nubis Sky Texture"
 BACKGROUND_NODE = "Nubis Sky Background"
 MARKER = "nubis_sky"  # custom property on a World that Nubis built (and so may keep in step with the sun)
-# The clouds' sky-light environment. 64 x 32 texels (5.6 degrees) smeared the bright band above the
-# horizon into the black below it; 128 x 64 brought the sky-lit single scattering at the default
-# camera within 1.8 % of Cycles on average (64 x 32: 2.8 %).
+# The clouds' sky-light environment: fine enough that the bright band just above the horizon is not smeared
+# into the ground below it, which would misplace the light the clouds receive from low in the sky
+# (docs/measurements.md#sky-capture).
 ENV_WIDTH = 128
 ENV_SAMPLES = 4  # Cycles samples per pixel of a capture: a sky is smooth
 BACKGROUND_WIDTH = 512  # the sky behind the clouds in pictures (render's PNG, panorama)
@@ -352,8 +352,8 @@ def _render_world(world, width: int, height: int, samples: int) -> np.ndarray:
         tmp_scene.cycles.samples = samples
         tmp_scene.cycles.use_adaptive_sampling = False
         tmp_scene.cycles.use_denoising = False
-        # Each texel the mean over its own area (a box of one pixel): the default 1.5-pixel filter blurred
-        # the bright horizon a row into the ground.
+        # Each texel the mean over its own area (a box of one pixel): a wider filter, such as Cycles' default
+        # 1.5 pixels, blurs the bright horizon into the ground's row below it.
         tmp_scene.cycles.pixel_filter_type = "BOX"
         tmp_scene.cycles.filter_width = 1.0
         r.resolution_x, r.resolution_y, r.resolution_percentage = width, height, 100

@@ -20,6 +20,7 @@ import numpy as np
 from ..core import lightvolume
 from ..core.bakeplan import BakePlan, plan_bake, view_footprint
 from ..core.errors import NubisError
+from ..core.jobs import BakeOptions
 from ..core.sequence import human_bytes
 from ..core.state import CloudState
 from ..render.engine import CloudGPU
@@ -75,58 +76,45 @@ class BakeSnapshot:
         return meta
 
 
-def bake_plan(
-    scene,
-    voxel_size: float | None = None,
-    camera_only: bool = False,
-    size: tuple[int, int] | None = None,
-    velocity: bool = False,
-    thin_cirrus: bool = False,
-    wait: bool = True,
-    active_share: float = 1.0,
-    vdb: bool = True,
-) -> tuple[CloudState, BakePlan]:
+def scene_options(scene, voxel_size: float | None = None) -> BakeOptions:
+    """The bake the scene's Bake settings ask for (the Bake panel's), at `voxel_size` if given."""
+    s = scene.nubis
+    return BakeOptions(
+        voxel_size=voxel_size or None, camera_only=s.bake_camera_only, half=s.bake_half, velocity=s.bake_velocity
+    )
+
+
+def bake_plan(scene, options: BakeOptions, wait: bool = True) -> tuple[CloudState, BakePlan]:
     """The scene's cloud state at its current frame and the bake's plan (tiles, memory estimate:
     refused politely before any GPU work when it does not fit). `wait` False plans without capturing
-    the World's light (the plan does not depend on it); `active_share` as in plan_bake; `vdb` False
-    leaves the VDB clouds out (a comparison's Cycles renders their own files: vdbclouds.native)."""
+    the World's light (the plan does not depend on it); `options.vdb` False leaves the VDB clouds out (a
+    comparison's Cycles renders their own files: vdbclouds.native)."""
     state = scene_io.state_from_scene(scene, wait=wait)
-    if not vdb:
+    if not options.vdb:
         state.vdb_clouds = ()
     region = None
-    if camera_only:
+    if options.camera_only:
         # The camera's aspect only: a camera-only bake renders no image, so the image size limit does not apply.
-        w, h = size or (scene.render.resolution_x, scene.render.resolution_y)
+        w, h = options.size or (scene.render.resolution_x, scene.render.resolution_y)
         inv = np.array(scene_io.camera_inv_view_proj(scene, w, h))
         region = view_footprint(state, inv)
     plan = plan_bake(
         state,
-        voxel_size or scene.nubis.bake_voxel_size,
+        options.voxel_size or scene.nubis.bake_voxel_size,
         region=region,
-        velocity=velocity,
-        thin_cirrus=thin_cirrus,
-        active_share=active_share,
+        velocity=options.velocity,
+        thin_cirrus=options.thin_cirrus,
+        active_share=options.active_share,
     )
     state.cirrus_slab = plan.cirrus_slab
     return state, plan
 
 
-def take(
-    scene,
-    voxel_size: float | None = None,
-    camera_only: bool = False,
-    size: tuple[int, int] | None = None,
-    velocity: bool = False,
-    thin_cirrus: bool = False,
-    active_share: float = 1.0,
-    vdb: bool = True,
-) -> BakeSnapshot:
+def take(scene, options: BakeOptions) -> BakeSnapshot:
     """The bake of the scene's current frame, as it is now (planned and refused here when it does not fit)."""
     s = scene.nubis
     noise = runtime.cloud_gpu(s.noise_seed).noise  # made or loaded now: a seed change later makes a new set
-    state, plan = bake_plan(
-        scene, voxel_size, camera_only, size, velocity, thin_cirrus, active_share=active_share, vdb=vdb
-    )
+    state, plan = bake_plan(scene, options)
     fps = scene_io.scene_fps(scene)
     state.motion_dt = s.wind_time_scale / fps  # one frame of wind time, for the velocity grid
     return BakeSnapshot(
@@ -142,7 +130,7 @@ def take(
     )
 
 
-def take_sequence(scene, frames: list[int], **options) -> list[BakeSnapshot]:
+def take_sequence(scene, frames: list[int], options: BakeOptions) -> list[BakeSnapshot]:
     """Every frame's snapshot, taken now: the scene is set to each frame in turn and back to the frame it
     was on. Frames whose field did not change share its arrays; when it changes from frame to frame and
     the copies would pass SEQUENCE_SNAPSHOT_LIMIT, refused before the first frame is read."""
@@ -163,7 +151,7 @@ def take_sequence(scene, frames: list[int], **options) -> list[BakeSnapshot]:
     try:
         for frame in frames:
             scene.frame_set(frame)
-            snap = take(scene, **options)
+            snap = take(scene, options)
             if snaps:
                 _share_fields(snap.state, snaps[-1].state)
             snaps.append(snap)

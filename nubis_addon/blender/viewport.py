@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 import traceback
+from dataclasses import dataclass
 
 import bpy
 import gpu
@@ -82,27 +83,33 @@ def temporal_view(key) -> temporal.TemporalViewport:
     return tv
 
 
-def draw_view(
-    scene,
-    inv_view_proj,
-    view_origin,
-    width: int,
-    height: int,
-    perspective: bool = True,
-    key=None,
-    depth=None,
-    depth_key=None,
-    wait_for_noise: bool | None = None,
-    sky: bool = False,
-) -> temporal.TemporalViewport | None:
+@dataclass(frozen=True)
+class ViewDraw:
+    """One view to draw: its inverse view-projection and origin (the eye of a perspective view), its size,
+    the temporal viewport it accumulates in (`key`), the scene's depth as a float texture with the key of
+    what it shows, and whether the World's sky goes behind the clouds (Solid shading)."""
+
+    inv_view_proj: object
+    view_origin: object
+    width: int
+    height: int
+    perspective: bool = True
+    key: object = None
+    depth: object = None
+    depth_key: object = None
+    sky: bool = False
+
+
+def draw_view(scene, request: ViewDraw, wait_for_noise: bool | None = None) -> temporal.TemporalViewport | None:
     """One redraw of the temporal viewport (render/temporal.py) over the bound framebuffer: march one
     pixel in 16 and resolve the history, unless it has converged, then upscale it behind the scene's
-    objects. `depth` (a float texture of the view's depth) lets the march skip what geometry hides.
+    objects. The request's `depth` lets the march skip what geometry hides.
 
     Noise for a new seed is made synchronously headless, and in the interface (`wait_for_noise` False)
     on a worker thread: meanwhile the previous seed's clouds are drawn, or nothing (None is returned),
     and the sidebar says "Generating noise"; the views redraw when it is ready (blender/runtime.py).
-    `sky` draws the World's sky behind the clouds first (Solid shading, where Blender draws none)."""
+    The request's `sky` draws the World's sky behind the clouds first (Solid shading, where Blender
+    draws none)."""
     settings = scene.nubis
     if wait_for_noise is None:
         wait_for_noise = bpy.app.background
@@ -114,15 +121,16 @@ def draw_view(
             return None
     # Binding the history's framebuffers rebinds; remember the target so the upscale lands there.
     target = gpu.state.active_framebuffer_get()
-    state = _state(scene, view_origin)
-    eye = (*view_origin[:3], 1.0) if perspective else (0.0, 0.0, 0.0, 0.0)
-    view = temporal.View.of(np.array(inv_view_proj), eye, width, height)
-    tv = temporal_view(key)
-    tv.redraw(clouds, state, view, settings.viewport_resolution, settings.viewport_samples, depth, depth_key)
+    r = request
+    state = _state(scene, r.view_origin)
+    eye = (*r.view_origin[:3], 1.0) if r.perspective else (0.0, 0.0, 0.0, 0.0)
+    view = temporal.View.of(np.array(r.inv_view_proj), eye, r.width, r.height)
+    tv = temporal_view(r.key)
+    tv.redraw(clouds, state, view, settings.viewport_resolution, settings.viewport_samples, r.depth, r.depth_key)
     with target.bind():
         gpu.state.depth_test_set("LESS_EQUAL")
         gpu.state.depth_mask_set(False)
-        if sky:
+        if r.sky:
             gpu.state.blend_set("NONE")
             engine.draw_stage("sky", clouds, {"inv_view_proj": Matrix(view.inv_view_proj), "eye": view.eye})
         gpu.state.blend_set("ALPHA_PREMULT")
@@ -260,8 +268,7 @@ def draw_region(scene, region, rv3d, sky: bool = False) -> temporal.TemporalView
     # The eye from the same float64 inverse the rays use: mathutils inverts in float32, which puts the
     # eye millimetres off the rays' own origin and turns rays that are only metres long by 0.04 degrees.
     eye = np.linalg.inv(np.array(rv3d.view_matrix, dtype=np.float64))[:3, 3]
-    tv = draw_view(
-        scene,
+    request = ViewDraw(
         camera.ray_inverse_view_projection(rv3d.window_matrix, rv3d.view_matrix),
         eye,
         region.width,
@@ -272,6 +279,7 @@ def draw_region(scene, region, rv3d, sky: bool = False) -> temporal.TemporalView
         depth_key=_geometry[0],
         sky=sky,
     )
+    tv = draw_view(scene, request)
     if tv is not None and not tv.converged:
         _keep_converging()
     return tv

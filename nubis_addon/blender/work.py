@@ -77,16 +77,8 @@ def bake_jobs(
 ) -> list[tuple[str, Iterator]]:
     """Bake VDB with the scene's bake settings: one job, its snapshot taken now; `tiles_per_step`
     pipeline.TILES_PER_STEP unless given."""
-    s = scene.nubis
-    steps = pipeline.bake_steps(
-        scene,
-        path,
-        voxel_size,
-        camera_only=s.bake_camera_only,
-        half=s.bake_half,
-        velocity=s.bake_velocity,
-        tiles_per_step=tiles_per_step or pipeline.TILES_PER_STEP,
-    )
+    options = snapshot.scene_options(scene, voxel_size)
+    steps = pipeline.bake_steps(scene, path, options, tiles_per_step or pipeline.TILES_PER_STEP)
     return [(os.path.basename(path), steps)]
 
 
@@ -95,15 +87,15 @@ def sequence_jobs(
 ) -> list[tuple[str, Iterator]]:
     """Bake Sequence: one job per frame, `clouds_NNNN.vdb` in `folder`, every frame's snapshot taken now
     (the timeline is back on its frame before the first tile)."""
-    s = scene.nubis
-    snaps = snapshot.take_sequence(scene, frames, camera_only=s.bake_camera_only, velocity=s.bake_velocity)
+    options = snapshot.scene_options(scene)
+    snaps = snapshot.take_sequence(scene, frames, options)
     return [
         (
             f"frame {snap.frame}",
             pipeline.snapshot_steps(
                 snap,
                 os.path.join(folder, f"clouds_{snap.frame:04d}.vdb"),
-                s.bake_half,
+                options.half,
                 tiles_per_step or pipeline.TILES_PER_STEP,
             ),
         )

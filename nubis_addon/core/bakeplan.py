@@ -23,10 +23,9 @@ MAX_TILES = 200_000  # beyond this the box alone is absurd: refuse before planni
 # What the process holds besides the trees: Blender, the noise textures, one block's read-back.
 BASE_BYTES = 600 * 1024**2
 # The file on disk, per voxel the GPU evaluates (most of them hold no cloud, and OpenVDB stores only the
-# active ones, compressed): measured at most 1.49 bytes in float and 1.19 in half on the bundled presets
-# (stratus_overcast at 500 m, the densest; 0.1 to 0.8 elsewhere and at finer voxels), with some margin.
-# A velocity grid holds three floats where the density holds one. Each file adds its header, metadata
-# and tree (about 14 KB for a near-empty bake).
+# active ones, compressed). A sequence's disk estimate must be an upper bound, so these sit a margin above
+# the densest bundled preset's bake (docs/measurements.md#bake-planning). A velocity grid holds three floats
+# where the density holds one. Each file adds its header, metadata and tree (FILE_OVERHEAD_BYTES).
 FILE_BYTES_PER_EVALUATED_VOXEL = {False: 1.6, True: 1.25}  # by `half`
 FILE_BYTES_VELOCITY_FACTOR = 4
 FILE_OVERHEAD_BYTES = 16 * 1024
@@ -430,15 +429,14 @@ def _merge(spans: list[tuple[int, int]]) -> tuple[tuple[int, int], ...]:
 
 
 # A comparison bakes only the camera's view, so it can afford finer voxels than a whole-sky bake:
-# trilinear interpolation of coarse voxels thickens thin cloud edges (measured: 40 m voxels showed
-# Cycles thin cloud 15 % more opaque than the viewport, 20 m halved the alpha error).
+# trilinear interpolation of coarse voxels thickens thin cloud edges, a difference between the viewport
+# and Cycles that would be the bake's, not the light model's (docs/measurements.md#bake-planning).
 COMPARE_VOXEL_BUDGET = 64_000_000  # the fixed budget of comparison_voxel_size (the benchmark's EEVEE bake)
 COMPARE_FINEST_VOXEL = 20.0
 # The camera's own voxel size: voxels per pixel footprint at the nearest cloud, and the finest it goes.
 # Trilinear reconstruction spreads a voxel over its neighbours, so one voxel per footprint still
-# thickens the thinnest edges: at the default camera (160x90, single mode) 23.9 m voxels (one per
-# footprint) left Cycles' thin cloud (alpha 0.1-0.3) 0.013 more opaque than the viewport, 16 m
-# voxels (1.5 per footprint) 0.004, and the luminance error fell from 4.9 % to 4.6 %.
+# thickens the thinnest edges; 1.5 per footprint takes most of that away for 1.5^3 (3.4) times the
+# voxels (docs/measurements.md#bake-planning).
 CAMERA_VOXELS_PER_FOOTPRINT = 1.5
 CAMERA_FINEST_VOXEL = 15.0
 
@@ -492,17 +490,16 @@ def camera_fitting_voxel(
     return voxel
 
 
-# The bound counts every voxel the tiles evaluate as active; the clouds fill far fewer. Measured on the
-# superstorm's camera-only bake (160x90), where the bound held the comparison to 34 m voxels: the density
-# grid's active voxels were 5.5 % of the evaluated ones at 34 m, 5.9 % at 24 m, 6.3 % at 15 m (finer
-# voxels resolve more of the thin edges), in leaves 80 % full; the bound said 34.4 GB at 15 m, the trees
-# held about 1.5 GB. A share measured by a probe bake at a coarser size, times this margin, covers
-# the growth towards finer voxels and the partly filled leaves (docs/bake.md#memory).
+# The bound counts every voxel the tiles evaluate as active; the clouds fill far fewer, so the bound can
+# refuse a bake whose trees would fit many times over. The share the clouds fill grows a little towards finer voxels
+# (they resolve more of the thin edges), and leaves are only partly full: a share measured by a probe bake
+# at a coarser size, times this margin, covers both (docs/bake.md#memory,
+# docs/measurements.md#bake-planning).
 SHARE_MARGIN = 1.5
 # A probe that finds almost no cloud still counts this share, so a bake never plans for nothing.
 SHARE_FLOOR = 0.01
-# How full the trees' leaves are (measured above): a bake that counts its active voxels as it goes
-# divides by this for the bytes its trees hold.
+# How full the trees' leaves are (docs/measurements.md#bake-planning): a bake that counts its active voxels
+# as it goes divides by this for the bytes its trees hold.
 LEAF_FILL = 0.8
 
 

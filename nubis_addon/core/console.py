@@ -14,7 +14,7 @@ from pathlib import Path
 _bars: set[int] = set()  # descriptors whose last line is an unfinished progress bar
 # Every write to a terminal and the bookkeeping of its bar go under this lock, so that the interrupt line,
 # written by the signal watcher thread while the main thread draws the bar, never lands inside a bar's line
-# or under a later bar (seen on Blender 4.5: "3.1%nubis: interrupted", then a 3.2 % bar).
+# or under a later bar: it is the last line the user reads (docs/measurements.md#terminal-output).
 _lock = threading.Lock()
 
 

@@ -28,6 +28,7 @@ from pathlib import Path
 
 from . import interrupt
 from .errors import NubisError
+from .jobs import BakeOptions  # noqa: F401 - the options a farm task carries (plain() below)
 
 try:  # optional: only distributed bakes need it
     import dask
@@ -58,15 +59,6 @@ class SceneSource:
 
     preset: str | None = None
     blend: str | None = None
-
-
-@dataclass(frozen=True)
-class BakeOptions:
-    voxel_size: float | None = None
-    camera_only: bool = False
-    size: tuple[int, int] | None = None
-    half: bool = False
-    velocity: bool = False
 
 
 def plain(value) -> dict:

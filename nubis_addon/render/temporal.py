@@ -176,6 +176,36 @@ class TemporalViewport:
         inv = np.array(view.inv_view_proj, dtype=np.float64)
         angle, size = camera.pixel_footprint(inv, history_size[0], history_size[1])
         state = dataclasses.replace(state, pixel_angle=angle, pixel_size=size)
+        dt, prev_view_proj = self._follow(view, inv, state, clouds, depth_key)
+        if self.converged:
+            clouds.update(state)  # the upscale reads this frame's flash intensities from the block
+            return False
+        sample_pass = self.since_change // REDRAWS_PER_SAMPLE if self._valid else 0
+        state = dataclasses.replace(state, jitter_pass=sample_pass + self.first_pass)
+        clouds.update(state)
+        bayer = self.redraw_index % REDRAWS_PER_SAMPLE
+        offset = march.bayer_offset(bayer)
+        defines = clouds.defines()
+        self._march(clouds, view, defines, offset, depth)
+        block = np.concatenate(
+            [
+                _matrix_block(view.inv_view_proj),
+                _matrix_block(prev_view_proj),
+                np.asarray(view.eye, np.float32),
+                np.array([*history_size, *work_size], np.float32),
+                np.array([bayer, min(self.since_change, 1 << 20), 1.0 / (sample_pass + 1), dt], np.float32),
+                np.array([1.0 if self._valid else 0.0, 0.0, *offset], np.float32),
+            ]
+        ).astype(np.float32)
+        self._resolve(clouds, defines, block)
+        self.redraw_index += 1
+        self.since_change += 1
+        self._valid = True
+        return True
+
+    def _follow(self, view: View, inv: np.ndarray, state: CloudState, clouds, depth_key) -> tuple[float, object]:
+        """Restart the accumulation when the view, the settings, the depth or the time changed; returns the
+        wind time since the last redraw and the previous view-projection (for reprojecting the history)."""
         key = (view.inv_view_proj, view.eye, self._state_key(state, clouds), depth_key)
         dt = 0.0
         prev_view_proj = self._view_proj
@@ -195,21 +225,12 @@ class TemporalViewport:
             self.restart("time")
         self._time = state.time
         view_proj = camera.forward_view_projection(inv)
-        if prev_view_proj is None:
-            prev_view_proj = view_proj
         self._view_proj = view_proj
-        if self.converged:
-            clouds.update(state)  # the upscale reads this frame's flash intensities from the block
-            return False
+        return dt, (view_proj if prev_view_proj is None else prev_view_proj)
 
-        sample_pass = self.since_change // REDRAWS_PER_SAMPLE if self._valid else 0
-        state = dataclasses.replace(state, jitter_pass=sample_pass + self.first_pass)
-        clouds.update(state)
-        bayer = self.redraw_index % REDRAWS_PER_SAMPLE
-        ox, oy = march.bayer_offset(bayer)
-        defines = clouds.defines()
-
-        # 1. March one pixel of every block into the working buffer.
+    def _march(self, clouds, view: View, defines, offset: tuple[float, float], depth) -> None:
+        """Step 1: march one pixel of every block into the working buffer, culled by the scene's depth."""
+        history_size, work_size = self._sizes
         if depth is None:
             if self._dummy_depth is None:
                 nothing = gpu.types.Buffer("FLOAT", 1, [1.0])
@@ -218,8 +239,7 @@ class TemporalViewport:
         else:
             depth_tex = depth
             cull = (1.0, view.width / history_size[0], view.height / history_size[1], 0.0)
-        work = self._work
-        with work["fb"].bind():
+        with self._work["fb"].bind():
             gpu.state.blend_set("NONE")
             gpu.state.depth_test_set("NONE")
             gpu.state.viewport_set(0, 0, *work_size)
@@ -227,24 +247,17 @@ class TemporalViewport:
             clouds.bind(sh)
             sh.uniform_float("inv_view_proj", _mathutils(view.inv_view_proj))
             sh.uniform_float("eye", view.eye)
-            sh.uniform_float("block", (float(ox), float(oy), float(history_size[0]), float(history_size[1])))
+            block = (float(offset[0]), float(offset[1]), float(history_size[0]), float(history_size[1]))
+            sh.uniform_float("block", block)
             sh.uniform_float("cull", cull)
             sh.uniform_sampler("scene_depth", depth_tex)
             engine.fullscreen_batch("temporal_march", defines).draw(sh)
 
-        # 2. Resolve the new history from it and the previous one.
+    def _resolve(self, clouds, defines, block: np.ndarray) -> None:
+        """Step 2: resolve the new history from the working buffer and the previous history (`block`: the
+        resolve's uniform block, shaders' T)."""
+        history_size, _work_size = self._sizes
         src, dst = self._history
-        weight = 1.0 / (sample_pass + 1)
-        block = np.concatenate(
-            [
-                _matrix_block(view.inv_view_proj),
-                _matrix_block(prev_view_proj),
-                np.asarray(view.eye, np.float32),
-                np.array([*history_size, *work_size], np.float32),
-                np.array([bayer, min(self.since_change, 1 << 20), weight, dt], np.float32),
-                np.array([1.0 if self._valid else 0.0, 0.0, ox, oy], np.float32),
-            ]
-        ).astype(np.float32)
         temporal_ubo = gpu.types.GPUUniformBuf(block.tobytes())
         with dst["fb"].bind():
             gpu.state.blend_set("NONE")
@@ -253,14 +266,10 @@ class TemporalViewport:
             clouds.bind(sh, cloud_inputs=False)
             sh.uniform_block("T", temporal_ubo)
             for name in ("color", "attr", "flash"):
-                sh.uniform_sampler(f"work_{name}", work[name])
+                sh.uniform_sampler(f"work_{name}", self._work[name])
                 sh.uniform_sampler(f"hist_{name}", src[name])
             engine.fullscreen_batch("resolve", defines).draw(sh)
         self._history = [dst, src]
-        self.redraw_index += 1
-        self.since_change += 1
-        self._valid = True
-        return True
 
     # ---- showing it ---------------------------------------------------------------------------------------
     def upscale(self, clouds: engine.CloudGPU, blur: float = 1.0) -> None:

@@ -768,14 +768,21 @@ def s_bake_disturbed(step: Step):
     metadata names the starting frame, and Ctrl-Z takes the imported Volume away and leaves the file."""
     pipeline, snapshot = ext_module("pipeline"), ext_module("snapshot")
     vdbio = _core_module("vdbio")
+    bake_options = _core_module("jobs").BakeOptions
     scene = bpy.context.scene
     start_frame, erosion = scene.frame_current, scene.nubis.density_erosion
     # One tile per timer step, as the issue's case; voxels small enough for two dozen steps.
     keep_step, pipeline.TILES_PER_STEP = pipeline.TILES_PER_STEP, 1
     voxel = next(
-        (v for v in (240.0, 200.0, 160.0) if len(snapshot.bake_plan(scene, v, wait=False)[1].tiles) >= 24), 120.0
+        (
+            v
+            for v in (240.0, 200.0, 160.0)
+            if len(snapshot.bake_plan(scene, bake_options(voxel_size=v), wait=False)[1].tiles) >= 24
+        ),
+        120.0,
     )
-    step.note(f"baking at {voxel:g} m: {len(snapshot.bake_plan(scene, voxel, wait=False)[1].tiles)} tiles")
+    tiles = len(snapshot.bake_plan(scene, bake_options(voxel_size=voxel), wait=False)[1].tiles)
+    step.note(f"baking at {voxel:g} m: {tiles} tiles")
     folder = os.path.join(OUT, "bake")
     os.makedirs(folder, exist_ok=True)
     path, ref = os.path.join(folder, "disturbed.vdb"), os.path.join(folder, "start_state.vdb")
@@ -803,7 +810,7 @@ def s_bake_disturbed(step: Step):
     # The starting state, baked again the way the command line bakes (to its end, nothing in between).
     scene.frame_set(start_frame)
     scene.nubis.density_erosion = erosion
-    pipeline.bake(scene, ref, voxel_size=voxel)
+    pipeline.bake(scene, ref, bake_options(voxel_size=voxel))
     a, lo_a = vdbio.read_grid_array(path, "density")
     b, lo_b = vdbio.read_grid_array(ref, "density")
     same = lo_a == lo_b and a.shape == b.shape

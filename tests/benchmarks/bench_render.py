@@ -12,6 +12,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from nubis_addon.core.jobs import BakeOptions
+
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
@@ -73,7 +75,7 @@ def main() -> None:
     rows.append(("frame 240x135, reference light march and sky visibility", f"{ref * 1000:.0f} ms"))
     rows.append(("  ratio reference / real-time at 240x135", f"{ref / times[(240, 135)]:.1f}x"))
     with tempfile.TemporaryDirectory() as tmp:
-        result = pipeline.bake(scene, Path(tmp) / "b.vdb", 100.0)
+        result = pipeline.bake(scene, Path(tmp) / "b.vdb", BakeOptions(voxel_size=100.0))
         size = (Path(tmp) / "b.vdb").stat().st_size
     nx, ny, nz = result.plan.dims
     rows.append((f"bake {nx}x{ny}x{nz} voxels of 100 m to OpenVDB", f"{result.seconds:.2f} s, {size / 2**20:.1f} MiB"))

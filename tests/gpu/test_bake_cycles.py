@@ -4,13 +4,15 @@ import numpy as np
 import pytest
 from gpu_helpers import split_coverage_scene
 
+from nubis_addon.core.jobs import BakeOptions
+
 
 @pytest.fixture
 def baked(make_scene, tmp_path):
     from nubis_addon.blender import pipeline
 
     scene = split_coverage_scene(make_scene)
-    result = pipeline.bake(scene, tmp_path / "clouds.vdb", voxel_size=400.0)
+    result = pipeline.bake(scene, tmp_path / "clouds.vdb", BakeOptions(voxel_size=400.0))
     return scene, result
 
 
@@ -42,7 +44,7 @@ def test_failed_bake_keeps_the_previous_vdb(baked, tmp_path):
     scene, result = baked
     before = result.path.read_bytes()
     with pytest.raises(NubisError, match="voxel size of at least"):
-        pipeline.bake(scene, result.path, voxel_size=2.0)
+        pipeline.bake(scene, result.path, BakeOptions(voxel_size=2.0))
     assert result.path.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["clouds.vdb"]
 
@@ -102,7 +104,7 @@ def test_flash_renders_offline_through_the_glow_grid(make_scene, tmp_path):
     renders = []
     for flash in (0.0, 400.0):
         storm.flash = flash
-        result = pipeline.bake(scene, tmp_path / f"f{int(flash)}.vdb", voxel_size=400.0, camera_only=True)
+        result = pipeline.bake(scene, tmp_path / f"f{int(flash)}.vdb", BakeOptions(voxel_size=400.0, camera_only=True))
         renders.append(pipeline.render_cycles(scene, 32, 18, samples=8, vdb_path=str(result.path)))
     gain = [float(renders[1][..., c].mean() / renders[0][..., c].mean()) - 1.0 for c in range(3)]
     assert gain[0] > 0.15 and gain[0] > max(gain[1], gain[2]) + 0.15, gain
@@ -128,7 +130,7 @@ def test_rain_absorbs_in_the_viewport_the_bake_and_cycles(make_scene, tmp_path):
     assert wet[..., 3].mean() >= dry[..., 3].mean()
     assert metrics.luminance(wet)[covered].mean() < 0.8 * metrics.luminance(dry)[covered].mean()
 
-    result = pipeline.bake(scene, tmp_path / "rain.vdb", voxel_size=400.0)
+    result = pipeline.bake(scene, tmp_path / "rain.vdb", BakeOptions(voxel_size=400.0))
     assert set(vdbio.read_grid_info(result.path)) == {"density", "absorption"}
     density, lo = vdbio.read_grid_array(result.path, "density")
     absorption, lo_abs = vdbio.read_grid_array(result.path, "absorption")

@@ -4,6 +4,8 @@ distributed bakes on Dask workers (identical grids, a clear message without Dask
 import numpy as np
 import pytest
 
+from nubis_addon.core.jobs import BakeOptions
+
 
 def test_sequence_names_follow_blenders_padding(tmp_path):
     from nubis_addon.core import sequence
@@ -56,7 +58,9 @@ def test_cli_sequence_with_velocity_matches_the_motion_vectors(make_scene, tmp_p
     scene = make_scene("superstorm")
     scene.nubis.wind_time_scale *= 100.0  # a hundred times the wind, so a frame moves the clouds pixels
     w, h = 64, 36
-    baked = pipeline.bake(scene, tmp_path / "storm.vdb", voxel_size=250.0, camera_only=True, size=(w, h), velocity=True)
+    baked = pipeline.bake(
+        scene, tmp_path / "storm.vdb", BakeOptions(voxel_size=250.0, camera_only=True, size=(w, h), velocity=True)
+    )
     vel, lo = _velocity_array(baked.path)
     motion = pipeline.render_motion(scene, w, h)
     inv = np.array(scene_io.camera_inv_view_proj(scene, w, h), np.float64)
@@ -99,7 +103,7 @@ def distributed_bakes(tmp_path_factory, blender):
     scene = blender.context.scene
     scene_io.apply_preset(scene, load_preset("default"))
     out = tmp_path_factory.mktemp("dist")
-    options = distributed.BakeOptions(voxel_size=300.0, velocity=True)
+    options = BakeOptions(voxel_size=300.0, velocity=True)
     engine = distributed.parse_engine("local:2")
     source = distributed.SceneSource(preset="default")
     results = {}

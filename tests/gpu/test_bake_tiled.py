@@ -5,6 +5,8 @@ import numpy as np
 import pytest
 from gpu_helpers import split_coverage_scene
 
+from nubis_addon.core.jobs import BakeOptions
+
 
 def _small_plan(scene, voxel=300.0, tile=8):
     from nubis_addon.blender import scene_io
@@ -100,8 +102,8 @@ def test_bake_writes_half_floats_and_pipeline_metadata(make_scene, tmp_path):
     from nubis_addon.core import bundled, vdbio
 
     scene = split_coverage_scene(make_scene)
-    full = pipeline.bake(scene, tmp_path / "full.vdb", voxel_size=400.0)
-    half = pipeline.bake(scene, tmp_path / "half.vdb", voxel_size=400.0, half=True)
+    full = pipeline.bake(scene, tmp_path / "full.vdb", BakeOptions(voxel_size=400.0))
+    half = pipeline.bake(scene, tmp_path / "half.vdb", BakeOptions(voxel_size=400.0, half=True))
     vdb = bundled.openvdb()
     grids, meta = vdb.readAll(str(half.path))
     density = next(g for g in grids if g.name == "density")
@@ -122,7 +124,7 @@ def test_a_killed_bake_leaves_the_old_file_untouched(make_scene, tmp_path):
     from nubis_addon.blender import pipeline
 
     scene = split_coverage_scene(make_scene)
-    first = pipeline.bake(scene, tmp_path / "clouds.vdb", voxel_size=400.0)
+    first = pipeline.bake(scene, tmp_path / "clouds.vdb", BakeOptions(voxel_size=400.0))
     before = first.path.read_bytes()
     calls = []
 
@@ -132,7 +134,7 @@ def test_a_killed_bake_leaves_the_old_file_untouched(make_scene, tmp_path):
             raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
-        pipeline.bake(scene, first.path, voxel_size=250.0, progress=die)
+        pipeline.bake(scene, first.path, BakeOptions(voxel_size=250.0), progress=die)
     assert len(calls) == 2
     assert first.path.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["clouds.vdb"]
@@ -149,7 +151,7 @@ def test_a_probe_counts_what_the_bake_writes_and_a_bake_past_its_measured_share_
 
     scene = split_coverage_scene(make_scene)
     size = (160, 90)
-    full = pipeline.bake(scene, tmp_path / "clouds.vdb", 400.0, camera_only=True, size=size)
+    full = pipeline.bake(scene, tmp_path / "clouds.vdb", BakeOptions(voxel_size=400.0, camera_only=True, size=size))
     assert full.active_voxels > 1000
     share = pipeline.probe_share(scene, 400.0, size)
     assert share == bakeplan.measured_share(full.active_voxels, full.plan.evaluated_voxels)
@@ -159,10 +161,16 @@ def test_a_probe_counts_what_the_bake_writes_and_a_bake_past_its_measured_share_
     limit = bakeplan.BASE_BYTES + full.active_voxels // 2 * full.plan.bytes_per_active_voxel / bakeplan.LEAF_FILL
     monkeypatch.setattr(bakeplan, "DEFAULT_MEMORY_LIMIT", int(limit))
     with pytest.raises(bakeplan.BakeTooLarge, match="more of the 400 m bake than its probe measured"):
-        pipeline.bake(scene, full.path, 400.0, camera_only=True, size=size, active_share=bakeplan.SHARE_FLOOR)
+        pipeline.bake(
+            scene,
+            full.path,
+            BakeOptions(voxel_size=400.0, camera_only=True, size=size, active_share=bakeplan.SHARE_FLOOR),
+        )
     assert full.path.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["clouds.vdb"]
     # Planned by the bound (share 1), the same limit is not checked while baking: the plan promised it.
     monkeypatch.undo()
-    again = pipeline.bake(scene, full.path, 400.0, camera_only=True, size=size, active_share=share)
+    again = pipeline.bake(
+        scene, full.path, BakeOptions(voxel_size=400.0, camera_only=True, size=size, active_share=share)
+    )
     assert again.active_voxels == full.active_voxels and again.plan.active_share == share

@@ -6,22 +6,24 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from nubis_addon.core.jobs import BakeOptions
+
 
 def test_a_cancelled_bake_leaves_the_earlier_file_byte_identical(make_scene, tmp_path):
     from nubis_addon.blender import pipeline
 
     scene = make_scene("default")
     path = tmp_path / "clouds.vdb"
-    pipeline.bake(scene, path, voxel_size=800.0)
+    pipeline.bake(scene, path, BakeOptions(voxel_size=800.0))
     before = path.read_bytes()
-    steps = pipeline.bake_steps(scene, path, voxel_size=400.0, tiles_per_step=1)
+    steps = pipeline.bake_steps(scene, path, BakeOptions(voxel_size=400.0), tiles_per_step=1)
     fractions = [next(steps), next(steps)]  # two tiles in: half way is far from done
     assert 0.0 < fractions[0] < fractions[1] < 1.0
     steps.close()  # what Esc does
     assert path.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["clouds.vdb"]  # no staging left either
     # Run to its end, the same steps write the new bake.
-    result = pipeline.run_steps(pipeline.bake_steps(scene, path, voxel_size=400.0))
+    result = pipeline.run_steps(pipeline.bake_steps(scene, path, BakeOptions(voxel_size=400.0)))
     assert result.plan.voxel_size == 400.0 and path.read_bytes() != before
 
 

@@ -3,6 +3,8 @@
 
 import numpy as np
 
+from nubis_addon.core.jobs import BakeOptions
+
 
 def _band(make_scene, tmp_path, cloud_type: float) -> float:
     from nubis_addon.blender import pipeline, scene_io
@@ -14,7 +16,7 @@ def _band(make_scene, tmp_path, cloud_type: float) -> float:
     a[..., 0] = 0.8  # the same coverage everywhere: only the type differs
     a[..., 2] = cloud_type
     scene_io.write_field_image(scene.nubis, "a", a)
-    result = pipeline.bake(scene, tmp_path / f"type_{cloud_type}.vdb", voxel_size=250.0)
+    result = pipeline.bake(scene, tmp_path / f"type_{cloud_type}.vdb", BakeOptions(voxel_size=250.0))
     dense, lo = vdbio.read_grid_array(result.path, "density")
     z = np.nonzero(dense > 1e-3)[0] + lo[2]
     altitude = result.plan.origin[2] + z * result.plan.voxel_size

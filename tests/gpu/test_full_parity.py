@@ -7,6 +7,8 @@ docs/measurements.md#parity-with-cycles has every preset at 160x90."""
 
 import pytest
 
+from nubis_addon.core.jobs import CompareOptions
+
 # preset: (luminance error, bias) measured 2026-12-03 on llvmpipe, Blender 5.3, 48x27 (the light model with
 # Side Light, refitted: docs/viewport.md#fitted-to-converged-cycles; Cycles' noise 5.3 %).
 MEASURED = {
@@ -25,7 +27,11 @@ def full(request, tmp_path_factory, blender):
     scene = blender.context.scene
     scene_io.apply_preset(scene, load_preset(request.param))
     out = tmp_path_factory.mktemp(f"full_{request.param}")
-    m = pipeline.compare(scene, out, 48, 27, samples=128, mode="full", noise_target=NOISE_TARGET, reference=False)
+    m = pipeline.compare(
+        scene,
+        out,
+        CompareOptions(width=48, height=27, samples=128, mode="full", noise_target=NOISE_TARGET, reference=False),
+    )
     return request.param, m
 
 

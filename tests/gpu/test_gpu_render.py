@@ -61,7 +61,9 @@ def test_viewport_draw_uses_the_render_code(make_scene):
         fb = gpu.state.active_framebuffer_get()
         for _ in range(16):
             fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
-            tv = viewport.draw_view(scene, inv, scene.camera.matrix_world.translation, w, h, key="test")
+            tv = viewport.draw_view(
+                scene, viewport.ViewDraw(inv, scene.camera.matrix_world.translation, w, h, key="test")
+            )
         got = read_pixels(fb, w, h)[::-1]
     offscreen.free()
     assert tv.since_change == 16 and not tv.converged
@@ -114,10 +116,10 @@ def test_solid_shading_draws_the_worlds_sky_behind_the_clouds(make_scene):
         fb = gpu.state.active_framebuffer_get()
         for _ in range(16):  # every pixel marched once
             fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
-            viewport.draw_view(scene, inv, eye, w, h, key="sky", sky=True)
+            viewport.draw_view(scene, viewport.ViewDraw(inv, eye, w, h, key="sky", sky=True))
         got = read_pixels(fb, w, h)[::-1]
         fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=0.5)  # an object in front of everything
-        viewport.draw_view(scene, inv, eye, w, h, key="sky", sky=True)
+        viewport.draw_view(scene, viewport.ViewDraw(inv, eye, w, h, key="sky", sky=True))
         covered = read_pixels(fb, w, h)[::-1]
     offscreen.free()
     clouds = pipeline.render_viewport(scene, w, h)

@@ -76,9 +76,8 @@ def _draw(scene, viewport, w=32, h=18):
             fb = gpu.state.active_framebuffer_get()
             fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
             t0 = time.perf_counter()
-            tv = viewport.draw_view(
-                scene, inv, scene.camera.matrix_world.translation, w, h, key="async", wait_for_noise=False
-            )
+            request = viewport.ViewDraw(inv, scene.camera.matrix_world.translation, w, h, key="async")
+            tv = viewport.draw_view(scene, request, wait_for_noise=False)
             seconds = time.perf_counter() - t0
             pixels = read_pixels(fb, w, h)
     finally:

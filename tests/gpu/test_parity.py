@@ -8,6 +8,8 @@ measures its noise, which must sit well below the limits for the comparison to m
 
 import pytest
 
+from nubis_addon.core.jobs import CompareOptions
+
 # The targets for single scattering (measured 2026-11-22 on llvmpipe: alpha RMSE 0.006,
 # luminance error 0.030, bias +0.001, IoU 0.99; Cycles' own noise 0.0024 / 0.018).
 ALPHA_RMSE_MAX = 0.02
@@ -44,7 +46,11 @@ def _compare_single(blender, preset, out, samples: int) -> dict:
     ensure_registered()
     scene = blender.context.scene
     scene_io.apply_preset(scene, preset)
-    return pipeline.compare(scene, out, 48, 27, samples=samples, mode="single", voxel_size=20.0, noise_estimate=True)
+    return pipeline.compare(
+        scene,
+        out,
+        CompareOptions(width=48, height=27, samples=samples, mode="single", voxel_size=20.0, noise_estimate=True),
+    )
 
 
 @pytest.fixture(scope="module")

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from nubis_addon.blender import reference
+from nubis_addon.core.jobs import CompareOptions
 
 
 def test_rounds_are_sized_from_the_measured_noise_and_keep_every_sample():
@@ -47,7 +48,9 @@ def _compare(blender, out, **kw):
     if edit:
         edit(scene)
     voxel = kw.pop("voxel_size", 40.0)
-    return pipeline.compare(scene, out, 32, 18, mode="single", voxel_size=voxel, reference=False, **kw)
+    step = kw.pop("step", None)
+    options = CompareOptions(width=32, height=18, mode="single", voxel_size=voxel, reference=False, **kw)
+    return pipeline.compare(scene, out, options, step=step)
 
 
 @pytest.fixture(scope="module")

@@ -20,6 +20,8 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
+from nubis_addon.core.jobs import BakeOptions
+
 VOXEL = 300.0  # four tiles of the default cloudscape: steps to disturb between, seconds to bake
 
 
@@ -74,7 +76,7 @@ def test_a_disturbed_bake_writes_the_undisturbed_grid(make_scene, tmp_path):
 
     scene = make_scene("default")
     start_frame, erosion = scene.frame_current, scene.nubis.density_erosion
-    calm = pipeline.bake(scene, tmp_path / "calm.vdb", voxel_size=VOXEL)
+    calm = pipeline.bake(scene, tmp_path / "calm.vdb", BakeOptions(voxel_size=VOXEL))
     jobs = work.bake_jobs(scene, str(tmp_path / "busy.vdb"), VOXEL, tiles_per_step=1)
 
     def disturb(n):
@@ -94,7 +96,7 @@ def test_a_disturbed_bake_writes_the_undisturbed_grid(make_scene, tmp_path):
     assert settings["density_erosion"] == pytest.approx(erosion)
     assert meta["nubis_noise_seed"] == scene.nubis.noise_seed and "lighting_ambient" not in settings
     # The disturbances were real: the scene as the artist left it bakes other clouds.
-    after = pipeline.bake(scene, tmp_path / "after.vdb", voxel_size=VOXEL)
+    after = pipeline.bake(scene, tmp_path / "after.vdb", BakeOptions(voxel_size=VOXEL))
     assert after.active_voxels != calm.active_voxels
 
 
@@ -110,7 +112,7 @@ def test_a_disturbed_sequence_bake_writes_the_undisturbed_grids(make_scene, tmp_
     calm.mkdir()
     for frame in frames:
         scene.frame_set(frame)
-        pipeline.bake(scene, calm / f"clouds_{frame:04d}.vdb", voxel_size=VOXEL)
+        pipeline.bake(scene, calm / f"clouds_{frame:04d}.vdb", BakeOptions(voxel_size=VOXEL))
     scene.frame_set(5)
     scene.nubis.bake_voxel_size = VOXEL
     busy = tmp_path / "busy"
@@ -227,7 +229,7 @@ def calm_bake(tmp_path_factory, make_scene_module):
 
     scene = make_scene_module("default")
     path = tmp_path_factory.mktemp("calm") / "calm.vdb"
-    pipeline.bake(scene, path, voxel_size=VOXEL)
+    pipeline.bake(scene, path, BakeOptions(voxel_size=VOXEL))
     return path
 
 
@@ -299,7 +301,7 @@ def test_opening_a_file_cancels_the_work_and_keeps_the_earlier_file(blender, mak
 
     scene = make_scene("default")
     path = tmp_path / "clouds.vdb"
-    pipeline.bake(scene, path, voxel_size=2 * VOXEL)
+    pipeline.bake(scene, path, BakeOptions(voxel_size=2 * VOXEL))
     before = path.read_bytes()
     other = tmp_path / "other.blend"
     blender.ops.wm.save_as_mainfile(filepath=str(other), copy=True)
@@ -332,10 +334,11 @@ def test_quitting_during_a_bake_cancels_it_and_keeps_the_earlier_file(cache_dir,
             nubis_addon.register()
             ensure_gpu_context()
             from nubis_addon.blender import pipeline, scene_io, work
+            from nubis_addon.core.jobs import BakeOptions
             from nubis_addon.core.presets import load_preset
             scene = bpy.context.scene
             scene_io.apply_preset(scene, load_preset("default"))
-            pipeline.bake(scene, {str(path)!r}, voxel_size={2 * VOXEL})
+            pipeline.bake(scene, {str(path)!r}, BakeOptions(voxel_size={2 * VOXEL}))
             open({str(path)!r} + ".before", "wb").write(open({str(path)!r}, "rb").read())
             running = work.start(work.Work("baking", work.bake_jobs(scene, {str(path)!r}, {VOXEL}, 1)))
             running.step()

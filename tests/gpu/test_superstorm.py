@@ -6,6 +6,8 @@ import math
 import numpy as np
 import pytest
 
+from nubis_addon.core.jobs import BakeOptions
+
 
 @pytest.fixture
 def storm_scene(make_scene):
@@ -108,7 +110,7 @@ def test_baked_glow_grid_stays_inside_the_storm(storm_scene, tmp_path):
     from nubis_addon.core import vdbio
 
     scene, storm = storm_scene
-    result = pipeline.bake(scene, tmp_path / "storm.vdb", voxel_size=500.0)
+    result = pipeline.bake(scene, tmp_path / "storm.vdb", BakeOptions(voxel_size=500.0))
     info = vdbio.read_grid_info(result.path)
     # The storm's darkening bakes as absorption (GDC22; docs/sources.md#storm-darkening), its glow as emission.
     assert set(info) == {"density", "glow", "absorption"}

@@ -14,6 +14,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from vdb_helpers import trilinear, write_cumulus  # noqa: E402
 
+from nubis_addon.core.jobs import BakeOptions
+
 
 @pytest.fixture(scope="module")
 def cumulus_file(tmp_path_factory) -> Path:
@@ -122,9 +124,11 @@ def test_the_bake_holds_the_vdb_cloud_as_the_viewport_draws_it(blender, make_sce
 
     scene = _vdb_only(make_scene)
     _import(blender, scene, cumulus_file)
-    with_cloud = pipeline.bake(scene, tmp_path / "with.vdb", voxel_size=100.0, camera_only=True, size=(64, 36))
+    with_cloud = pipeline.bake(
+        scene, tmp_path / "with.vdb", BakeOptions(voxel_size=100.0, camera_only=True, size=(64, 36))
+    )
     without = pipeline.bake(
-        scene, tmp_path / "without.vdb", voxel_size=100.0, camera_only=True, size=(64, 36), vdb=False
+        scene, tmp_path / "without.vdb", BakeOptions(voxel_size=100.0, camera_only=True, size=(64, 36), vdb=False)
     )
     assert without.active_voxels == 0
     info = vdbio.read_grid_info(with_cloud.path)["density"]

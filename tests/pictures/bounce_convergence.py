@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from nubis_addon.core.jobs import BakeOptions
+
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
@@ -47,10 +49,12 @@ def measure(name: str, args) -> dict:
         baked = pipeline.bake(
             scene,
             vdb,
-            args.voxel_size,
-            camera_only=True,
-            size=(args.width, args.height),
-            thin_cirrus=pipeline.THIN_CIRRUS,
+            BakeOptions(
+                voxel_size=args.voxel_size,
+                camera_only=True,
+                size=(args.width, args.height),
+                thin_cirrus=pipeline.THIN_CIRRUS,
+            ),
         )
         out["voxel_size"] = baked.plan.voxel_size
         out["bake_s"] = round(time.perf_counter() - t, 1)

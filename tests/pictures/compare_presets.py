@@ -11,6 +11,8 @@ import sys
 import time
 from pathlib import Path
 
+from nubis_addon.core.jobs import CompareOptions
+
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
@@ -27,7 +29,11 @@ def compare_preset(name: str, out_dir: Path, width: int, height: int, samples: i
     scene = bpy.context.scene
     scene_io.apply_preset(scene, load_preset(name))
     start = time.perf_counter()
-    m = pipeline.compare(scene, out_dir / name, width, height, samples, "full", None, noise_estimate=True)
+    m = pipeline.compare(
+        scene,
+        out_dir / name,
+        CompareOptions(width=width, height=height, samples=samples, mode="full", voxel_size=None, noise_estimate=True),
+    )
     m["total_s"] = time.perf_counter() - start
     return scene, m
 

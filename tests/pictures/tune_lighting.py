@@ -34,6 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
+from nubis_addon.core.jobs import CompareOptions
+
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
@@ -98,13 +100,15 @@ def reference(name: str, out: Path, width: int, height: int, samples: int) -> di
     return pipeline.compare(
         bpy.context.scene,
         out / name,
-        width,
-        height,
-        samples,
-        "full",
-        noise_target=NOISE_TARGET * 100,
-        reuse_reference=True,
-        reference=False,
+        CompareOptions(
+            width=width,
+            height=height,
+            samples=samples,
+            mode="full",
+            noise_target=NOISE_TARGET * 100,
+            reuse_reference=True,
+            reference=False,
+        ),
         step=lambda text: print(f"{name}: {text}", flush=True),
     )
 

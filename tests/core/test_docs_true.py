@@ -1,0 +1,274 @@
+"""The docs stay true to the code they describe, read from the code itself (pure Python, no Blender):
+
+- **The command line.** Every option of every command, as the real argument parser (`cli.build_parser()`)
+  accepts it, is in that command's synopsis in docs/cli.md (the ```text block at its top, one entry per
+  command: the line `python -m nubis_addon COMMAND ...` and the indented lines under it) and in the same
+  synopsis in the module docstring of nubis_addon/cli.py; no synopsis names a command or an option the
+  parser does not have; and every option is explained in docs/cli.md's prose (outside the code blocks).
+- **The modules.** Every module of the package (every .py file under nubis_addon/) is named in
+  docs/architecture.md, and every module that page names exists. A module is named by its path: below a
+  subpackage from the subpackage's folder (`core/vdbfile.py`, `blender/__init__.py`, optionally with
+  `nubis_addon/` in front), at the top always whole (`nubis_addon/cli.py`, `nubis_addon/__init__.py`), so
+  the repository's own `__init__.py` is not taken for the package's. A path counts only whole: not
+  preceded by a word character, `/` or `.`, not followed by a word character. The docstring of
+  nubis_addon/blender/__init__.py lists every module of blender/ top down (the name before the colon of
+  each `- name: ...` item, or of each part after a `;`), and, as it says, each imports only modules
+  listed after it (imports inside functions included, as tests/core/test_architecture.py reads them).
+- **The presets.** Every preset that ships (what core/presets.py lists: the .toml files directly in
+  presets/, so presets/quality/ is none) is in the README's gallery (the table after "**Presets.**"), its
+  picture, where it has one, presets/gallery/<name>.png; the gallery shows nothing else; and the README's
+  count of skies ("**Presets.** Nine skies") is the number of presets, written as an English word.
+
+Each failure says what is missing and where to add it.
+"""
+
+from __future__ import annotations
+
+import ast
+import re
+from pathlib import Path
+
+from test_architecture import import_graph
+
+from nubis_addon import cli
+from nubis_addon.core.presets import list_presets, preset_dir
+
+ROOT = Path(__file__).resolve().parents[2]
+PACKAGE = ROOT / "nubis_addon"
+CLI_DOC = ROOT / "docs" / "cli.md"
+ARCHITECTURE = ROOT / "docs" / "architecture.md"
+README = ROOT / "README.md"
+ENTRY = re.compile(r"^python -m nubis_addon (\S+)")
+OPTION = re.compile(r"(?<![\w-])--[a-z][a-z0-9-]*")
+NUMBERS = (
+    "zero one two three four five six seven eight nine ten eleven twelve thirteen fourteen fifteen sixteen "
+    "seventeen eighteen nineteen twenty"
+).split()
+
+
+# ---- the command line ------------------------------------------------------------------------------------
+
+
+def parser_options() -> dict[str, set[str]]:
+    """Each command's long options, from the parser the command line runs (`--help` aside)."""
+    parser = cli.build_parser()
+    commands = parser._subparsers._group_actions[0].choices
+    return {
+        name: {o for action in sub._actions for o in action.option_strings if o.startswith("--")} - {"--help"}
+        for name, sub in commands.items()
+    }
+
+
+def synopsis(text: str) -> dict[str, str]:
+    """Each command's synopsis entry in `text`: its `python -m nubis_addon COMMAND` line (leading whitespace
+    aside) and the lines under it that are indented further."""
+    entries: dict[str, str] = {}
+    current, indent = None, 0
+    for line in text.splitlines():
+        stripped = line.lstrip()
+        depth = len(line) - len(stripped)
+        m = ENTRY.match(stripped)
+        if m:
+            current, indent = m.group(1), depth
+            entries[current] = entries.get(current, "") + " " + stripped
+        elif current is not None and stripped and depth > indent:
+            entries[current] += " " + stripped
+        else:
+            current = None
+    return entries
+
+
+def _fenced(text: str, inside: bool) -> str:
+    """The lines of a Markdown page inside (or outside) its ``` blocks."""
+    kept, fence = [], False
+    for line in text.splitlines():
+        if line.startswith("```"):
+            fence = not fence
+            continue
+        if fence == inside:
+            kept.append(line)
+    return "\n".join(kept)
+
+
+def _check_synopsis(entries: dict[str, str], where: str) -> list[str]:
+    problems = []
+    for command, options in sorted(parser_options().items()):
+        if command not in entries:
+            problems.append(
+                f"{where} has no synopsis of `{command}`: add a line `python -m nubis_addon {command} ...` "
+                f"with its options ({' '.join(sorted(options))})"
+            )
+            continue
+        named = set(OPTION.findall(entries[command]))
+        if missing := sorted(options - named):
+            problems.append(f"{where}: the synopsis of `{command}` lacks {', '.join(missing)}: add them to it")
+        if stale := sorted(named - options):
+            problems.append(
+                f"{where}: the synopsis of `{command}` names {', '.join(stale)}, which `{command}` does not take: "
+                "remove them (or add them to cli.build_parser())"
+            )
+    for command in sorted(set(entries) - set(parser_options())):
+        problems.append(f"{where} has a synopsis of `{command}`, which is no command: remove it")
+    return problems
+
+
+def test_parser_is_read():
+    options = parser_options()
+    assert {"render", "bake", "compare"} <= set(options), "cli.build_parser() no longer has its subcommands"
+    assert "--out" in options["render"] and "--passes" in options["render"], "the parser's options are not read"
+
+
+def test_every_option_is_in_the_synopsis_of_docs_cli():
+    text = _fenced(CLI_DOC.read_text(encoding="utf-8"), inside=True)
+    problems = _check_synopsis(synopsis(text), "docs/cli.md (the ```text block at the top)")
+    assert not problems, "\n".join(problems)
+
+
+def test_every_option_is_in_the_synopsis_of_the_cli_docstring():
+    problems = _check_synopsis(synopsis(cli.__doc__ or ""), "the module docstring of nubis_addon/cli.py")
+    assert not problems, "\n".join(problems)
+
+
+def test_every_option_is_explained_in_docs_cli():
+    prose = _fenced(CLI_DOC.read_text(encoding="utf-8"), inside=False)
+    named = set(OPTION.findall(prose))
+    missing = {}
+    for command, options in parser_options().items():
+        for option in options - named:
+            missing.setdefault(option, []).append(command)
+    assert not missing, (
+        "docs/cli.md explains no use of "
+        + "; ".join(f"{option} (of {', '.join(sorted(commands))})" for option, commands in sorted(missing.items()))
+        + ": say what each does in the prose under the synopsis (in the bullet of its command)"
+    )
+
+
+# ---- the modules -----------------------------------------------------------------------------------------
+
+
+def module_names() -> dict[str, Path]:
+    """Every module of the package by the name architecture.md gives it (the module docstring's rule)."""
+    names = {}
+    for path in sorted(PACKAGE.rglob("*.py")):
+        rel = path.relative_to(PACKAGE).as_posix()
+        names[rel if "/" in rel else f"nubis_addon/{rel}"] = path
+    return names
+
+
+def _named(name: str, text: str) -> bool:
+    # A top-level module is named whole (nubis_addon/cli.py); one below a subpackage from there or whole.
+    pattern = re.escape(name) if name.startswith("nubis_addon/") else f"(?:nubis_addon/)?{re.escape(name)}"
+    return re.search(rf"(?<![\w/.]){pattern}(?!\w)", text) is not None
+
+
+def test_every_module_is_in_docs_architecture():
+    text = ARCHITECTURE.read_text(encoding="utf-8")
+    modules = module_names()
+    assert "nubis_addon/cli.py" in modules and "core/presets.py" in modules, "the package's modules are not found"
+    missing = [name for name in modules if not _named(name, text)]
+    assert not missing, (
+        "docs/architecture.md does not name "
+        + ", ".join(missing)
+        + ": add each, written as here, with a few words on what it does, to the list of its folder under "
+        "'## Modules'"
+    )
+
+
+def test_every_module_docs_architecture_names_exists():
+    text = ARCHITECTURE.read_text(encoding="utf-8")
+    named = set(re.findall(r"(?<![\w/.])(?:nubis_addon/)?(?:[a-z_]+/)?[a-z_]+\.py(?!\w)", text))
+    gone = sorted(n for n in named if not (PACKAGE / n.removeprefix("nubis_addon/")).is_file())
+    assert not gone, (
+        f"docs/architecture.md names {', '.join(gone)}, not in nubis_addon/: remove or rename them (a module "
+        "below a subpackage is written from its folder, core/x.py; one at the top whole, nubis_addon/x.py)"
+    )
+
+
+def blender_listing() -> list[str]:
+    """The modules the docstring of blender/__init__.py lists, in its order (read without importing bpy)."""
+    path = PACKAGE / "blender" / "__init__.py"
+    doc = ast.get_docstring(ast.parse(path.read_text(encoding="utf-8"))) or ""
+    names: list[str] = []
+    for item in re.split(r"\n- ", doc)[1:]:
+        for part in " ".join(item.split()).split("; "):
+            head = part.split(":")[0].split(", ")
+            if ":" in part and all(re.fullmatch(r"[a-z_]+", h) for h in head):
+                names += [h for h in head if h not in names]
+    return names
+
+
+def test_the_blender_docstring_lists_every_module_top_down():
+    listed = blender_listing()
+    modules = sorted(p.stem for p in (PACKAGE / "blender").glob("*.py") if p.stem != "__init__")
+    missing = [m for m in modules if m not in listed]
+    assert not missing, (
+        f"the docstring of nubis_addon/blender/__init__.py does not list {', '.join(missing)}: add a "
+        "'- name: what it does;' item for each, below every module that imports it, above those it imports"
+    )
+    gone = [m for m in listed if m not in modules]
+    assert not gone, f"the docstring of nubis_addon/blender/__init__.py lists {', '.join(gone)}: no such module"
+    graph = import_graph()
+    upward = []
+    for i, name in enumerate(listed):
+        for imported in sorted(graph[f"nubis_addon.blender.{name}"]):
+            short = imported.removeprefix("nubis_addon.blender.")
+            if short in listed and listed.index(short) < i:
+                upward.append(f"{name} imports {short}, listed above it")
+    assert not upward, (
+        "the docstring of nubis_addon/blender/__init__.py lists its modules top down, each importing only "
+        "modules listed after it, but " + "; ".join(upward) + ": move the items so that it holds"
+    )
+
+
+# ---- the presets -----------------------------------------------------------------------------------------
+
+
+def _readme_presets() -> tuple[str, list[str]]:
+    """The README's "**Presets.**" paragraph and the cells of the gallery table under it."""
+    lines = README.read_text(encoding="utf-8").splitlines()
+    start = next((i for i, line in enumerate(lines) if line.startswith("**Presets.**")), None)
+    assert start is not None, "README.md has no paragraph starting '**Presets.**': the gallery's home is gone"
+    paragraph, cells, i = [], [], start
+    while i < len(lines) and lines[i].strip() and not lines[i].startswith("|"):
+        paragraph.append(lines[i])
+        i += 1
+    while i < len(lines) and not lines[i].startswith("|"):
+        i += 1
+    while i < len(lines) and lines[i].startswith("|"):
+        cells += [c.strip() for c in lines[i].strip().strip("|").split("|")]
+        i += 1
+    return " ".join(paragraph), [c for c in cells if c and not re.fullmatch(r":?-+:?", c)]
+
+
+def test_every_preset_is_in_the_readme_gallery():
+    presets = list_presets()
+    assert "default" in presets and all((preset_dir() / f"{p}.toml").is_file() for p in presets)
+    _paragraph, cells = _readme_presets()
+    shown = {}
+    for cell in cells:
+        pictures = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", cell)
+        name = re.sub(r"!\[[^\]]*\]\([^)]*\)", "", cell).strip().strip("`")
+        shown[name] = pictures
+    missing = [p for p in presets if p not in shown]
+    assert not missing, (
+        f"README.md's gallery (the table under '**Presets.**') lacks {', '.join(missing)}: add a cell "
+        "'![](presets/gallery/NAME.png) NAME' for each (the name alone where there is no picture)"
+    )
+    extra = sorted(set(shown) - set(presets))
+    assert not extra, f"README.md's gallery shows {', '.join(extra)}, which no preset in presets/ is: remove them"
+    wrong = [f"{name}: {pics}" for name, pics in shown.items() if pics not in ([], [f"presets/gallery/{name}.png"])]
+    assert not wrong, "README.md's gallery: each preset's picture is presets/gallery/<name>.png: " + "; ".join(wrong)
+
+
+def test_the_readme_counts_the_presets():
+    count = len(list_presets())
+    assert count < len(NUMBERS), f"{count} presets: extend NUMBERS in this test to name the count"
+    paragraph, _cells = _readme_presets()
+    m = re.match(r"\*\*Presets\.\*\* (\w+) skies\b", paragraph)
+    assert m, "README.md: the '**Presets.**' paragraph opens with the count of skies ('**Presets.** Nine skies')"
+    word = m.group(1).lower()
+    assert word in NUMBERS, f"README.md: write the count of skies as a word ('{NUMBERS[count].title()}'), not '{word}'"
+    assert NUMBERS.index(word) == count, (
+        f"README.md says '{m.group(1)} skies' but {count} presets ship in presets/: "
+        f"write '**Presets.** {NUMBERS[count].title()} skies'"
+    )
