@@ -1,23 +1,27 @@
 """Blender's side of the extension, listed from the top down: each module imports only modules listed
 after it.
 
-- commands: the command line's commands (cli.py parses, these run); farm: bakes of frame sequences and
-  bakes spread over Dask workers;
+- commands: the command line's commands (cli.py parses, these run); workers: what a Dask worker process
+  runs for a farm bake (it registers the extension, so it sits above registration);
 - registration: registers what follows (and ensure_registered for the command line and farm workers);
-- panels, paint, operators: the sidebar, the Paint Sky tool and what the buttons do;
-- preferences: the add-on's preferences (the cache, the user's presets);
-- properties: the property groups, generated from core/schema.py;
-- events: what a change triggers, and Blender's handlers;
-- work: the bake or render that runs in steps while the artist keeps working;
-- scene_render: F12 and Render Animation with the clouds in EEVEE and Cycles, and the panorama;
-- viewport: the 3D view's draw; preview: the same draw headless, and the benchmark;
-- pipeline, reference: renders, bakes, Cycles renders and comparisons, Cycles' noise and its reuse;
-- snapshot: what a bake reads from the scene when it starts, with GPU inputs of its own;
-- scene_io: Blender data to and from the plain data core/ and render/ work on;
-- sky: the physical sky World and its captures; vdbclouds: Volume objects drawn as Nubis clouds;
-- cycles_setup: a bake as a Cycles volume with the matching material;
-- runtime: session GPU resources and the user's folders; mainthread: work a render thread hands to the
-  main thread; handlers: application handlers added once; status: messages for the sidebar;
+- panels, operators: the sidebar and what its buttons do;
+- paint: the Paint Sky tool, its operator and panel; properties: the property groups, generated from
+  core/schema.py; preview: the viewport's draw headless, and the benchmark; scene_render: F12 and Render
+  Animation with the clouds in EEVEE and Cycles, and the panorama; work: the bake or render that runs in
+  steps while the artist keeps working; farm: bakes of frame sequences and bakes spread over Dask workers;
+- events: what a change triggers, and Blender's handlers; pipeline: renders, bakes, Cycles renders and
+  comparisons;
+- viewport: the 3D view's draw; snapshot: what a bake reads from the scene when it starts, with GPU inputs
+  of its own;
+- scene_io: Blender data to and from the plain data core/ and render/ work on; reference: Cycles' noise
+  and its reuse;
+- sky: the physical sky World and its captures;
+- vdbclouds: Volume objects drawn as Nubis clouds; mainthread: work a render thread hands to the main
+  thread; presetlist: the presets the sidebar lists; preferences: the add-on's preferences (the cache, the
+  user's presets);
+- runtime: session GPU resources and the user's folders; cycles_setup: a bake as a Cycles volume with the
+  matching material; handlers: application handlers added once; status: messages for the sidebar; ui: what
+  the interface's pieces share (has_cloudscape, the cloudscape poll, the sidebar panel, redraws);
 - cli_command: `blender -b --command nubis`, registered by the package's register().
 """
 

@@ -17,7 +17,7 @@ from ..core.fsutil import check_output_dir, not_a_file
 from ..core.jobs import BakeOptions, BenchmarkOptions, CompareOptions, PreviewOptions, RenderOptions
 from ..core.presets import load_preset
 from ..render.gpu_context import ensure_gpu_context
-from . import farm, pipeline, preview, registration, scene_io, scene_render, snapshot, vdbclouds
+from . import farm, pipeline, preview, registration, scene_io, scene_render, snapshot, ui, vdbclouds
 
 PROG = "nubis"
 # compare --draft bakes voxels no finer than this (metres): at half the scene's size the camera-footprint
@@ -54,10 +54,10 @@ def load_scene(args, in_blender: bool):
         interrupt.track_blender_tempdir()
         registration.ensure_registered()
         scene = bpy.context.scene
-        if not scene_io.has_cloudscape(scene):
+        if not ui.has_cloudscape(scene):
             raise NubisError(f"'{path}' holds no Nubis cloudscape: add one with New Cloudscape and save the file")
         return scene
-    if in_blender and not args.preset and bpy.data.filepath and scene_io.has_cloudscape(bpy.context.scene):
+    if in_blender and not args.preset and bpy.data.filepath and ui.has_cloudscape(bpy.context.scene):
         return bpy.context.scene
     preset = load_preset(args.preset or "default")
     bpy.ops.wm.read_factory_settings(use_empty=True)

@@ -15,7 +15,7 @@ import bpy
 
 from ..core import schema
 from ..core.errors import NubisError
-from . import handlers, mainthread, scene_io, status, viewport
+from . import handlers, mainthread, scene_io, status, ui, viewport
 
 # Seconds of quiet after the last edit before the field is composited again.
 DEBOUNCE_S = 0.15
@@ -28,10 +28,10 @@ def changed(scene, trigger: str, key: str = "") -> None:
         return
     if key:
         enforce_limits(scene.nubis, key)
-    if trigger == "field" and scene_io.has_cloudscape(scene):
+    if trigger == "field" and ui.has_cloudscape(scene):
         request_composite(scene)
     viewport.invalidate()
-    scene_io.redraw_views()
+    ui.redraw_views()
 
 
 def update_callback(trigger: str, key: str = ""):
@@ -73,7 +73,7 @@ def request_composite(scene) -> None:
 def composite_stale():
     """Composite every scene that owes one (what the debounce timer runs)."""
     for scene in scene_io.stale_scenes():
-        if not scene_io.has_cloudscape(scene):
+        if not ui.has_cloudscape(scene):
             continue
         try:
             scene_io.generate_fields(scene)
@@ -82,7 +82,7 @@ def composite_stale():
             scene_io.forget_stale()
             status.set_error(str(err))
     viewport.invalidate()
-    scene_io.redraw_views()
+    ui.redraw_views()
     return None
 
 
@@ -105,7 +105,7 @@ def on_frame_change(scene, _depsgraph=None) -> None:
     sets the frame again on the main thread, which composites then: blender/scene_render.py.)"""
     if not mainthread.on_main_thread():
         return
-    if not scene_io.has_cloudscape(scene) or not scene_io.field_animated(scene.nubis):
+    if not ui.has_cloudscape(scene) or not scene_io.field_animated(scene.nubis):
         return
     try:
         scene_io.generate_fields(scene)
@@ -120,7 +120,7 @@ def on_depsgraph_update(scene, depsgraph) -> None:
     geometry, so the viewport reads its depth again."""
     _scene_updates[0] += 1
     viewport.geometry_changed(_scene_updates[0])
-    if not scene_io.has_cloudscape(scene):
+    if not ui.has_cloudscape(scene):
         return
     settings = scene.nubis
     used = scene_io.layer_images(settings)
@@ -136,7 +136,7 @@ def on_depsgraph_update(scene, depsgraph) -> None:
 def on_save_pre(*_args) -> None:
     """Pack the field images into the file being saved (composites leave them unpacked)."""
     for scene in bpy.data.scenes:
-        if scene_io.has_cloudscape(scene):
+        if ui.has_cloudscape(scene):
             if scene_io.field_stale(scene):
                 try:
                     scene_io.generate_fields(scene)
@@ -151,7 +151,7 @@ def on_save_pre(*_args) -> None:
 def on_undo_redo(*_args) -> None:
     """Undo and redo restore the settings, not necessarily the field's pixels: composite from them."""
     for scene in bpy.data.scenes:
-        if scene_io.has_cloudscape(scene):
+        if ui.has_cloudscape(scene):
             request_composite(scene)
     viewport.invalidate()
 

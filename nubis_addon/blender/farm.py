@@ -9,10 +9,7 @@ so the merged grids equal the serial bake's voxel for voxel."""
 
 from __future__ import annotations
 
-import atexit
 import os
-import shutil
-import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -25,15 +22,14 @@ from ..core.distributed import SceneSource
 from ..core.errors import NubisError
 from ..core.fsutil import check_output_path, shown, sync_to_disk
 from ..core.jobs import BakeOptions
-from ..core.presets import load_preset
 from ..core.staging import FolderGone, output_set
-from ..render.gpu_context import ensure_gpu_context
-from . import pipeline, scene_io, snapshot
-from .registration import ensure_registered
+from . import pipeline, snapshot
 
 Progress = Callable[[float], None]
-_TASK_FRAME = f"{__name__}.worker_bake_frame"
-_TASK_TILES = f"{__name__}.worker_bake_tiles"
+# The tasks' entry points, named (not imported): the worker side registers the extension, so it sits above
+# everything it registers (blender/workers.py).
+_TASK_FRAME = f"{__package__}.workers.worker_bake_frame"
+_TASK_TILES = f"{__package__}.workers.worker_bake_tiles"
 
 
 @dataclass
@@ -232,64 +228,3 @@ def _balanced(items: list[int], weights: list[int], groups: int) -> list[list[in
         bins[k].append(item)
         load[k] += w
     return [sorted(b) for b in bins if b]
-
-
-# ---- the worker side: runs in Dask worker processes ---------------------------------------------
-
-_loaded: dict[str, object] = {}
-
-
-def _worker_scene(source: SceneSource | dict, frame: int):
-    """This worker's copy of the scene at `frame` (loaded once per process and source)."""
-    if isinstance(source, dict):  # tasks carry plain data (core/distributed.py)
-        source = SceneSource(**source)
-    if "cleanup" not in _loaded:
-        # A worker ends without Blender's teardown, which alone removes Blender's session folder.
-        _loaded["cleanup"] = atexit.register(_remove_blender_tempdir)
-    key = repr(source)
-    if _loaded.get("key") != key:
-        if source.blend:
-            bpy.ops.wm.open_mainfile(filepath=source.blend, load_ui=False)
-            ensure_registered()
-        else:
-            bpy.ops.wm.read_factory_settings(use_empty=True)
-            ensure_registered()
-            scene_io.apply_preset(bpy.context.scene, load_preset(source.preset or "default"))
-        ensure_gpu_context()
-        _loaded["key"] = key
-    scene = bpy.context.scene
-    pipeline.check_scene(scene)
-    scene.frame_set(frame)
-    return scene
-
-
-def _remove_blender_tempdir() -> None:
-    tmp = interrupt.blender_tempdir()
-    if tmp is not None:
-        shutil.rmtree(tmp, ignore_errors=True)
-
-
-def worker_bake_frame(source: SceneSource | dict, frame: int, options: BakeOptions | dict) -> dict:
-    """One whole frame, baked on this worker: the file's bytes and its summary."""
-    options = BakeOptions.of(options)
-    scene = _worker_scene(source, frame)
-    with tempfile.TemporaryDirectory(prefix="nubis-worker-") as tmp:
-        r = pipeline.bake(scene, Path(tmp) / "frame.vdb", options)
-        data = r.path.read_bytes()
-    return {"data": data, "plan": r.plan, "active": r.active_voxels, "seconds": r.seconds, "grids": list(r.grids)}
-
-
-def worker_bake_tiles(
-    source: SceneSource | dict, frame: int, options: BakeOptions | dict, ids: list[int], dims
-) -> bytes:
-    """Some tiles of one frame, baked on this worker: a partial VDB (no metadata) of their voxels."""
-    options = BakeOptions.of(options)
-    scene = _worker_scene(source, frame)
-    snap = snapshot.take(scene, options)
-    plan = snap.plan
-    if tuple(plan.dims) != tuple(dims):
-        raise NubisError(f"this worker planned a {plan.dims} bake, not {tuple(dims)}: it reads a different scene")
-    grids = pipeline.bake_grids(snap, [plan.tiles[n] for n in ids])
-    with tempfile.TemporaryDirectory(prefix="nubis-worker-") as tmp:
-        path = grids.write(Path(tmp) / "part.vdb", keep=())
-        return path.read_bytes()

@@ -5,8 +5,6 @@ from __future__ import annotations
 import contextlib
 import os
 import traceback
-from dataclasses import dataclass
-from pathlib import Path
 
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
@@ -16,7 +14,9 @@ from ..core.errors import NubisError
 from ..core.jobs import BenchmarkOptions
 from ..core.limits import MAX_LAYERS
 from ..core.state import MAX_STORMS
-from . import cycles_setup, preview, runtime, scene_io, status, viewport, work
+from . import cycles_setup, preview, runtime, scene_io, status, ui, viewport, work
+from .presetlist import active_preset, find_preset_entry, preset_entries
+from .ui import NeedsCloudscape
 
 _PRESET_ITEMS: dict = {}  # id(entries) -> items: Blender keeps pointers to these strings
 
@@ -32,10 +32,6 @@ def preset_items(_self=None, _context=None):
         items = [(e.stem, e.name + (" (yours)" if e.user else ""), e.description) for e in entries]
         _PRESET_ITEMS[key] = (entries, items or [("default", "Default", "The default cloudscape")])
     return _PRESET_ITEMS[key][1]
-
-
-def find_preset_entry(stem: str) -> PresetEntry | None:
-    return next((e for e in preset_entries() if e.stem == stem), None)
 
 
 def _absolute(path: str) -> str:
@@ -57,17 +53,8 @@ class NubisOperator:
         if message:
             self.report({"INFO"}, message)
         viewport.invalidate()
-        scene_io.redraw_views()
+        ui.redraw_views()
         return {"FINISHED"}
-
-
-class NeedsCloudscape:
-    @classmethod
-    def poll(cls, context):
-        if not scene_io.has_cloudscape(context.scene):
-            cls.poll_message_set("Create a cloudscape first (Nubis > New Cloudscape)")
-            return False
-        return True
 
 
 class KeepOptions:
@@ -144,7 +131,7 @@ class NUBIS_OT_view_toggle(NeedsCloudscape, bpy.types.Operator):
 
     def execute(self, context):
         viewport.set_view_toggle(context, not viewport.view_toggle(context))
-        scene_io.redraw_views()
+        ui.redraw_views()
         return {"FINISHED"}
 
 
@@ -657,47 +644,6 @@ class NUBIS_OT_clear_cache(NubisOperator, bpy.types.Operator):
     def run(self, context):
         freed = noise.clear_cache(runtime.cache_dir())
         return f"Cleared {freed.sets} cached noise sets ({freed.nbytes / 2**20:.1f} MB)"
-
-
-@dataclass(frozen=True)
-class PresetEntry:
-    path: Path
-    stem: str
-    name: str
-    description: str
-    user: bool
-
-
-_ENTRIES: dict = {}  # (folder listings and times) -> entries, parsed once per change of either folder
-
-
-def preset_entries() -> list[PresetEntry]:
-    """The shipped presets, then the user's own, each parsed once per change of its file."""
-    folders = ((presets.preset_dir(), False), (runtime.user_preset_dir(), True))
-    listing = [(user, sorted(f.glob("*.toml"))) for f, user in folders]
-    key = tuple((p.name, p.stat().st_mtime_ns, user) for user, paths in listing for p in paths if p.is_file())
-    if key not in _ENTRIES:
-        entries = []
-        for user, paths in listing:
-            for path in paths:
-                try:
-                    preset = presets.load_preset(str(path))
-                    entries.append(PresetEntry(path, path.stem, preset.name, preset.description or preset.name, user))
-                except NubisError as err:
-                    entries.append(PresetEntry(path, path.stem, f"{path.stem} (broken)", str(err), user))
-        _ENTRIES.clear()
-        _ENTRIES[key] = entries
-    return _ENTRIES[key]
-
-
-def active_preset(context) -> PresetEntry | None:
-    """The preset the scene's cloudscape was last loaded from or saved as."""
-    stem = context.scene.nubis.preset
-    entries = preset_entries()
-    # A user preset and a shipped one never share a stem (saving refuses shipped names).
-    return next((e for e in entries if e.stem == stem and e.user), None) or next(
-        (e for e in entries if e.stem == stem), None
-    )
 
 
 class NUBIS_OT_preset_load(KeepOptions, NubisOperator, bpy.types.Operator):

@@ -21,22 +21,28 @@ from gpu_extras.batch import batch_for_shader
 
 from ..core import paint
 from ..core.errors import NubisError
-from . import events, runtime, scene_io, viewport
-from .operators import NeedsCloudscape
+from . import events, runtime, scene_io, ui, viewport
+from .ui import NeedsCloudscape, SidebarPanel
 
 TOOL_ID = "nubis.paint_sky"
-_CHANNELS = (
-    ("COVERAGE", "Coverage", "Where the clouds are: adds to the cover the Coverage slider gives"),
-    ("TYPE", "Cloud Type", "Stratus (0) to cumulonimbus (1)"),
-    ("PRECIPITATION", "Precipitation", "Rain: darker, denser clouds"),
-    ("STORM", "Storm Coverage", "Where a superstorm's clouds stand (inside a superstorm)"),
-)
-_MODES = (
-    ("ADD", "Add", "Raise the channel under the brush (the tool's plain drag)"),
-    ("SUBTRACT", "Subtract", "Lower the channel under the brush (Ctrl-drag)"),
-    ("SMOOTH", "Smooth", "Soften the paint layer's strokes under the brush (Shift-drag)"),
-)
+PAINT_OPERATOR = "nubis.paint_field"
+BRUSH_KEYS = ("channel", "radius", "strength", "falloff")  # the brush settings the tool and the sidebar show
+
+
+def _drag(mode: paint.BrushMode, plain: str = "drag") -> str:
+    """How a drag picks `mode`: "Ctrl-drag", or `plain` for the drag without a modifier key."""
+    return f"{mode.key.title()}-drag" if mode.key else plain
+
+
+# The menus, in core/paint.py's order: Blender keeps an operator's choice by its position in the menu.
+_CHANNELS = tuple((c.name.upper(), c.label, c.description) for c in paint.BRUSH_CHANNELS)
+_PLAIN_DRAG = "the tool's plain drag"
+_MODES = tuple((m.name.upper(), m.label, f"{m.description} ({_drag(m, _PLAIN_DRAG)})") for m in paint.BRUSH_MODES)
 _FALLOFFS = tuple((f.upper(), f.title(), f"{f.title()} falloff from the centre to the radius") for f in paint.FALLOFFS)
+# The drags as the tool's tooltip, the sidebar's hint and the operator's tooltip say them.
+DRAGS = ", ".join(f"{_drag(m)} to {m.name}" for m in paint.BRUSH_MODES)
+DRAG_HINT = " · ".join(f"{m.key.title() or 'Drag'}: {m.name}" for m in paint.BRUSH_MODES)
+MODIFIER_DRAGS = ", ".join(f"{m.key.title()} {m.name}s" for m in paint.BRUSH_MODES if m.key)
 # While a drag goes on, the light volumes (the clouds' shadows) wait this long after the last sample:
 # refilling them costs a whole-sky pass per sample (docs/measurements.md#painting).
 LIGHT_HOLD_S = 0.4
@@ -114,7 +120,7 @@ def composite_notice(scene, layer, dabs: np.ndarray, grid: paint.Grid) -> str | 
         if other.kind != "PAINT" or not other.enabled or (other != layer and not len(other.dabs)):
             continue
         held = scene_io.paint_dabs(other)
-        todo.append((other.as_pointer(), np.vstack([held, dabs]) if other == layer else held))
+        todo.append((scene_io.raster_key(other), np.vstack([held, dabs]) if other == layer else held))
     cost = paint.composite_cost(todo, grid)
     paint.check_cost(cost)
     return paint.notice(cost)
@@ -128,8 +134,15 @@ def check_channel(scene, channel: str) -> None:
         )
 
 
-def _sign(mode: str) -> float:
-    return -1.0 if mode == "SUBTRACT" else 1.0
+def brush_mode(mode: str) -> paint.BrushMode:
+    """The brush mode an operator's Mode ("ADD", "SUBTRACT", "SMOOTH") names."""
+    return paint.BRUSH_MODE[mode.lower()]
+
+
+def mode_of_event(event, mode: str) -> str:
+    """The Mode a drag paints in: the first brush mode whose modifier key the event holds, else `mode`."""
+    held = next((m for m in paint.BRUSH_MODES if m.key and getattr(event, m.key)), None)
+    return held.name.upper() if held is not None else mode
 
 
 # ---- live: a stroke's rectangle into the drawn field ------------------------------------------------
@@ -141,7 +154,7 @@ class LiveStroke:
 
     def __init__(self, scene, layer, radius: float, strength: float, falloff: str, mode: str):
         self.scene = scene
-        self.layer_key = layer.as_pointer()
+        self.layer_key = scene_io.raster_key(layer)
         settings = scene.nubis
         if scene_io.field_stale(scene) or scene_io.pre_paint(scene) is None:
             scene_io.generate_fields(scene)
@@ -149,7 +162,7 @@ class LiveStroke:
         self.pre, self.multiplier = scene_io.pre_paint(scene)
         self.channel = layer.channel.lower()
         self.image, self.plane = paint.PAINT_CHANNELS[self.channel]
-        self.which = ("a", "b", "cirrus").index(self.image)
+        self.which = tuple(scene_io.FIELD_IMAGES).index(self.image)  # the viewport's arrays are in this order
         # The layer's raster as it stands, copied: a cancelled drag leaves the cached one untouched.
         base = paint.raster(self.layer_key, scene_io.paint_dabs(layer), self.grid)
         self.raster = paint.Raster(self.grid)
@@ -162,11 +175,11 @@ class LiveStroke:
             values = (
                 self.raster.values
                 if other == layer
-                else paint.raster(other.as_pointer(), scene_io.paint_dabs(other), self.grid).values
+                else paint.raster(scene_io.raster_key(other), scene_io.paint_dabs(other), self.grid).values
             )
             self.layers.append(paint.PaintLayer(other.channel.lower(), float(other.opacity), values))
-        mode_name = "smooth" if mode == "SMOOTH" else "paint"
-        self.spacer = paint.Spacer(radius, _sign(mode) * strength, falloff.lower(), mode_name, grid=self.grid)
+        brush = brush_mode(mode)
+        self.spacer = paint.Spacer(radius, brush.sign * strength, falloff.lower(), brush.dab_mode, grid=self.grid)
         self.layer_name = layer.name
         self.held = len(layer.dabs)
         self.dabs: list[np.ndarray] = []
@@ -203,13 +216,13 @@ class LiveStroke:
             clouds.patch_field(arrays, self.which, rect)
             if self.hold_light:
                 clouds.hold_light(LIGHT_HOLD_S)
-        scene_io.redraw_views()
+        ui.redraw_views()
 
     def commit(self, layer) -> int:
         """The stroke's dabs into the layer (the undo step's data); the raster is kept as the layer's."""
         dabs = np.concatenate(self.dabs) if self.dabs else paint.as_dabs([])
         append_dabs(layer, dabs)
-        paint.remember(layer.as_pointer(), scene_io.paint_dabs(layer), self.raster)
+        paint.remember(scene_io.raster_key(layer), scene_io.paint_dabs(layer), self.raster)
         return len(dabs)
 
 
@@ -217,11 +230,14 @@ class LiveStroke:
 
 
 class NUBIS_OT_paint_field(NeedsCloudscape, bpy.types.Operator):
-    """Paint the data field from above: drag over the clouds (Ctrl subtracts, Shift smooths). From a script,
-    give `stroke` as Blender's paint operators take it (world locations, pressure, is_start)"""
+    """Paint the data field from above, from a drag or a script's stroke (bl_description says how)."""
 
-    bl_idname = "nubis.paint_field"
+    bl_idname = PAINT_OPERATOR
     bl_label = "Paint Sky"
+    bl_description = (
+        f"Paint the data field from above: drag over the clouds ({MODIFIER_DRAGS}). From a script, give "
+        "`stroke` as Blender's paint operators take it (world locations, pressure, is_start)"
+    )
     bl_options = {"REGISTER", "UNDO"}
 
     channel: EnumProperty(name="Channel", items=_CHANNELS, default="COVERAGE")
@@ -263,9 +279,9 @@ class NUBIS_OT_paint_field(NeedsCloudscape, bpy.types.Operator):
                 x, y = float(el.location[0]), float(el.location[1])
                 points.append((x, y, float(el.pressure), bool(el.is_start) or n == 0))
             paint.check_points(grid, points)
-            mode = "smooth" if self.mode == "SMOOTH" else "paint"
-            strength = _sign(self.mode) * self.strength
-            dabs = paint.stroke_dabs(points, self.radius, strength, self.falloff.lower(), mode, grid=grid)
+            brush = brush_mode(self.mode)
+            strength = brush.sign * self.strength
+            dabs = paint.stroke_dabs(points, self.radius, strength, self.falloff.lower(), brush.dab_mode, grid=grid)
             layer = paint_layer(scene.nubis, self.channel, self.layer)
             line = composite_notice(scene, layer, dabs, grid)
             append_dabs(layer, dabs)
@@ -276,14 +292,14 @@ class NUBIS_OT_paint_field(NeedsCloudscape, bpy.types.Operator):
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}
         viewport.invalidate()
-        scene_io.redraw_views()
+        ui.redraw_views()
         return {"FINISHED"}
 
     def invoke(self, context, event):
         if len(self.stroke) or context.area is None or context.area.type != "VIEW_3D":
             return self.execute(context)
         scene = context.scene
-        mode = "SUBTRACT" if event.ctrl else "SMOOTH" if event.shift else self.mode
+        mode = mode_of_event(event, self.mode)
         self.mode = mode
         try:
             self._checked(context)
@@ -334,7 +350,7 @@ class NUBIS_OT_paint_field(NeedsCloudscape, bpy.types.Operator):
         self._live = None
         viewport.invalidate()
         events.request_composite(context.scene)
-        scene_io.redraw_views()
+        ui.redraw_views()
         return {"CANCELLED"}
 
     def _finish(self, context):
@@ -365,7 +381,7 @@ class NUBIS_OT_paint_cursor(bpy.types.Operator):
 
     def invoke(self, context, event):
         _cursor.clear()
-        if scene_io.has_cloudscape(context.scene):
+        if ui.has_cloudscape(context.scene):
             point = hit(context, (event.mouse_region_x, event.mouse_region_y))
             props = tool_settings(context)
             if point is not None and props is not None:
@@ -421,7 +437,7 @@ class NUBIS_OT_paint_layer_clear(NeedsCloudscape, bpy.types.Operator):
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}
         viewport.invalidate()
-        scene_io.redraw_views()
+        ui.redraw_views()
         return {"FINISHED"}
 
 
@@ -437,7 +453,7 @@ def tool_settings(context):
         tool = workspace.tools.from_space_view3d_mode("OBJECT", create=False)  # no ID writes while drawing
         if tool.idname != TOOL_ID:
             tool = None
-        return tool.operator_properties("nubis.paint_field") if tool is not None else None
+        return tool.operator_properties(PAINT_OPERATOR) if tool is not None else None
     except (AttributeError, RuntimeError, TypeError):
         return None
 
@@ -447,16 +463,16 @@ class NubisPaintSkyTool(bpy.types.WorkSpaceTool):
     bl_context_mode = "OBJECT"
     bl_idname = TOOL_ID
     bl_label = "Paint Sky"
-    bl_description = "Paint where the clouds are, from above: drag to add, Ctrl-drag to subtract, Shift-drag to smooth"
+    bl_description = f"Paint where the clouds are, from above: {DRAGS}"
     bl_icon = "ops.generic.select_circle"
     bl_keymap = (
-        ("nubis.paint_field", {"type": "LEFTMOUSE", "value": "PRESS", "any": True}, None),
+        (PAINT_OPERATOR, {"type": "LEFTMOUSE", "value": "PRESS", "any": True}, None),
         ("nubis.paint_cursor", {"type": "MOUSEMOVE", "value": "ANY", "any": True}, None),
     )
 
     def draw_settings(context, layout, tool):
-        props = tool.operator_properties("nubis.paint_field")
-        for key in ("channel", "radius", "strength", "falloff"):
+        props = tool.operator_properties(PAINT_OPERATOR)
+        for key in BRUSH_KEYS:
             layout.prop(props, key)
 
 
@@ -492,18 +508,10 @@ def _draw_cursor() -> None:
     gpu.state.blend_set("NONE")
 
 
-class NUBIS_PT_paint(bpy.types.Panel):
+class NUBIS_PT_paint(SidebarPanel, bpy.types.Panel):
     """The sidebar's painting tools: the Paint Sky tool, its brush and the top view."""
 
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "Nubis"
-    bl_parent_id = "NUBIS_PT_main"
     bl_label = "Paint Sky"
-
-    @classmethod
-    def poll(cls, context):
-        return scene_io.has_cloudscape(context.scene)
 
     def draw(self, context):
         layout = self.layout
@@ -514,9 +522,9 @@ class NUBIS_PT_paint(bpy.types.Panel):
         if props is not None:
             col = layout.column()
             col.use_property_split = True
-            for key in ("channel", "radius", "strength", "falloff"):
+            for key in BRUSH_KEYS:
                 col.prop(props, key)
-            layout.label(text="Drag: add · Ctrl: subtract · Shift: smooth", icon="INFO")
+            layout.label(text=DRAG_HINT, icon="INFO")
         s = context.scene.nubis
         painted = [x for x in s.layers if x.kind == "PAINT"]
         for x in painted:

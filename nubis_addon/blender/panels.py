@@ -8,7 +8,7 @@ import bpy
 
 from ..core import quality, schema
 from ..core.errors import NubisError
-from . import operators, paint, pipeline, runtime, scene_io, status, viewport
+from . import paint, pipeline, presetlist, runtime, status, ui, viewport
 
 
 def draw_settings(layout, owner, settings) -> None:
@@ -32,7 +32,7 @@ class NUBIS_MT_presets(bpy.types.Menu):
     def draw(self, _context):
         layout = self.layout
         try:
-            entries = operators.preset_entries()
+            entries = presetlist.preset_entries()
         except NubisError as err:
             layout.label(text=str(err), icon="ERROR")
             return
@@ -50,7 +50,7 @@ class NUBIS_MT_presets(bpy.types.Menu):
 def draw_preset_row(layout, context) -> None:
     """Blender's preset row: the menu, showing the active preset, with Add (+) and Remove (-) beside it."""
     try:
-        entry = operators.active_preset(context) if scene_io.has_cloudscape(context.scene) else None
+        entry = presetlist.active_preset(context) if ui.has_cloudscape(context.scene) else None
     except NubisError as err:  # the user's preset folder cannot be made
         layout.label(text=str(err), icon="ERROR")
         return
@@ -70,7 +70,7 @@ class NUBIS_PT_main(bpy.types.Panel):
         layout = self.layout
         layout.operator_menu_enum("nubis.new_cloudscape", "preset", text="New Cloudscape", icon="OUTLINER_DATA_VOLUME")
         draw_preset_row(layout, context)
-        if not scene_io.has_cloudscape(context.scene):
+        if not ui.has_cloudscape(context.scene):
             layout.label(text="No cloudscape in this scene yet")
             return
         row = layout.row(align=True)
@@ -85,16 +85,10 @@ class NUBIS_PT_main(bpy.types.Panel):
         layout.operator("nubis.render_image", icon="RENDER_STILL")
 
 
-class NubisPanel:
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "Nubis"
-    bl_parent_id = "NUBIS_PT_main"
-    panel = ""
+class NubisPanel(ui.SidebarPanel):
+    """A sidebar panel drawing one panel of the settings schema (`panel`)."""
 
-    @classmethod
-    def poll(cls, context):
-        return scene_io.has_cloudscape(context.scene)
+    panel = ""
 
     def draw(self, context):
         self.draw_before(context)
@@ -146,10 +140,7 @@ _LAYER_KEYS_BY_KIND = {
 _LAYER_COMMON = ("kind", "channel", "blend", "enabled", "opacity")
 
 
-class NUBIS_PT_field(NubisPanel, bpy.types.Panel):
-    bl_label = "Data Field"
-    panel = "field"
-
+class _FieldDrawing:
     def draw_after(self, context):
         layout = self.layout
         layout.use_property_split = False
@@ -187,28 +178,7 @@ class NUBIS_PT_field(NubisPanel, bpy.types.Panel):
         layout.operator("nubis.generate_field", icon="FILE_REFRESH")
 
 
-class NUBIS_PT_altitude(NubisPanel, bpy.types.Panel):
-    bl_label = "Altitude"
-    bl_options = {"DEFAULT_CLOSED"}
-    panel = "altitude"
-
-
-class NUBIS_PT_shape(NubisPanel, bpy.types.Panel):
-    bl_label = "Shape"
-    bl_options = {"DEFAULT_CLOSED"}
-    panel = "shape"
-
-
-class NUBIS_PT_wind(NubisPanel, bpy.types.Panel):
-    bl_label = "Wind"
-    bl_options = {"DEFAULT_CLOSED"}
-    panel = "wind"
-
-
-class NUBIS_PT_lighting(NubisPanel, bpy.types.Panel):
-    bl_label = "Lighting"
-    panel = "lighting"
-
+class _LightingDrawing:
     def draw(self, context):
         s = context.scene.nubis
         layout = self.layout
@@ -224,23 +194,7 @@ class NUBIS_PT_lighting(NubisPanel, bpy.types.Panel):
         col.prop(context.scene.cycles, "volume_bounces", text="Bounces")  # Cycles' own tooltip
 
 
-class NUBIS_PT_sky(NubisPanel, bpy.types.Panel):
-    bl_label = "Sky and Final Renders"
-    bl_options = {"DEFAULT_CLOSED"}
-    panel = "sky"
-
-
-class NUBIS_PT_cirrus(NubisPanel, bpy.types.Panel):
-    bl_label = "Cirrus"
-    bl_options = {"DEFAULT_CLOSED"}
-    panel = "cirrus"
-
-
-class NUBIS_PT_storms(NubisPanel, bpy.types.Panel):
-    bl_label = "Superstorms"
-    bl_options = {"DEFAULT_CLOSED"}
-    panel = "storms"
-
+class _StormsDrawing:
     def draw_before(self, context):
         layout = self.layout
         s = context.scene.nubis
@@ -258,17 +212,8 @@ class NUBIS_PT_storms(NubisPanel, bpy.types.Panel):
             row.operator("nubis.lightning_sequence", icon="LIGHT_SUN")
 
 
-class NUBIS_PT_march(NubisPanel, bpy.types.Panel):
-    bl_label = "Ray March"
-    bl_options = {"DEFAULT_CLOSED"}
-    panel = "march"
-
-
-class NUBIS_PT_viewport(NubisPanel, bpy.types.Panel):
+class _ViewportDrawing:
     """The temporal viewport (docs/viewport.md): quality, convergence and the benchmark."""
-
-    bl_label = "Viewport"
-    panel = "viewport"
 
     def draw_before(self, context):
         s = context.scene.nubis
@@ -293,10 +238,7 @@ class NUBIS_PT_viewport(NubisPanel, bpy.types.Panel):
                 row.label(text=value)
 
 
-class NUBIS_PT_bake(NubisPanel, bpy.types.Panel):
-    bl_label = "Bake"
-    panel = "bake"
-
+class _BakeDrawing:
     def draw_after(self, context):
         layout = self.layout
         try:
@@ -310,24 +252,31 @@ class NUBIS_PT_bake(NubisPanel, bpy.types.Panel):
         self.layout.operator("nubis.bake_frames", icon="SEQUENCE")
 
 
-PANEL_CLASSES = {
-    cls.panel: cls
-    for cls in (
-        NUBIS_PT_field,
-        NUBIS_PT_altitude,
-        NUBIS_PT_shape,
-        NUBIS_PT_wind,
-        NUBIS_PT_lighting,
-        NUBIS_PT_sky,
-        NUBIS_PT_cirrus,
-        NUBIS_PT_storms,
-        NUBIS_PT_march,
-        NUBIS_PT_viewport,
-        NUBIS_PT_bake,
-    )
+# Panels open on a new cloudscape; the others start closed.
+_OPEN = frozenset({"field", "lighting", "viewport", "bake"})
+# What a panel draws beyond its schema panel's settings (NubisPanel.draw calls draw_before and draw_after).
+_DRAWINGS = {
+    "field": _FieldDrawing,
+    "lighting": _LightingDrawing,
+    "storms": _StormsDrawing,
+    "viewport": _ViewportDrawing,
+    "bake": _BakeDrawing,
 }
+
+
+def _panel(panel: str) -> type:
+    """The sidebar panel of the schema's panel `panel`: its label from the schema, its settings drawn by
+    NubisPanel with the panel's own additions (_DRAWINGS)."""
+    namespace = {"bl_label": dict(schema.PANELS)[panel], "panel": panel}
+    if panel not in _OPEN:
+        namespace["bl_options"] = {"DEFAULT_CLOSED"}
+    bases = (_DRAWINGS[panel],) if panel in _DRAWINGS else ()
+    return type(f"NUBIS_PT_{panel}", (*bases, NubisPanel, bpy.types.Panel), namespace)
+
+
 # Sub-panels in the schema's order (the order an artist works in).
-CLASSES = (NUBIS_UL_layers, NUBIS_MT_presets, NUBIS_PT_main, *(PANEL_CLASSES[p] for p in schema.PANEL_IDS))
+PANEL_CLASSES = {p: _panel(p) for p in schema.PANEL_IDS}
+CLASSES = (NUBIS_UL_layers, NUBIS_MT_presets, NUBIS_PT_main, *PANEL_CLASSES.values())
 
 
 register, unregister = bpy.utils.register_classes_factory(CLASSES)

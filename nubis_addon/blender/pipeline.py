@@ -99,7 +99,7 @@ def resolution(scene, width: int | None, height: int | None) -> tuple[int, int]:
     return w, h
 
 
-# The two comparison modes of `compare` (issue: measured parity with Cycles).
+# The two comparison modes of `compare`.
 # single: one scattering event on both sides, the viewport's reference light march, no powder and no
 #         multiple-scattering octaves, against Cycles with one volume bounce.
 # full:   every viewport term against Cycles with REFERENCE_BOUNCES volume bounces (or the caller's).
@@ -107,7 +107,7 @@ COMPARE_MODES = ("single", "full")
 
 # Cycles' volume bounces for a full comparison: enough that doubling them changes the picture by less
 # than Cycles' own noise on every preset (docs/convergence.md). The scene's own setting (8 by default,
-# what an artist renders with) is not a reference: at 8 bounces a stratus deck is 44 % darker.
+# what an artist renders with) is not a reference: a thick deck is far darker at 8 (docs/convergence.md).
 REFERENCE_BOUNCES = 256
 
 

@@ -15,11 +15,12 @@ from bpy.props import (
     StringProperty,
 )
 
-from ..core import schema
+from ..core import paint, schema
 from . import events
 
 # Blender keeps pointers to enum item strings: build each list once, at import, and keep it.
 _ENUM_ITEMS: dict[str, list[tuple[str, str, str]]] = {}
+_CALLBACK_ITEMS: list[list[tuple]] = []
 
 
 def enum_id(value: str) -> str:
@@ -57,11 +58,16 @@ def _float_kw(s: schema.Setting) -> dict:
     return kw
 
 
-def prop_for(s: schema.Setting):
-    """The bpy property of one setting."""
-    common = {"name": s.label, "description": s.description}
+def _common(s: schema.Setting) -> tuple[dict, dict]:
+    """A setting's name and tooltip, and its update callback (none when a change triggers nothing)."""
     key = s.key if s.group == "scene" else ""
     update = {"update": events.update_callback(s.trigger, key)} if s.trigger != "none" else {}
+    return {"name": s.label, "description": s.description}, update
+
+
+def prop_for(s: schema.Setting):
+    """The bpy property of one setting."""
+    common, update = _common(s)
     if s.kind == "float":
         return FloatProperty(**common, **update, **_float_kw(s))
     if s.kind == "int":
@@ -93,20 +99,60 @@ def _annotations(settings, skip=()) -> dict:
     return {s.key: prop_for(s) for s in settings if s.key not in skip}
 
 
-class NubisPaintDab(bpy.types.PropertyGroup):
-    """One brush dab of a paint layer, in world metres (core/paint.py: DAB_COLUMNS)."""
+def _dab_prop(column: paint.DabColumn):
+    """The bpy property of one dab column (core/paint.py: DABS)."""
+    kw = {"name": column.label, "description": column.description}
+    if column.kind == "bool":
+        return BoolProperty(**kw)
+    bounds = {b: getattr(column, b) for b in ("min", "max") if getattr(column, b) is not None}
+    if column.kind == "int":
+        return IntProperty(**kw, **{b: int(v) for b, v in bounds.items()})
+    if column.metres:
+        kw.update(subtype="DISTANCE", unit="LENGTH")
+    return FloatProperty(**kw, **{b: float(v) for b, v in bounds.items()})
 
-    x: FloatProperty(name="X", subtype="DISTANCE", unit="LENGTH")
-    y: FloatProperty(name="Y", subtype="DISTANCE", unit="LENGTH")
-    radius: FloatProperty(name="Radius", min=0.0, subtype="DISTANCE", unit="LENGTH")
-    strength: FloatProperty(name="Strength", min=-1.0, max=1.0, description="Signed: negative subtracts")
-    falloff: IntProperty(name="Falloff", min=0, description="Index into core/paint.FALLOFFS")
-    mode: IntProperty(name="Mode", min=0, description="Index into core/paint.MODES")
-    start: BoolProperty(name="Stroke Start", description="The first dab of a stroke")
+
+NubisPaintDab = type(
+    "NubisPaintDab",
+    (bpy.types.PropertyGroup,),
+    {
+        "__annotations__": {column.name: _dab_prop(column) for column in paint.DABS},
+        "__doc__": "One brush dab of a paint layer, in world metres (core/paint.py: DABS)",
+    },
+)
+
+
+def _layer_channel_items(s: schema.Setting):
+    """The items callback of a field layer's channel: a paint layer offers the channels a brush paints
+    (core/paint.py: PAINT_CHANNELS), any other layer every channel. Each item keeps its position in the
+    schema's list as its number, the number Blender stores, so files and presets read as they did."""
+    every = [(enum_id(v), label, desc or label, number) for number, (v, label, desc) in enumerate(s.items)]
+    paintable = [item for item, v in zip(every, s.choices, strict=True) if v in paint.PAINT_CHANNELS]
+    # A paint layer holding a channel no brush paints (its kind was changed after its channel) lists that
+    # channel too, so it still reads as itself and the composite says what to change (check_paint_channel).
+    holding = {item[3]: sorted([*paintable, item], key=lambda i: i[3]) for item in every if item not in paintable}
+    # Blender keeps pointers to the strings an items callback returns: these lists live as long as the add-on.
+    _CALLBACK_ITEMS.extend([every, paintable, *holding.values()])
+    default = s.choices.index(s.default)
+
+    def items(layer, _context):
+        if layer.kind != "PAINT":
+            return every
+        return holding.get(layer.get(s.name, default), paintable)
+
+    return items, default
+
+
+def _layer_channel_prop(s: schema.Setting):
+    """A field layer's channel (core/schema.py) with a paint layer's menu narrowed (_layer_channel_items)."""
+    common, update = _common(s)
+    items, default = _layer_channel_items(s)
+    return EnumProperty(**common, **update, items=items, default=default)
 
 
 def _layer_annotations() -> dict:
     ann = _annotations(schema.LAYER)
+    ann["channel"] = _layer_channel_prop(schema.LAYER_BY_NAME["channel"])
     # A paint layer's strokes: plain data, so Blender saves and undoes them like any setting.
     ann["dabs"] = CollectionProperty(type=NubisPaintDab)
     return ann

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import contextlib
+import dataclasses
+import itertools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import bpy
@@ -33,21 +35,6 @@ CAMERA_NAME = "Nubis Camera"
 
 
 # ---- settings ---------------------------------------------------------------------------------------
-
-
-def has_cloudscape(scene) -> bool:
-    """Whether `scene` holds a Nubis cloudscape (New Cloudscape has made its field images)."""
-    settings = getattr(scene, "nubis", None) if scene is not None else None
-    return settings is not None and settings.field_a is not None
-
-
-def redraw_views() -> None:
-    """Ask every 3D view of every window to redraw."""
-    wm = getattr(bpy.context, "window_manager", None)
-    for window in wm.windows if wm else ():
-        for area in window.screen.areas:
-            if area.type == "VIEW_3D":
-                area.tag_redraw()
 
 
 def scene_fps(scene) -> float:
@@ -97,6 +84,13 @@ def layer_to_dict(layer) -> dict:
 
 
 def layer_from_dict(layer, data: dict) -> None:
+    """Set a layer from its preset table. A paint layer's channel is checked before anything is set, and the
+    kind is set before the channel: a paint layer's channel menu offers only the channels a brush paints
+    (blender/properties.py)."""
+    if data.get("kind", layer.kind.lower()) == "paint" and "channel" in data:
+        paint.check_paint_channel(data.get("name") or layer.name, data["channel"])
+    if "kind" in data:
+        data = {"kind": data["kind"], **data}
     for key, value in data.items():
         if key == "dabs":  # a paint layer's strokes (core/paint.py)
             layer.dabs.clear()
@@ -150,51 +144,86 @@ def pack_fields(settings) -> None:
 
 # ---- a composite owed: the field's inputs changed since the last one ---------------------------------
 
-_stale: set[int] = set()
-_cover_hist: dict = {}  # scene pointer -> the histogram of its last composite's coverage, before the storms
-_cover_painted: dict = {}  # scene pointer -> whether its last composite painted coverage (core/paint.py)
-_pre_paint: dict = {}  # scene pointer -> (the paintable planes before the paint, the slider's multiplier)
+
+@dataclass
+class SceneState:
+    """What this session remembers of one scene between composites: nothing of it is saved. Kept by the
+    scene's pointer, so all of it goes at once on a file load (pointers are reused) and on unregister."""
+
+    stale: bool = False  # the field's inputs changed since its last composite: one is owed
+    cover_hist: tuple | None = None  # the last composite's coverage histogram, before the storms
+    cover_painted: bool = False  # whether the last composite painted coverage (core/paint.py)
+    pre_paint: tuple | None = None  # (the paintable planes before the paint, the slider's multiplier)
+    raster_keys: dict = field(default_factory=dict)  # a paint layer's pointer -> its key in core/paint.py
+    vortex: dict = field(default_factory=dict)  # an animated storm's vortex times, by F-curve (_vortex_time)
+
+
+_scenes: dict[int, SceneState] = {}
+# The keys core/paint.py caches paint layers' rasters under: counted here, never reused, never a pointer.
+_raster_key_counter = itertools.count(1)
+
+
+def scene_state(scene) -> SceneState:
+    """The scene's SceneState, made on first use."""
+    return _scenes.setdefault(scene.as_pointer(), SceneState())
+
+
+def _known_state(scene) -> SceneState:
+    """The scene's SceneState, or a fresh one (not kept) when this session has none: reads make none."""
+    return _scenes.get(scene.as_pointer()) or SceneState()
 
 
 def mark_field_stale(scene) -> None:
     """The field's inputs changed: the next read of the field (or the debounced timer) composites."""
-    _stale.add(scene.as_pointer())
+    scene_state(scene).stale = True
 
 
 def field_stale(scene) -> bool:
-    return scene.as_pointer() in _stale
+    return _known_state(scene).stale
 
 
 def stale_scenes() -> list:
-    return [scene for scene in bpy.data.scenes if scene.as_pointer() in _stale]
+    return [scene for scene in bpy.data.scenes if _known_state(scene).stale]
 
 
 def forget_stale() -> None:
-    """Forget what is remembered per scene pointer (on file loads, when pointers are reused)."""
-    _stale.clear()
-    _cover_hist.clear()
-    _cover_painted.clear()
-    _pre_paint.clear()
+    """Forget every scene's SceneState and the paint rasters cached for them: the one place this session's
+    per-scene memory ends (blender/events.py calls it on file loads, on unregister, and after a failed
+    debounced composite)."""
+    _scenes.clear()
     paint.forget()
+
+
+def raster_key(layer) -> int:
+    """The key core/paint.py caches this paint layer's raster under (core holds no Blender pointer)."""
+    keys = scene_state(layer.id_data).raster_keys
+    pointer = layer.as_pointer()
+    if pointer not in keys:
+        keys[pointer] = next(_raster_key_counter)
+    return keys[pointer]
 
 
 def coverage_multiplier(scene) -> float:
     """The multiplier on the coverage field that covers the fraction Coverage asks for: from the last
     composite's field before the storms, or, until this session composites, the one saved with the file."""
-    hist = _cover_hist.get(scene.as_pointer())
+    state = _known_state(scene)
     s = scene.nubis
-    if hist is None:
+    if state.cover_hist is None:
         return s.density_coverage
-    m = coverage.multiplier_for(s.density_cover, hist)
-    return max(m, paint.MULTIPLIER_FLOOR) if _cover_painted.get(scene.as_pointer()) else m
+    m = coverage.multiplier_for(s.density_cover, state.cover_hist)
+    return max(m, paint.MULTIPLIER_FLOOR) if state.cover_painted else m
+
+
+# Each dab column's name and the Python type Blender takes it as (core/paint.py: DABS).
+_DAB_TYPES = tuple((column.name, {"float": float, "int": int, "bool": bool}[column.kind]) for column in paint.DABS)
 
 
 def paint_dabs(layer) -> np.ndarray:
     """A paint layer's dabs as an (N, 7) array (core/paint.py: DAB_COLUMNS)."""
     n = len(layer.dabs)
-    out = np.empty((n, len(paint.DAB_COLUMNS)), np.float64)
-    for k, name in enumerate(paint.DAB_COLUMNS):
-        buf = np.empty(n, np.float32 if name in ("x", "y", "radius", "strength") else np.int32)
+    out = np.empty((n, len(paint.DABS)), np.float64)
+    for k, (name, kind) in enumerate(_DAB_TYPES):
+        buf = np.empty(n, np.float32 if kind is float else np.int32)
         if n:
             layer.dabs.foreach_get(name, buf)
         out[:, k] = buf
@@ -203,10 +232,11 @@ def paint_dabs(layer) -> np.ndarray:
 
 def add_dabs(layer, rows) -> None:
     """Append dabs (DAB_COLUMNS rows) to a paint layer's strokes."""
-    for row in rows:
+    # Python numbers, not numpy's: a million dabs (a full layer from a preset) are set one attribute at a time.
+    for row in rows.tolist() if isinstance(rows, np.ndarray) else rows:
         d = layer.dabs.add()
-        d.x, d.y, d.radius, d.strength = (float(v) for v in row[:4])
-        d.falloff, d.mode, d.start = int(row[4]), int(row[5]), bool(row[6])
+        for (name, kind), v in zip(_DAB_TYPES, row, strict=True):
+            setattr(d, name, kind(v))
 
 
 def copy_dabs(src, dst) -> None:
@@ -222,12 +252,8 @@ def paint_layers(settings, params=None) -> list[paint.PaintLayer]:
         if layer.kind != "PAINT" or not layer.enabled or not len(layer.dabs):
             continue
         channel = layer.channel.lower()
-        if channel not in paint.PAINT_CHANNELS:
-            raise NubisError(
-                f"the paint layer '{layer.name}' writes '{channel}', which a brush cannot paint: "
-                f"set its channel to one of {', '.join(paint.PAINT_CHANNELS)}"
-            )
-        r = paint.raster(layer.as_pointer(), paint_dabs(layer), grid)
+        paint.check_paint_channel(layer.name, channel)
+        r = paint.raster(raster_key(layer), paint_dabs(layer), grid)
         out.append(paint.PaintLayer(channel, float(layer.opacity), r.values))
     return out
 
@@ -235,7 +261,7 @@ def paint_layers(settings, params=None) -> list[paint.PaintLayer]:
 def pre_paint(scene):
     """(the paintable planes before the paint, the slider's multiplier) of the scene's last composite, or
     None: what a live stroke re-applies the paint to (blender/paint.py)."""
-    return _pre_paint.get(scene.as_pointer())
+    return _known_state(scene).pre_paint
 
 
 def read_field_image(img, which: str, resolution: int) -> np.ndarray:
@@ -294,10 +320,10 @@ def generate_fields(scene, progress=None) -> None:
     # Coverage is the fraction of the sky covered: the multiplier on this field that gives it, found from
     # the field before the storms (a superstorm's stencil is its own system, GDC22: counting it would thin
     # the fair-weather clouds everywhere else). Kept in the file, so a reopened file draws the same sky.
-    ptr = scene.as_pointer()
-    _cover_hist[ptr] = coverage.histogram(result["a"][..., 0])
+    state = scene_state(scene)
+    state.cover_hist = coverage.histogram(result["a"][..., 0])
     painted = paint_layers(settings, params)
-    _cover_painted[ptr] = any(p.channel == "coverage" for p in painted)
+    state.cover_painted = any(p.channel == "coverage" for p in painted)
     try:
         with batch_edit():
             settings.density_coverage = coverage_multiplier(scene)
@@ -312,14 +338,14 @@ def generate_fields(scene, progress=None) -> None:
     # paint while the scene has paint layers, so a live stroke re-applies its paint to a rectangle only.
     if any(layer.kind == "PAINT" for layer in settings.layers):
         pre = paint.pre_planes(result)
-        m = coverage.multiplier_for(settings.density_cover, _cover_hist[ptr])
-        _pre_paint[ptr] = (pre, m)
+        m = coverage.multiplier_for(settings.density_cover, state.cover_hist)
+        state.pre_paint = (pre, m)
         paint.apply(result, pre, painted, m)
     else:
-        _pre_paint.pop(ptr, None)
+        state.pre_paint = None
     for which, data in result.items():
         write_field_image(settings, which, data)
-    _stale.discard(scene.as_pointer())
+    state.stale = False
 
 
 # ---- superstorms ------------------------------------------------------------------------------------
@@ -340,26 +366,20 @@ def storm_stencils(settings, params) -> list:
     out = []
     for s in list(settings.storms)[:MAX_STORMS]:
         x, y = storm_centre(s)
-        out.append(
-            stormgen.Storm(
-                x=x,
-                y=y,
-                radius=max(s.radius - margin, 0.5 * s.radius),
-                coverage=s.coverage,
-                blend=s.blend,
-                height=s.height,
-                base=s.base,
-                bottom_type=s.bottom_type,
-                seed=s.seed,
-                anvil_offset=s.anvil_offset,
-                wind_x=wx,
-                wind_y=wy,
-            )
-        )
+        radius = max(s.radius - margin, 0.5 * s.radius)
+        out.append(_from_settings(stormgen.Storm, s, x=x, y=y, radius=radius, wind_x=wx, wind_y=wy))
     return out
 
 
-_vortex_cache: dict = {}
+def _from_settings(cls, source, **given):
+    """A `cls` dataclass: the fields in `given`, and every other field the property group `source` holds
+    under the same name (a storm's settings carry the names of core's storm fields); the rest defaults."""
+    read = {}
+    for f in dataclasses.fields(cls):
+        if f.name not in given and f.name in source.bl_rna.properties:
+            value = getattr(source, f.name)
+            read[f.name] = tuple(value) if hasattr(value, "__len__") and not isinstance(value, str) else value
+    return cls(**read, **given)
 
 
 def _vortex_time(scene, index: int, storm, time: float) -> float | None:
@@ -378,37 +398,25 @@ def _vortex_time(scene, index: int, storm, time: float) -> float | None:
         return float(time * stormgen.vortex_fade(storm.blend))
     last = int(math.ceil(scene.frame_current + scene.frame_subframe)) + 1
     keys = tuple((k.co[0], k.co[1], k.interpolation) for k in curve.keyframe_points)
-    key = (scene.as_pointer(), path, keys, fps, s.wind_time_scale, offset)
-    cached = _vortex_cache.get(key)
+    key = (path, keys, fps, s.wind_time_scale, offset)
+    vortex = scene_state(scene).vortex
+    cached = vortex.get(key)
     if cached is None or len(cached[0]) < last + 1:
         frames = np.arange(0, max(last, 2 * len(cached[0]) if cached else 0) + 1, dtype=np.float64)
-        if len(_vortex_cache) > 64:
-            _vortex_cache.clear()
+        if len(vortex) > 64:
+            vortex.clear()
         blends = np.array([curve.evaluate(f) for f in frames])
-        _vortex_cache[key] = cached = (frames / fps * s.wind_time_scale + offset, blends)
+        vortex[key] = cached = (frames / fps * s.wind_time_scale + offset, blends)
     return float(stormgen.vortex_time(cached[0], cached[1], time))
 
 
 def storm_lights(settings, scene=None, time: float = 0.0) -> tuple[StormLight, ...]:
     """The storms as the renderer needs them; given the scene, animated lifecycles get their vortex time."""
-    return tuple(
-        StormLight(
-            *storm_centre(s),
-            radius=s.radius,
-            blend=s.blend,
-            spin=s.spin,
-            darkening=s.darkening,
-            glow=s.glow,
-            ambient_boost=s.ambient_boost,
-            glow_color=tuple(s.glow_color),
-            flash=s.flash,
-            flash_x=s.flash_x,
-            flash_y=s.flash_y,
-            flash_ground=s.flash_ground,
-            vortex_time=_vortex_time(scene, i, s, time),
-        )
-        for i, s in enumerate(list(settings.storms)[:MAX_STORMS])
-    )
+    lights = []
+    for i, s in enumerate(list(settings.storms)[:MAX_STORMS]):
+        x, y = storm_centre(s)
+        lights.append(_from_settings(StormLight, s, x=x, y=y, vortex_time=_vortex_time(scene, i, s, time)))
+    return tuple(lights)
 
 
 def add_storm(scene, data: dict):
@@ -542,7 +550,7 @@ def apply_preset(scene, preset: Preset, progress=None, keep: Keep = Keep()) -> N
     generate_fields(scene, progress)  # after the camera and storms: the rules and stencils are placed by them
     if preset.legacy_coverage is not None:
         with batch_edit():
-            settings.density_cover = coverage.covered_fraction(preset.legacy_coverage, _cover_hist[scene.as_pointer()])
+            settings.density_cover = coverage.covered_fraction(preset.legacy_coverage, scene_state(scene).cover_hist)
             settings.density_coverage = preset.legacy_coverage
     # The sky after the (possibly long) composite: its capture renders with Cycles for a second.
     if not keep.world or scene.world is None:
@@ -578,7 +586,8 @@ def preset_from_scene(scene, name: str, description: str = "") -> Preset:
         data = {k: tidy(v) for k, v in layer_to_dict(layer).items()}
         if layer.kind == "PAINT" and len(layer.dabs):
             data["dabs"] = [
-                [*(tidy(float(v)) for v in row[:4]), *(int(v) for v in row[4:])] for row in paint_dabs(layer)
+                [tidy(float(v)) if kind is float else int(v) for (_name, kind), v in zip(_DAB_TYPES, row, strict=True)]
+                for row in paint_dabs(layer)
             ]
         layers.append(data)
     storms = []

@@ -16,7 +16,9 @@ import numpy as np
 
 from ..core import imageio, interrupt, metrics
 from ..core import sky as skymath
+from ..render import gpu_context
 from . import handlers, mainthread
+from .ui import redraw_views
 
 WORLD_NAME = "Nubis Sky"
 SKY_NODE = "Nubis Sky Texture"
@@ -332,12 +334,8 @@ def capture_world(scene, width: int = ENV_WIDTH, samples: int = ENV_SAMPLES, wor
 
 
 def _render_world(world, width: int, height: int, samples: int) -> np.ndarray:
-    tmp_scene = bpy.data.scenes.new("Nubis World Capture")
-    cam_data = bpy.data.cameras.new("Nubis World Capture")
-    cam = bpy.data.objects.new("Nubis World Capture", cam_data)
-    try:
-        tmp_scene.collection.objects.link(cam)
-        tmp_scene.camera = cam
+    with gpu_context.camera_scene("Nubis World Capture") as (tmp_scene, cam):
+        cam_data = cam.data
         tmp_scene.world = world
         cam_data.type = "PANO"
         if hasattr(cam_data, "panorama_type"):
@@ -370,10 +368,6 @@ def _render_world(world, width: int, height: int, samples: int) -> np.ndarray:
             r.filepath = str(path)
             _without_nubis_handlers(lambda: bpy.ops.render.render(write_still=True, scene=tmp_scene.name))
             rgba = imageio.read_image(path)
-    finally:
-        bpy.data.scenes.remove(tmp_scene)
-        bpy.data.objects.remove(cam)
-        bpy.data.cameras.remove(cam_data)
     # read_image gives the top row first; environments are stored bottom row first.
     return np.ascontiguousarray(rgba[::-1, :, :3], dtype=np.float32)
 
@@ -462,10 +456,7 @@ def _capture_pending():
         scene = bpy.data.scenes.get(name)
         if scene is not None and scene.world is not None:
             _latest[scene.world.name] = capture_world(scene, ENV_WIDTH)
-    for window in bpy.context.window_manager.windows if bpy.context.window_manager else ():
-        for area in window.screen.areas:
-            if area.type == "VIEW_3D":
-                area.tag_redraw()
+    redraw_views()
     return None
 
 

@@ -23,6 +23,7 @@ from ..core.errors import NubisError
 from ..core.sequence import human_bytes
 from ..render import vdbclouds as gpu_side
 from . import cycles_setup, status
+from .ui import SidebarPanel, redraw_views
 
 # Clouds read from disk, by (path, modification time, size, grid): a few, as Blender's own volume cache.
 _CACHE_ENTRIES = 8
@@ -31,10 +32,7 @@ _problems: dict[str, str] = {}  # object name -> why it is not drawn (the sideba
 
 
 def _redraw(_self=None, _context=None) -> None:
-    for window in getattr(bpy.context.window_manager, "windows", ()):
-        for area in window.screen.areas:
-            if area.type in ("VIEW_3D", "PROPERTIES"):
-                area.tag_redraw()
+    redraw_views(("VIEW_3D", "PROPERTIES"))
 
 
 def _on_toggle(self, context) -> None:
@@ -307,19 +305,11 @@ class NUBIS_PT_volume_cloud(bpy.types.Panel):
             self.layout.label(text=problem(obj), icon="ERROR")
 
 
-class NUBIS_PT_vdb_clouds(bpy.types.Panel):
+class NUBIS_PT_vdb_clouds(SidebarPanel, bpy.types.Panel):
     """The sidebar's list of the scene's VDB clouds, with the active Volume's settings."""
 
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "Nubis"
-    bl_parent_id = "NUBIS_PT_main"
     bl_label = "VDB Clouds"
     bl_options = {"DEFAULT_CLOSED"}
-
-    @classmethod
-    def poll(cls, context):
-        return getattr(getattr(context.scene, "nubis", None), "field_a", None) is not None
 
     def draw(self, context):
         layout = self.layout

@@ -14,7 +14,7 @@ from mathutils import Matrix
 from ..core import camera
 from ..core.errors import NubisError
 from ..render import engine, temporal
-from . import cycles_setup, runtime, scene_io, status, vdbclouds
+from . import cycles_setup, runtime, scene_io, status, ui, vdbclouds
 
 _handle = None
 _fields_cache: dict = {}  # scene pointer -> (key, field arrays)
@@ -116,7 +116,7 @@ def draw_view(scene, request: ViewDraw, wait_for_noise: bool | None = None) -> t
     if wait_for_noise:
         clouds = runtime.cloud_gpu(settings.noise_seed)
     else:
-        clouds = runtime.cloud_gpu_nowait(settings.noise_seed, scene_io.redraw_views)
+        clouds = runtime.cloud_gpu_nowait(settings.noise_seed, ui.redraw_views)
         if clouds is None:
             return None
     # Binding the history's framebuffers rebinds; remember the target so the upscale lands there.
@@ -163,7 +163,7 @@ def _converging_tick():
     now = time.monotonic()
     if not any(not tv.converged and now - getattr(tv, "last_drawn", 0.0) < _IDLE_SECONDS for tv in _views.values()):
         return None
-    scene_io.redraw_views()
+    ui.redraw_views()
     return 1.0 / 60.0
 
 
@@ -182,7 +182,7 @@ def view_shows_clouds(context) -> bool:
     is on, the shading is not Wireframe, and in Rendered mode no baked Nubis volume stands in for them
     (the render engine draws that one: the clouds would show twice)."""
     scene = context.scene
-    if not scene_io.has_cloudscape(scene) or not scene.nubis.enabled:
+    if not ui.has_cloudscape(scene) or not scene.nubis.enabled:
         return False
     if not view_toggle(context):
         return False

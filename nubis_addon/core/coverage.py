@@ -39,8 +39,8 @@ COVERED_AT = (
     (0.90, 0.9970),
     (1.00, 0.9974),
 )
-_C = np.array([c for c, _ in COVERED_AT])
-_F = np.array([f for _, f in COVERED_AT])
+_UNIFORM_COVERAGE = np.array([c for c, _ in COVERED_AT])
+_FRACTION_COVERED = np.array([f for _, f in COVERED_AT])
 
 # The largest multiplier the slider reaches: enough to lift a field's faintest tenth to full coverage.
 MAX_MULTIPLIER = 50.0
@@ -58,7 +58,8 @@ def histogram(coverage_field: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def covered_fraction(multiplier: float, hist: tuple[np.ndarray, np.ndarray]) -> float:
     """The fraction of the sky covered seen from above with this multiplier on the field."""
     centres, weights = hist
-    return float(np.dot(weights, np.interp(np.clip(centres * multiplier, 0.0, 1.0), _C, _F)))
+    covered = np.interp(np.clip(centres * multiplier, 0.0, 1.0), _UNIFORM_COVERAGE, _FRACTION_COVERED)
+    return float(np.dot(weights, covered))
 
 
 def multiplier_for(cover: float, hist: tuple[np.ndarray, np.ndarray]) -> float:

@@ -1,8 +1,8 @@
 """Painting the data field from above: brush dabs, their raster, and how a paint layer meets the field.
 
-A paint layer holds brush dabs in world metres (x, y, radius, signed strength, falloff, mode, stroke
-start), not pixels: it is re-rasterized at any field resolution and its strokes are plain data, which
-Blender saves and undoes like any setting. Its raster is a signed change per field pixel in [-1, 1].
+A paint layer holds brush dabs in world metres (one row of DABS each: position, radius, signed strength,
+falloff, mode, stroke start), not pixels: it is re-rasterized at any field resolution and its strokes are
+plain data, which Blender saves and undoes like any setting. Its raster is a signed change per field pixel in [-1, 1].
 
 Paint layers act last, after the stack, the weather rules and the superstorm stencils, in their order
 (docs/painting.md). A coverage paint layer adds to the coverage the shader sees *after* the Coverage
@@ -20,21 +20,85 @@ from typing import Any
 
 import numpy as np
 
-from . import console
+from . import console, fields
 from .errors import NubisError
 
-# The channels a brush paints, and where they live in the field images (core/fields.py's layout).
+
+@dataclass(frozen=True)
+class Choice:
+    """One entry of a brush menu: the name core/ uses, and the label and tooltip Blender shows."""
+
+    name: str
+    label: str
+    description: str
+
+
+# The channels a brush paints, in the Paint Sky tool's menu order. Blender keeps the tool's choice by its
+# position in this list, so a new channel goes at the end. The one list: the tool's menu (blender/paint.py),
+# a paint layer's channel menu (blender/properties.py) and every check derive from it.
+BRUSH_CHANNELS = (
+    Choice("coverage", "Coverage", "Where the clouds are: adds to the cover the Coverage slider gives"),
+    Choice("type", "Cloud Type", "Stratus (0) to cumulonimbus (1)"),
+    Choice("precipitation", "Precipitation", "Rain: darker, denser clouds"),
+    Choice("storm", "Storm Coverage", "Where a superstorm's clouds stand (inside a superstorm)"),
+)
+# Where each lives in the field images, in core/fields.py's layout order (the order sentences list them in).
 PAINT_CHANNELS: dict[str, tuple[str, int]] = {
-    "coverage": ("a", 0),
-    "precipitation": ("a", 1),
-    "type": ("a", 2),
-    "storm": ("b", 0),
+    name: place for name, place in fields.CHANNELS.items() if name in {c.name for c in BRUSH_CHANNELS}
 }
 FALLOFFS = ("smooth", "linear", "constant")
-MODES = ("paint", "smooth")
+MODES = ("paint", "smooth")  # what a dab does: its `mode` column holds the index
+
+
+@dataclass(frozen=True)
+class BrushMode:
+    """A way the brush paints: the modifier key that picks it during a drag, and the dabs it lays."""
+
+    name: str
+    label: str
+    description: str
+    key: str  # the modifier held while dragging ("ctrl", "shift"); "" for the plain drag
+    sign: float  # of the dabs' strength: negative subtracts
+    dab_mode: str  # a MODES entry
+
+
+# The one list of brush modes: the tool's Mode menu, the keys a drag reads and the tooltips derive from it
+# (blender/paint.py). A drag holding several keys takes the first mode here whose key is held.
+BRUSH_MODES = (
+    BrushMode("add", "Add", "Raise the channel under the brush", "", 1.0, "paint"),
+    BrushMode("subtract", "Subtract", "Lower the channel under the brush", "ctrl", -1.0, "paint"),
+    BrushMode("smooth", "Smooth", "Soften the paint layer's strokes under the brush", "shift", 1.0, "smooth"),
+)
+BRUSH_MODE: dict[str, BrushMode] = {m.name: m for m in BRUSH_MODES}
+
+
+@dataclass(frozen=True)
+class DabColumn:
+    """One number of a stored dab, and how Blender stores it (blender/properties.py builds its dab from these)."""
+
+    name: str
+    kind: str  # "float", "int" or "bool"
+    label: str
+    description: str = ""
+    metres: bool = False  # a length in world metres
+    min: float | None = None
+    max: float | None = None
+
+
 # One dab: x, y (metres), radius (metres), signed strength (with the pen's pressure), falloff index,
-# mode index, 1 where a stroke starts.
-DAB_COLUMNS = ("x", "y", "radius", "strength", "falloff", "mode", "start")
+# mode index, 1 where a stroke starts. The one list of its columns: arrays hold them in this order.
+DABS = (
+    DabColumn("x", "float", "X", metres=True),
+    DabColumn("y", "float", "Y", metres=True),
+    DabColumn("radius", "float", "Radius", metres=True, min=0.0),
+    DabColumn("strength", "float", "Strength", "Signed: negative subtracts", min=-1.0, max=1.0),
+    DabColumn("falloff", "int", "Falloff", "Index into core/paint.FALLOFFS", min=0),
+    DabColumn("mode", "int", "Mode", "Index into core/paint.MODES", min=0),
+    DabColumn("start", "bool", "Stroke Start", "The first dab of a stroke"),
+)
+DAB_COLUMNS = tuple(c.name for c in DABS)
+COLUMN: dict[str, int] = {name: i for i, name in enumerate(DAB_COLUMNS)}  # a column's index in a dab array
+
 # The slider's multiplier stored in the file while coverage paint exists: at 0 (a clear sky) the painted
 # cover could not be stored as cover / multiplier. Unpainted texels read exactly as before at any floor.
 MULTIPLIER_FLOOR = 1e-3
@@ -187,6 +251,15 @@ def check_points(grid: Grid, points: Sequence[tuple[float, float, float, bool]])
         check_number(pressure, f"the pressure of stroke point {n}", "", "give a pressure between 0 and 1")
 
 
+def check_paint_channel(layer: str, channel: str) -> None:
+    """Rule: a paint layer writes a channel a brush paints (PAINT_CHANNELS); `channel` as presets write it."""
+    if channel not in PAINT_CHANNELS:
+        raise NubisError(
+            f"the paint layer '{layer}' writes '{channel}', which a brush cannot paint: "
+            f"set its channel to one of {', '.join(PAINT_CHANNELS)}"
+        )
+
+
 def check_room(held: int, adding: int, layer: str = "") -> None:
     """Rule: a paint layer holds at most MAX_DABS dabs; `adding` is counted before any is laid."""
     if held + adding <= MAX_DABS:
@@ -213,9 +286,10 @@ def check_dab(row: Sequence[float], where: str) -> None:
     -1 to 1 (a subtracting stroke's dabs are negative, a pen's light touch near 0), its position within
     DAB_POSITION_MAX of the origin."""
     x, y, radius, strength, falloff, mode, start = row
-    for name, v in zip(DAB_COLUMNS, row, strict=True):
-        if name != "radius":  # check_radius says which radius to use
-            check_number(v, f"{where}: {name}", " of metres" if name in "xy" else "", "fix or remove the dab")
+    for column, v in zip(DABS, row, strict=True):
+        if column.name != "radius":  # check_radius says which radius to use
+            unit = " of metres" if column.metres else ""
+            check_number(v, f"{where}: {column.name}", unit, "fix or remove the dab")
     for name, v in (("x", x), ("y", y)):
         if abs(v) > DAB_POSITION_MAX:
             raise NubisError(
@@ -287,7 +361,7 @@ class Spacer:
 
     def __init__(self, radius: float, strength: float, falloff="smooth", mode="paint", spacing=SPACING, grid=None):
         self.radius, self.strength = radius, strength
-        self.fi, self.mi = FALLOFFS.index(falloff), MODES.index(mode)
+        self.falloff_index, self.mode_index = FALLOFFS.index(falloff), MODES.index(mode)
         self.step = max(radius * spacing, 1e-6)
         self.box = None if grid is None else grid.reach(radius)
         self.prev: tuple[float, float, float] | None = None
@@ -333,13 +407,15 @@ class Spacer:
         x0, y0, p0, x1, y1, p1, length, first, count = run
         t = (first + np.arange(count) * self.step) / length
         out = np.empty((count, len(DAB_COLUMNS)), np.float64)
-        out[:, 0] = x0 + (x1 - x0) * t
-        out[:, 1] = y0 + (y1 - y0) * t
-        out[:, 2] = self.radius
-        out[:, 3] = self.strength * (p0 + (p1 - p0) * t)
-        out[:, 4], out[:, 5], out[:, 6] = self.fi, self.mi, 0.0
+        out[:, COLUMN["x"]] = x0 + (x1 - x0) * t
+        out[:, COLUMN["y"]] = y0 + (y1 - y0) * t
+        out[:, COLUMN["radius"]] = self.radius
+        out[:, COLUMN["strength"]] = self.strength * (p0 + (p1 - p0) * t)
+        out[:, COLUMN["falloff"]] = self.falloff_index
+        out[:, COLUMN["mode"]] = self.mode_index
+        out[:, COLUMN["start"]] = 0.0
         if self.pending:
-            out[0, 6], self.pending = 1.0, False
+            out[0, COLUMN["start"]], self.pending = 1.0, False
         return out
 
     def add(self, x: float, y: float, pressure: float, start: bool = False) -> np.ndarray:
@@ -387,10 +463,11 @@ def _as_float(v: int | float) -> float:
 
 
 def parse_dabs(value, where: str) -> list[list[float]]:
-    """A preset's `dabs` (a paint layer's strokes, one [x, y, radius, strength, falloff, mode, start] row per
-    dab) checked row by row by check_dab, with the row and the rule in the message."""
+    """A preset's `dabs` (a paint layer's strokes, one row of DAB_COLUMNS per dab) checked row by row by
+    check_dab, with the row and the rule in the message."""
+    columns = ", ".join(DAB_COLUMNS)
     if not isinstance(value, list):
-        raise NubisError(f"{where} must be an array of dabs, each [x, y, radius, strength, falloff, mode, start]")
+        raise NubisError(f"{where} must be an array of dabs, each [{columns}]")
     if len(value) > MAX_DABS:
         raise NubisError(
             f"{where} holds {len(value):,} dabs, over the {MAX_DABS:,} a paint layer holds: split the strokes "
@@ -404,11 +481,10 @@ def parse_dabs(value, where: str) -> list[list[float]]:
             or len(row) != len(DAB_COLUMNS)
             or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in row)
         ):
-            raise NubisError(f"{here} must be 7 numbers: x, y, radius, strength, falloff, mode, start")
+            raise NubisError(f"{here} must be {len(DAB_COLUMNS)} numbers: {columns}")
         row = [_as_float(v) for v in row]
         check_dab(row, here)
-        x, y, radius, strength, falloff, mode, start = row
-        rows.append([x, y, radius, strength, int(falloff), int(mode), int(start)])
+        rows.append([v if column.kind == "float" else int(v) for column, v in zip(DABS, row, strict=True)])
     return rows
 
 
@@ -509,12 +585,15 @@ class Raster:
         return rect
 
 
-_RASTERS: dict[int, tuple[tuple, np.ndarray, Raster]] = {}  # layer key -> (grid key, dabs, raster)
+# layer key -> (grid, dabs, raster). A layer key is a number the caller gives each layer (blender/scene_io.py
+# mints them), never a Blender pointer: core holds no Blender identity. A cached raster is used only for the
+# dabs it was made from, so a key that comes to name another layer costs a raster from scratch, no more.
+_RASTERS: dict[int, tuple[Grid, np.ndarray, Raster]] = {}
 _MAX_RASTERS = 8  # at most 16 MB each for a 2048x2048 field
 
 
 def raster(layer_key: int, dabs: np.ndarray, grid: Grid) -> Raster:
-    """The raster of a layer's dabs, cached per layer: a layer whose dabs only grew (a new stroke) is
+    """The raster of a layer's dabs, cached per layer key: a layer whose dabs only grew (a new stroke) is
     rasterized from where it was, anything else (an undo, a cleared layer, a new field grid) from scratch.
     A long one is announced on the console first (notice), one holding too much memory refused (check_cost)."""
     dabs = np.asarray(dabs, np.float64).reshape(-1, len(DAB_COLUMNS))
@@ -582,12 +661,12 @@ def raster_cost(dabs: np.ndarray, grid: Grid) -> Cost:
     their strokes (bpy-free arithmetic: nothing is rasterized)."""
     dabs = np.asarray(dabs, np.float64).reshape(-1, len(DAB_COLUMNS))
     res = grid.resolution
-    radius_px = np.abs(np.nan_to_num(dabs[:, 2], posinf=0.0)) / grid.pixel
+    radius_px = np.abs(np.nan_to_num(dabs[:, COLUMN["radius"]], posinf=0.0)) / grid.pixel
     side = np.minimum(2.0 * np.ceil(radius_px) + 2.0, res)
-    smooth = dabs[:, 5] == MODES.index("smooth")
+    smooth = dabs[:, COLUMN["mode"]] == MODES.index("smooth")
     area = side * side
     per_pixel = np.where(area > BIG_RECT, BIG_PIXEL_S, PIXEL_S) * np.where(smooth, SMOOTH_FACTOR, 1.0)
-    strokes = int(np.count_nonzero((dabs[:, 6] == 1) & ~smooth)) + (len(dabs) > 0)
+    strokes = int(np.count_nonzero((dabs[:, COLUMN["start"]] == 1) & ~smooth)) + (len(dabs) > 0)
     seconds = len(dabs) * DAB_S + float((area * per_pixel).sum()) + strokes * res * res * STROKE_PIXEL_S
     # The dabs read from Blender and the cached copy, three planes (the values, the stroke's base and reach),
     # and the largest rectangle's float64 temporaries (about six at once).

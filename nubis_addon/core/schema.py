@@ -89,14 +89,12 @@ def _scene(section: str, name: str, kind: str, default, label: str, description:
     return Setting("scene", section, name, kind, default, label, description, **kw)
 
 
-S = _scene
-M = 1e6  # metres in 1000 km
 _BLENDER_OBJECTS = "set on Blender's own objects and settings, drawn by Blender's own panels"
 
 SCENE: tuple[Setting, ...] = (
     # -- altitude: low layer 1500-4000 m (S15, GPU Pro 7); S15 draws clouds within 35 km. The planet
     #    radius is ours to choose (docs/sources.md#planet-radius).
-    S(
+    _scene(
         "layer",
         "bottom",
         "float",
@@ -111,7 +109,7 @@ SCENE: tuple[Setting, ...] = (
         gpu=True,
         trigger="field",
     ),
-    S(
+    _scene(
         "layer",
         "top",
         "float",
@@ -126,7 +124,7 @@ SCENE: tuple[Setting, ...] = (
         gpu=True,
         trigger="field",
     ),
-    S(
+    _scene(
         "layer",
         "planet_radius",
         "float",
@@ -141,7 +139,7 @@ SCENE: tuple[Setting, ...] = (
         panel="altitude",
         gpu=True,
     ),
-    S(
+    _scene(
         "layer",
         "draw_radius",
         "float",
@@ -156,7 +154,7 @@ SCENE: tuple[Setting, ...] = (
         gpu=True,
     ),
     # -- the data field
-    S(
+    _scene(
         "field",
         "size",
         "float",
@@ -171,7 +169,7 @@ SCENE: tuple[Setting, ...] = (
         gpu=True,
         trigger="field",
     ),
-    S(
+    _scene(
         "field",
         "origin_x",
         "float",
@@ -187,7 +185,7 @@ SCENE: tuple[Setting, ...] = (
         gpu=True,
         trigger="field",
     ),
-    S(
+    _scene(
         "field",
         "origin_y",
         "float",
@@ -203,7 +201,7 @@ SCENE: tuple[Setting, ...] = (
         gpu=True,
         trigger="field",
     ),
-    S(
+    _scene(
         "field",
         "resolution",
         "int",
@@ -217,7 +215,7 @@ SCENE: tuple[Setting, ...] = (
         trigger="field",
     ),
     # -- shape: noise and density (GPU Pro 7)
-    S(
+    _scene(
         "noise",
         "seed",
         "int",
@@ -229,7 +227,7 @@ SCENE: tuple[Setting, ...] = (
         soft_max=1000,
         panel="shape",
     ),
-    S(
+    _scene(
         "noise",
         "lf_period",
         "float",
@@ -243,7 +241,7 @@ SCENE: tuple[Setting, ...] = (
         panel="shape",
         gpu=True,
     ),
-    S(
+    _scene(
         "noise",
         "hf_period",
         "float",
@@ -257,7 +255,7 @@ SCENE: tuple[Setting, ...] = (
         panel="shape",
         gpu=True,
     ),
-    S(
+    _scene(
         "noise",
         "curl_period",
         "float",
@@ -271,7 +269,7 @@ SCENE: tuple[Setting, ...] = (
         panel="shape",
         gpu=True,
     ),
-    S(
+    _scene(
         "noise",
         "curl_strength",
         "float",
@@ -286,7 +284,7 @@ SCENE: tuple[Setting, ...] = (
         gpu=True,
     ),
     # One extinction coefficient, shared by the viewport and the VDB's Cycles material.
-    S(
+    _scene(
         "density",
         "sigma",
         "float",
@@ -299,7 +297,7 @@ SCENE: tuple[Setting, ...] = (
         panel="shape",
         gpu=True,
     ),
-    S(
+    _scene(
         "density",
         "cover",
         "float",
@@ -312,7 +310,7 @@ SCENE: tuple[Setting, ...] = (
         panel="shape",
         trigger="field",
     ),
-    S(
+    _scene(
         "density",
         "coverage",
         "float",
@@ -326,7 +324,7 @@ SCENE: tuple[Setting, ...] = (
         internal="derived from density.cover for the scene's field (core/coverage.py)",
         gpu=True,
     ),
-    S(
+    _scene(
         "density",
         "erosion",
         "float",
@@ -338,7 +336,7 @@ SCENE: tuple[Setting, ...] = (
         panel="shape",
         gpu=True,
     ),
-    S(
+    _scene(
         "density",
         "multiply_coverage",
         "bool",
@@ -349,7 +347,7 @@ SCENE: tuple[Setting, ...] = (
         gpu=True,
     ),
     # -- wind (GPU Pro 7: 10 m/s, 500 m top offset, 0.1 upward bias)
-    S(
+    _scene(
         "wind",
         "direction",
         "float",
@@ -361,7 +359,7 @@ SCENE: tuple[Setting, ...] = (
         unit="ROTATION",
         panel="wind",
     ),
-    S(
+    _scene(
         "wind",
         "speed",
         "float",
@@ -375,7 +373,7 @@ SCENE: tuple[Setting, ...] = (
         panel="wind",
         gpu=True,
     ),
-    S(
+    _scene(
         "wind",
         "top_offset",
         "float",
@@ -390,7 +388,7 @@ SCENE: tuple[Setting, ...] = (
         panel="wind",
         gpu=True,
     ),
-    S(
+    _scene(
         "wind",
         "upward_bias",
         "float",
@@ -402,7 +400,7 @@ SCENE: tuple[Setting, ...] = (
         panel="wind",
         gpu=True,
     ),
-    S(
+    _scene(
         "wind",
         "detail_speed",
         "float",
@@ -415,7 +413,7 @@ SCENE: tuple[Setting, ...] = (
         panel="wind",
         gpu=True,
     ),
-    S(
+    _scene(
         "wind",
         "time_offset",
         "float",
@@ -429,7 +427,7 @@ SCENE: tuple[Setting, ...] = (
         unit="TIME_ABSOLUTE",
         panel="wind",
     ),
-    S(
+    _scene(
         "wind",
         "time_scale",
         "float",
@@ -442,7 +440,7 @@ SCENE: tuple[Setting, ...] = (
         panel="wind",
     ),
     # -- lighting: GDC22's eccentricity 0.2, a second lobe for the silver lining
-    S(
+    _scene(
         "lighting",
         "phase_g0",
         "float",
@@ -454,7 +452,7 @@ SCENE: tuple[Setting, ...] = (
         panel="lighting",
         gpu=True,
     ),
-    S(
+    _scene(
         "lighting",
         "phase_g1",
         "float",
@@ -466,7 +464,7 @@ SCENE: tuple[Setting, ...] = (
         panel="lighting",
         gpu=True,
     ),
-    S(
+    _scene(
         "lighting",
         "phase_mix",
         "float",
@@ -478,7 +476,7 @@ SCENE: tuple[Setting, ...] = (
         panel="lighting",
         gpu=True,
     ),
-    S(
+    _scene(
         "lighting",
         "ambient",
         "float",
@@ -491,7 +489,7 @@ SCENE: tuple[Setting, ...] = (
         panel="lighting",
         gpu=True,
     ),
-    S(
+    _scene(
         "lighting",
         "ambient_bottom",
         "float",
@@ -504,7 +502,7 @@ SCENE: tuple[Setting, ...] = (
         panel="lighting",
         gpu=True,
     ),
-    S(
+    _scene(
         "lighting",
         "sky_occlusion",
         "float",
@@ -517,7 +515,7 @@ SCENE: tuple[Setting, ...] = (
         panel="lighting",
         gpu=True,
     ),
-    S(
+    _scene(
         "lighting",
         "ms_buildup",
         "float",
@@ -530,7 +528,7 @@ SCENE: tuple[Setting, ...] = (
         panel="lighting",
         gpu=True,
     ),
-    S(
+    _scene(
         "lighting",
         "diffusion_edge",
         "float",
@@ -543,7 +541,7 @@ SCENE: tuple[Setting, ...] = (
         panel="lighting",
         gpu=True,
     ),
-    S(
+    _scene(
         "lighting",
         "side_light",
         "float",
@@ -556,7 +554,7 @@ SCENE: tuple[Setting, ...] = (
         panel="lighting",
         gpu=True,
     ),
-    S(
+    _scene(
         "lighting",
         "cycles_mie",
         "bool",
@@ -566,7 +564,7 @@ SCENE: tuple[Setting, ...] = (
         panel="lighting",
         trigger="none",
     ),
-    S(
+    _scene(
         "lighting",
         "droplet_size",
         "float",
@@ -578,7 +576,7 @@ SCENE: tuple[Setting, ...] = (
         panel="lighting",
         trigger="none",
     ),
-    S(
+    _scene(
         "lighting",
         "rain_absorption",
         "float",
@@ -592,7 +590,7 @@ SCENE: tuple[Setting, ...] = (
     ),
     # Not from the Guerrilla sources: Wrenninge et al.'s multiple-scattering octaves. The lighting defaults
     # are fitted against converged Cycles references (docs/viewport.md#fitted-to-converged-cycles).
-    S(
+    _scene(
         "lighting",
         "ms_octaves",
         "int",
@@ -604,7 +602,7 @@ SCENE: tuple[Setting, ...] = (
         panel="lighting",
         gpu=True,
     ),
-    S(
+    _scene(
         "lighting",
         "ms_attenuation",
         "float",
@@ -616,7 +614,7 @@ SCENE: tuple[Setting, ...] = (
         panel="lighting",
         gpu=True,
     ),
-    S(
+    _scene(
         "lighting",
         "ms_contribution",
         "float",
@@ -628,7 +626,7 @@ SCENE: tuple[Setting, ...] = (
         panel="lighting",
         gpu=True,
     ),
-    S(
+    _scene(
         "lighting",
         "ms_eccentricity",
         "float",
@@ -640,7 +638,7 @@ SCENE: tuple[Setting, ...] = (
         panel="lighting",
         gpu=True,
     ),
-    S(
+    _scene(
         "lighting",
         "powder",
         "float",
@@ -652,7 +650,7 @@ SCENE: tuple[Setting, ...] = (
         panel="lighting",
         gpu=True,
     ),
-    S(
+    _scene(
         "lighting",
         "fade_distance",
         "float",
@@ -667,7 +665,7 @@ SCENE: tuple[Setting, ...] = (
         gpu=True,
     ),
     # -- the high 2D cirrus layer (GPU Pro 7, GDC22), above the volumetric one
-    S(
+    _scene(
         "cirrus",
         "altitude",
         "float",
@@ -681,7 +679,7 @@ SCENE: tuple[Setting, ...] = (
         panel="cirrus",
         gpu=True,
     ),
-    S(
+    _scene(
         "cirrus",
         "coverage",
         "float",
@@ -693,7 +691,7 @@ SCENE: tuple[Setting, ...] = (
         panel="cirrus",
         gpu=True,
     ),
-    S(
+    _scene(
         "cirrus",
         "period",
         "float",
@@ -706,7 +704,7 @@ SCENE: tuple[Setting, ...] = (
         unit="LENGTH",
         panel="cirrus",
     ),
-    S(
+    _scene(
         "cirrus",
         "opacity",
         "float",
@@ -719,7 +717,7 @@ SCENE: tuple[Setting, ...] = (
         panel="cirrus",
         gpu=True,
     ),
-    S(
+    _scene(
         "cirrus",
         "wind_direction",
         "float",
@@ -731,7 +729,7 @@ SCENE: tuple[Setting, ...] = (
         unit="ROTATION",
         panel="cirrus",
     ),
-    S(
+    _scene(
         "cirrus",
         "wind_speed",
         "float",
@@ -744,7 +742,7 @@ SCENE: tuple[Setting, ...] = (
         unit="VELOCITY",
         panel="cirrus",
     ),
-    S(
+    _scene(
         "cirrus",
         "thickness",
         "float",
@@ -758,7 +756,7 @@ SCENE: tuple[Setting, ...] = (
         panel="cirrus",
     ),
     # -- superstorms (GDC22): the vortex twist at ring boundaries, the anvil and the internal glow
-    S(
+    _scene(
         "storm",
         "twist",
         "float",
@@ -771,7 +769,7 @@ SCENE: tuple[Setting, ...] = (
         panel="storms",
         gpu=True,
     ),
-    S(
+    _scene(
         "storm",
         "jittered_rings",
         "bool",
@@ -782,7 +780,7 @@ SCENE: tuple[Setting, ...] = (
         gpu=True,
         quality="jittered_rings",
     ),
-    S(
+    _scene(
         "storm",
         "anvil_shift",
         "float",
@@ -796,7 +794,7 @@ SCENE: tuple[Setting, ...] = (
         panel="storms",
         gpu=True,
     ),
-    S(
+    _scene(
         "storm",
         "glow_height",
         "float",
@@ -810,7 +808,7 @@ SCENE: tuple[Setting, ...] = (
     ),
     # -- the ray march (GPU Pro 7: 64 view samples looking up, 128 towards the horizon; GDC22's platform
     #    table: 6 light samples and noise mip 1 on PS4, 10 and mip 0 on PS5)
-    S(
+    _scene(
         "march",
         "steps_min",
         "int",
@@ -824,7 +822,7 @@ SCENE: tuple[Setting, ...] = (
         gpu=True,
         quality="steps_min",
     ),
-    S(
+    _scene(
         "march",
         "steps_max",
         "int",
@@ -838,7 +836,7 @@ SCENE: tuple[Setting, ...] = (
         gpu=True,
         quality="steps_max",
     ),
-    S(
+    _scene(
         "march",
         "light_step",
         "float",
@@ -851,7 +849,7 @@ SCENE: tuple[Setting, ...] = (
         unit="LENGTH",
         panel="march",
     ),
-    S(
+    _scene(
         "march",
         "light_samples",
         "int",
@@ -864,7 +862,7 @@ SCENE: tuple[Setting, ...] = (
         gpu=True,
         quality="light_samples",
     ),
-    S(
+    _scene(
         "march",
         "mip",
         "int",
@@ -878,7 +876,7 @@ SCENE: tuple[Setting, ...] = (
         quality="mip",
     ),
     # -- the temporal viewport (docs/viewport.md)
-    S(
+    _scene(
         "viewport",
         "resolution",
         "float",
@@ -890,7 +888,7 @@ SCENE: tuple[Setting, ...] = (
         panel="viewport",
         quality="resolution",
     ),
-    S(
+    _scene(
         "viewport",
         "blur",
         "float",
@@ -902,7 +900,7 @@ SCENE: tuple[Setting, ...] = (
         panel="viewport",
         quality="blur",
     ),
-    S(
+    _scene(
         "viewport",
         "samples",
         "int",
@@ -914,7 +912,7 @@ SCENE: tuple[Setting, ...] = (
         soft_max=64,
         panel="viewport",
     ),
-    S(
+    _scene(
         "viewport",
         "solid_sky",
         "bool",
@@ -926,7 +924,7 @@ SCENE: tuple[Setting, ...] = (
     ),
     # -- the sky and final renders: a physically based World (Blender's Sky Texture), the clouds in F12
     #    renders through the World (camera background and lighting environment), cloud shadows
-    S(
+    _scene(
         "sky",
         "sun_color",
         "bool",
@@ -936,7 +934,7 @@ SCENE: tuple[Setting, ...] = (
         panel="sky",
         trigger="redraw",
     ),
-    S(
+    _scene(
         "sky",
         "ground",
         "color",
@@ -950,7 +948,7 @@ SCENE: tuple[Setting, ...] = (
         panel="sky",
         trigger="redraw",
     ),
-    S(
+    _scene(
         "sky",
         "render_clouds",
         "bool",
@@ -960,7 +958,7 @@ SCENE: tuple[Setting, ...] = (
         panel="sky",
         trigger="none",
     ),
-    S(
+    _scene(
         "sky",
         "shadows",
         "bool",
@@ -970,7 +968,7 @@ SCENE: tuple[Setting, ...] = (
         panel="sky",
         trigger="none",
     ),
-    S(
+    _scene(
         "sky",
         "shadow_resolution",
         "int",
@@ -983,7 +981,7 @@ SCENE: tuple[Setting, ...] = (
         panel="sky",
         trigger="none",
     ),
-    S(
+    _scene(
         "sky",
         "shadow_size",
         "float",
@@ -997,7 +995,7 @@ SCENE: tuple[Setting, ...] = (
         panel="sky",
         trigger="none",
     ),
-    S(
+    _scene(
         "sky",
         "environment_width",
         "int",
@@ -1011,7 +1009,7 @@ SCENE: tuple[Setting, ...] = (
         trigger="none",
     ),
     # -- the bake
-    S(
+    _scene(
         "bake",
         "voxel_size",
         "float",
@@ -1026,7 +1024,7 @@ SCENE: tuple[Setting, ...] = (
         trigger="none",
     ),
     # Production VDB export (docs/bake.md): the Bake panel's options, as the command line's flags.
-    S(
+    _scene(
         "bake",
         "camera_only",
         "bool",
@@ -1036,7 +1034,7 @@ SCENE: tuple[Setting, ...] = (
         panel="bake",
         trigger="none",
     ),
-    S(
+    _scene(
         "bake",
         "half",
         "bool",
@@ -1046,7 +1044,7 @@ SCENE: tuple[Setting, ...] = (
         panel="bake",
         trigger="none",
     ),
-    S(
+    _scene(
         "bake",
         "velocity",
         "bool",
@@ -1057,7 +1055,7 @@ SCENE: tuple[Setting, ...] = (
         trigger="none",
     ),
     # -- the weather rules, applied after the layer stack (GPU Pro 7, S15)
-    S(
+    _scene(
         "rules",
         "rain",
         "bool",
@@ -1068,7 +1066,7 @@ SCENE: tuple[Setting, ...] = (
         trigger="field",
         key_override="rule_rain",
     ),
-    S(
+    _scene(
         "rules",
         "horizon",
         "bool",
@@ -1079,7 +1077,7 @@ SCENE: tuple[Setting, ...] = (
         trigger="field",
         key_override="rule_horizon",
     ),
-    S(
+    _scene(
         "rules",
         "cumulonimbus_top",
         "float",
@@ -1092,7 +1090,7 @@ SCENE: tuple[Setting, ...] = (
         trigger="field",
         key_override="rule_cumulonimbus_top",
     ),
-    S(
+    _scene(
         "rules",
         "horizon_start",
         "float",
@@ -1108,7 +1106,7 @@ SCENE: tuple[Setting, ...] = (
         key_override="rule_horizon_start",
     ),
     # -- Blender state only, never in a preset
-    S(
+    _scene(
         "",
         "enabled",
         "bool",
@@ -1119,7 +1117,7 @@ SCENE: tuple[Setting, ...] = (
         in_preset=False,
         key_override="enabled",
     ),
-    S(
+    _scene(
         "",
         "preset",
         "string",
@@ -1131,7 +1129,7 @@ SCENE: tuple[Setting, ...] = (
         trigger="none",
         key_override="preset",
     ),
-    S(
+    _scene(
         "",
         "sun",
         "object",
@@ -1144,7 +1142,7 @@ SCENE: tuple[Setting, ...] = (
         key_override="sun",
         object_type="SUN",
     ),
-    S(
+    _scene(
         "",
         "ambient_source",
         "enum",
@@ -1159,7 +1157,7 @@ SCENE: tuple[Setting, ...] = (
             ("color", "Color", "Sky light from an explicit color"),
         ),
     ),
-    S(
+    _scene(
         "",
         "ambient_color",
         "color",
@@ -1173,7 +1171,7 @@ SCENE: tuple[Setting, ...] = (
         in_preset=False,
         key_override="ambient_color",
     ),
-    S(
+    _scene(
         "",
         "viewport_quality",
         "string",
@@ -1185,7 +1183,7 @@ SCENE: tuple[Setting, ...] = (
         trigger="none",
         key_override="viewport_quality",
     ),
-    S(
+    _scene(
         "",
         "field_a",
         "image",
@@ -1196,7 +1194,7 @@ SCENE: tuple[Setting, ...] = (
         in_preset=False,
         key_override="field_a",
     ),
-    S(
+    _scene(
         "",
         "field_b",
         "image",
@@ -1207,7 +1205,7 @@ SCENE: tuple[Setting, ...] = (
         in_preset=False,
         key_override="field_b",
     ),
-    S(
+    _scene(
         "",
         "field_cirrus",
         "image",
@@ -1218,7 +1216,7 @@ SCENE: tuple[Setting, ...] = (
         in_preset=False,
         key_override="field_cirrus",
     ),
-    S(
+    _scene(
         "",
         "active_layer",
         "int",
@@ -1230,7 +1228,7 @@ SCENE: tuple[Setting, ...] = (
         trigger="none",
         key_override="active_layer",
     ),
-    S(
+    _scene(
         "",
         "active_storm",
         "int",
@@ -1243,7 +1241,6 @@ SCENE: tuple[Setting, ...] = (
         key_override="active_storm",
     ),
 )
-del S
 
 LAYER_KINDS = ("perlin", "worley", "perlin_worley", "gradient", "constant", "image", "paint")
 FIELD_CHANNELS = (
@@ -1270,19 +1267,20 @@ def _table(group: str, section: str, rows: list[tuple]) -> tuple[Setting, ...]:
     return tuple(out)
 
 
-_F = {"panel": "field", "trigger": "field"}
+# A field layer's setting: drawn in the Data Field panel, a change re-composites the field.
+_LAYER_KW = {"panel": "field", "trigger": "field"}
 LAYER: tuple[Setting, ...] = _table(
     "layer",
     "field.layers",
     [
-        ("name", "string", "", "Name", "The layer's name; masks refer to layers by it", _F),
+        ("name", "string", "", "Name", "The layer's name; masks refer to layers by it", _LAYER_KW),
         (
             "kind",
             "enum",
             "perlin",
             "Kind",
             "What the layer generates",
-            {**_F, "items": _items(*LAYER_KINDS, perlin_worley="Perlin-Worley")},
+            {**_LAYER_KW, "items": _items(*LAYER_KINDS, perlin_worley="Perlin-Worley")},
         ),
         (
             "channel",
@@ -1290,7 +1288,7 @@ LAYER: tuple[Setting, ...] = _table(
             "coverage",
             "Channel",
             "The data-field channel the layer writes",
-            {**_F, "items": _items(*FIELD_CHANNELS)},
+            {**_LAYER_KW, "items": _items(*FIELD_CHANNELS)},
         ),
         (
             "blend",
@@ -1298,36 +1296,36 @@ LAYER: tuple[Setting, ...] = _table(
             "replace",
             "Blend",
             "How the layer combines with the layers above it",
-            {**_F, "items": _items(*BLEND_MODES)},
+            {**_LAYER_KW, "items": _items(*BLEND_MODES)},
         ),
-        ("enabled", "bool", True, "Enabled", "Include the layer in the composite", _F),
+        ("enabled", "bool", True, "Enabled", "Include the layer in the composite", _LAYER_KW),
         (
             "opacity",
             "float",
             1.0,
             "Opacity",
             "How much of the layer's result is blended in",
-            {**_F, "min": 0.0, "max": 1.0},
+            {**_LAYER_KW, "min": 0.0, "max": 1.0},
         ),
-        ("mask", "string", "", "Mask", "An earlier layer whose value scales this one's opacity", _F),
-        ("invert_mask", "bool", False, "Invert Mask", "Use one minus the mask", _F),
+        ("mask", "string", "", "Mask", "An earlier layer whose value scales this one's opacity", _LAYER_KW),
+        ("invert_mask", "bool", False, "Invert Mask", "Use one minus the mask", _LAYER_KW),
         (
             "scale",
             "float",
             8000.0,
             "Scale",
             "Feature size of the noise",
-            {**_F, "min": 1.0, "max": 1e7, "soft_max": 100000.0, "unit": "LENGTH"},
+            {**_LAYER_KW, "min": 1.0, "max": 1e7, "soft_max": 100000.0, "unit": "LENGTH"},
         ),
-        ("seed", "int", 0, "Seed", "Seed of the noise", {**_F, "min": 0, "max": 2**31 - 1, "soft_max": 1000}),
-        ("octaves", "int", 4, "Octaves", "Octaves of the fractal noise", {**_F, "min": 1, "max": 10}),
+        ("seed", "int", 0, "Seed", "Seed of the noise", {**_LAYER_KW, "min": 0, "max": 2**31 - 1, "soft_max": 1000}),
+        ("octaves", "int", 4, "Octaves", "Octaves of the fractal noise", {**_LAYER_KW, "min": 1, "max": 10}),
         (
             "remap",
             "vector",
             (0.0, 1.0, 0.0, 1.0),
             "Remap",
             "Input low and high, output low and high: the layer's value mapped linearly",
-            {**_F, "size": 4},
+            {**_LAYER_KW, "size": 4},
         ),
         (
             "value",
@@ -1335,39 +1333,48 @@ LAYER: tuple[Setting, ...] = _table(
             1.0,
             "Value",
             "The constant layer's value",
-            {**_F, "min": -1e6, "max": 1e6, "soft_min": -2.0, "soft_max": 2.0},
+            {**_LAYER_KW, "min": -1e6, "max": 1e6, "soft_min": -2.0, "soft_max": 2.0},
         ),
-        ("gradient", "enum", "linear", "Gradient", "Shape of the gradient", {**_F, "items": _items(*GRADIENT_SHAPES)}),
+        (
+            "gradient",
+            "enum",
+            "linear",
+            "Gradient",
+            "Shape of the gradient",
+            {**_LAYER_KW, "items": _items(*GRADIENT_SHAPES)},
+        ),
         (
             "angle",
             "float",
             0.0,
             "Angle",
             "Direction of a linear gradient, in degrees",
-            {**_F, "min": -360.0, "max": 360.0},
+            {**_LAYER_KW, "min": -360.0, "max": 360.0},
         ),
-        ("center", "vector", (0.0, 0.0), "Center", "Center of the gradient in meters", {**_F, "size": 2}),
+        ("center", "vector", (0.0, 0.0), "Center", "Center of the gradient in meters", {**_LAYER_KW, "size": 2}),
         (
             "radius",
             "float",
             10000.0,
             "Radius",
             "Radius of a radial gradient",
-            {**_F, "min": 1.0, "max": 1e7, "soft_max": 200000.0, "unit": "LENGTH"},
+            {**_LAYER_KW, "min": 1.0, "max": 1e7, "soft_max": 200000.0, "unit": "LENGTH"},
         ),
-        ("image", "image", "", "Image", "Painted image for image layers", _F),
+        ("image", "image", "", "Image", "Painted image for image layers", _LAYER_KW),
     ],
 )
 
-_ST = {"panel": "storms", "trigger": "field"}
-_SL = {"panel": "storms", "trigger": "redraw"}
+# A superstorm's settings, drawn in its panel: those of its stencil re-composite the field, those of its
+# light and motion only redraw the clouds.
+_STORM_FIELD_KW = {"panel": "storms", "trigger": "field"}
+_STORM_REDRAW_KW = {"panel": "storms", "trigger": "redraw"}
 _POSITION = "the storm's Empty holds its position; move it in the viewport"
 _KEYED = "keyframed by Add Lightning"
 STORM: tuple[Setting, ...] = _table(
     "storm",
     "storms",
     [
-        ("name", "string", "Superstorm", "Name", "The storm's name", {**_ST, "trigger": "none"}),
+        ("name", "string", "Superstorm", "Name", "The storm's name", {**_STORM_FIELD_KW, "trigger": "none"}),
         (
             "x",
             "float",
@@ -1390,16 +1397,23 @@ STORM: tuple[Setting, ...] = _table(
             12000.0,
             "Radius",
             "Radius of the storm's stencil",
-            {**_ST, "min": 100.0, "max": 1e6, "soft_max": 50000.0, "unit": "LENGTH"},
+            {**_STORM_FIELD_KW, "min": 100.0, "max": 1e6, "soft_max": 50000.0, "unit": "LENGTH"},
         ),
-        ("coverage", "float", 1.0, "Coverage", "Coverage inside the storm", {**_ST, "min": 0.0, "max": 1.0}),
+        (
+            "coverage",
+            "float",
+            1.0,
+            "Coverage",
+            "Coverage inside the storm",
+            {**_STORM_FIELD_KW, "min": 0.0, "max": 1.0},
+        ),
         (
             "blend",
             "float",
             1.0,
             "Blend",
             "Lifecycle blend factor: animate it for the storm to form and dissipate (GDC22)",
-            {**_ST, "min": 0.0, "max": 1.0},
+            {**_STORM_FIELD_KW, "min": 0.0, "max": 1.0},
         ),
         (
             "height",
@@ -1407,7 +1421,7 @@ STORM: tuple[Setting, ...] = _table(
             3.0,
             "Height",
             "Top of the storm at its center, in layer thicknesses",
-            {**_ST, "min": 0.1, "max": 8.0},
+            {**_STORM_FIELD_KW, "min": 0.1, "max": 8.0},
         ),
         (
             "base",
@@ -1415,16 +1429,23 @@ STORM: tuple[Setting, ...] = _table(
             -0.1,
             "Base",
             "Height of the storm's flat foot, in layer thicknesses (negative lowers it)",
-            {**_ST, "min": -1.0, "max": 1.0},
+            {**_STORM_FIELD_KW, "min": -1.0, "max": 1.0},
         ),
-        ("bottom_type", "float", 0.85, "Bottom Type", "Raggedness of the underside", {**_ST, "min": 0.0, "max": 1.0}),
+        (
+            "bottom_type",
+            "float",
+            0.85,
+            "Bottom Type",
+            "Raggedness of the underside",
+            {**_STORM_FIELD_KW, "min": 0.0, "max": 1.0},
+        ),
         (
             "seed",
             "int",
             0,
             "Seed",
             "Seed of the storm's shape noise",
-            {**_ST, "min": 0, "max": 2**31 - 1, "soft_max": 1000},
+            {**_STORM_FIELD_KW, "min": 0, "max": 2**31 - 1, "soft_max": 1000},
         ),
         (
             "spin",
@@ -1432,7 +1453,7 @@ STORM: tuple[Setting, ...] = _table(
             0.02,
             "Spin",
             "Vortex rotation at the center in radians per second; outer rings turn slower",
-            {**_SL, "min": -10.0, "max": 10.0, "soft_min": -0.2, "soft_max": 0.2},
+            {**_STORM_REDRAW_KW, "min": -10.0, "max": 10.0, "soft_min": -0.2, "soft_max": 0.2},
         ),
         (
             "darkening",
@@ -1440,7 +1461,7 @@ STORM: tuple[Setting, ...] = _table(
             3.0,
             "Darkening",
             "Optical-depth scale of the light reaching the storm's center",
-            {**_SL, "min": 1.0, "max": 50.0, "soft_max": 10.0},
+            {**_STORM_REDRAW_KW, "min": 1.0, "max": 50.0, "soft_max": 10.0},
         ),
         (
             "glow",
@@ -1448,7 +1469,7 @@ STORM: tuple[Setting, ...] = _table(
             0.0,
             "Glow",
             "Intensity of the internal glow",
-            {**_SL, "min": 0.0, "max": 1e4, "soft_max": 20.0},
+            {**_STORM_REDRAW_KW, "min": 0.0, "max": 1e4, "soft_max": 20.0},
         ),
         (
             "glow_color",
@@ -1456,7 +1477,7 @@ STORM: tuple[Setting, ...] = _table(
             (1.0, 0.08, 0.03),
             "Glow Color",
             "Color of the internal glow",
-            {**_SL, "size": 3, "min": 0.0},
+            {**_STORM_REDRAW_KW, "size": 3, "min": 0.0},
         ),
         (
             "ambient_boost",
@@ -1464,7 +1485,7 @@ STORM: tuple[Setting, ...] = _table(
             1.5,
             "Ambient Boost",
             "Ambient light under the storm relative to the other clouds",
-            {**_SL, "min": 0.0, "max": 20.0, "soft_max": 5.0},
+            {**_STORM_REDRAW_KW, "min": 0.0, "max": 20.0, "soft_max": 5.0},
         ),
         (
             "anvil_offset",
@@ -1472,7 +1493,7 @@ STORM: tuple[Setting, ...] = _table(
             12000.0,
             "Anvil Offset",
             "How far downwind the cirrus anvil sits",
-            {**_ST, "min": -1e6, "max": 1e6, "soft_min": -50000.0, "soft_max": 50000.0, "unit": "LENGTH"},
+            {**_STORM_FIELD_KW, "min": -1e6, "max": 1e6, "soft_min": -50000.0, "soft_max": 50000.0, "unit": "LENGTH"},
         ),
         # Blender state of a storm, keyframed by the operators; never in a preset.
         (
@@ -1481,7 +1502,7 @@ STORM: tuple[Setting, ...] = _table(
             None,
             "Position",
             "An Empty whose location is the storm's center; move it in the viewport",
-            {"object_type": "EMPTY", **_ST, "in_preset": False},
+            {"object_type": "EMPTY", **_STORM_FIELD_KW, "in_preset": False},
         ),
         (
             "flash",
@@ -1489,7 +1510,7 @@ STORM: tuple[Setting, ...] = _table(
             0.0,
             "Flash",
             "Lightning flash intensity; keyframed by Add Lightning",
-            {**_SL, "min": 0.0, "max": 1e6, "soft_max": 500.0, "in_preset": False},
+            {**_STORM_REDRAW_KW, "min": 0.0, "max": 1e6, "soft_max": 500.0, "in_preset": False},
         ),
         (
             "flash_x",

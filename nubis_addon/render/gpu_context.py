@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+
 import bpy
 import gpu
 
@@ -48,24 +50,33 @@ def ensure_gpu_context() -> None:
     if _gpu_works():
         _ready = True
         return
-    scene = bpy.data.scenes.new(".nubis_gpu_init")
-    cam_data = bpy.data.cameras.new(".nubis_gpu_init")
-    cam = bpy.data.objects.new(".nubis_gpu_init", cam_data)
+    with camera_scene(".nubis_gpu_init") as (scene, _cam):
+        scene.render.engine = "BLENDER_WORKBENCH"
+        scene.render.resolution_x = scene.render.resolution_y = 4
+        try:
+            bpy.ops.render.render(scene=scene.name)
+        except RuntimeError as err:
+            raise NubisError(f"Blender could not render in background mode ({err}): {_EGL_HINT}") from None
+    if not _gpu_works():
+        raise NubisError(f"no GPU context in background mode: {_EGL_HINT}")
+    _ready = True
+
+
+@contextlib.contextmanager
+def camera_scene(name: str):
+    """A scene of its own with a camera as its camera, (scene, camera object), removed afterwards with its
+    camera whatever happens: for renders the artist's scenes must not see."""
+    scene = bpy.data.scenes.new(name)
+    cam_data = bpy.data.cameras.new(name)
+    cam = bpy.data.objects.new(name, cam_data)
     try:
         scene.collection.objects.link(cam)
         scene.camera = cam
-        scene.render.engine = "BLENDER_WORKBENCH"
-        scene.render.resolution_x = scene.render.resolution_y = 4
-        bpy.ops.render.render(scene=scene.name)
-    except RuntimeError as err:
-        raise NubisError(f"Blender could not render in background mode ({err}): {_EGL_HINT}") from None
+        yield scene, cam
     finally:
         bpy.data.objects.remove(cam)
         bpy.data.cameras.remove(cam_data)
         bpy.data.scenes.remove(scene)
-    if not _gpu_works():
-        raise NubisError(f"no GPU context in background mode: {_EGL_HINT}")
-    _ready = True
 
 
 _EGL_HINT = (

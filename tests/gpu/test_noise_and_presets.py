@@ -248,12 +248,14 @@ def test_a_saved_user_preset_loads_back_to_every_setting(make_scene, blender, tm
     assert path.is_file() and scene.nubis.preset == "dusk_storm"
     assert sorted(p.name for p in path.parent.iterdir()) == ["dusk_storm.toml"]
     # The menu lists it after the shipped ones, with its description as the tooltip.
-    entries = operators.preset_entries()
+    from nubis_addon.blender import presetlist
+
+    entries = presetlist.preset_entries()
     assert [e.user for e in entries] == [False] * len(presets.list_presets()) + [True]
     assert entries[-1].name == "Dusk Storm"
     props = types.SimpleNamespace(filepath=str(path))
     assert operators.NUBIS_OT_preset_load.description(None, props) == "A storm at dusk, saved by the test"
-    assert operators.active_preset(blender.context).path == path
+    assert presetlist.active_preset(blender.context).path == path
     # The main panel's preset row: the menu shows the active preset, with + and - beside it.
     from nubis_addon.blender import panels
 

@@ -374,3 +374,88 @@ def test_a_live_drag_to_far_away_lays_its_part_and_a_full_layer_stops_it(blender
     )
     assert live.laid == 76
     assert live.commit(layer) == 76 and len(layer.dabs) == 76
+
+
+def test_a_paint_layer_offers_only_the_channels_a_brush_paints_and_refuses_another(blender, make_scene):
+    """The layer's channel menu narrows for a paint layer (the schema's channel, numbered as before, so files
+    read the same); a channel no brush paints is refused where it is set, in one sentence."""
+    from nubis_addon.blender import scene_io
+    from nubis_addon.core import paint, schema
+    from nubis_addon.core.errors import NubisError
+
+    scene = make_scene("default")
+    layer = scene.nubis.layers.add()
+    layer.kind = "PAINT"
+    offered = []
+    for name in schema.FIELD_CHANNELS:
+        try:
+            layer.channel = name.upper()
+        except TypeError as err:  # Blender's own refusal lists the menu
+            assert "('COVERAGE', 'PRECIPITATION', 'TYPE', 'STORM')" in str(err)
+            continue
+        offered.append(name)
+        assert layer["channel"] == schema.FIELD_CHANNELS.index(name)  # the number Blender stores, as before
+    assert offered == list(paint.PAINT_CHANNELS)
+    other = scene.nubis.layers.add()
+    for name in schema.FIELD_CHANNELS:  # any other layer writes any channel
+        other.channel = name.upper()
+        assert other.channel == name.upper()
+    # A table (a duplicate, a script) naming a channel no brush paints: refused before anything is set.
+    fresh = scene.nubis.layers.add()
+    with pytest.raises(NubisError) as info:
+        scene_io.layer_from_dict(fresh, {"name": "Rain paint", "kind": "paint", "channel": "density"})
+    assert str(info.value) == (
+        "the paint layer 'Rain paint' writes 'density', which a brush cannot paint: set its channel to one of "
+        "coverage, precipitation, type, storm"
+    )
+    assert fresh.kind == "PERLIN" and fresh.name == ""
+    scene_io.layer_from_dict(fresh, {"channel": "storm", "kind": "paint"})  # the kind is set first
+    assert (fresh.kind, fresh.channel) == ("PAINT", "STORM")
+    # A layer made a paint layer after its channel keeps showing it; the composite says what to change.
+    other.channel, other.kind, other.name = "BOTTOM_TYPE", "PAINT", "Turned"
+    assert other.channel == "BOTTOM_TYPE"
+    scene_io.add_dabs(other, paint.stroke_dabs([(0.0, 0.0, 1.0, True)], RADIUS, 1.0))
+    with pytest.raises(NubisError, match="'Turned' writes 'bottom_type', which a brush cannot paint"):
+        scene_io.generate_fields(scene)
+
+
+def test_a_scenes_runtime_state_lives_in_one_object_and_ends_in_one_place(blender, make_scene):
+    """Stale flag, coverage histogram, pre-paint planes and raster keys: one SceneState per scene, all gone
+    with forget_stale (a file load, unregister); core/paint.py caches rasters under scene_io's numbers."""
+    from nubis_addon.blender import events, scene_io
+    from nubis_addon.core import paint
+
+    scene = make_scene("default")
+    blender.ops.nubis.paint_field(channel="COVERAGE", radius=RADIUS, strength=1.0, stroke=stroke([0, 2000]))
+    layer = scene.nubis.layers[-1]
+    state = scene_io.scene_state(scene)
+    assert state.cover_hist is not None and state.cover_painted and state.pre_paint is not None
+    key = scene_io.raster_key(layer)
+    assert key == scene_io.raster_key(layer) and key != layer.as_pointer()
+    assert key in paint._RASTERS and layer.as_pointer() not in paint._RASTERS
+    events.request_composite(scene)
+    assert scene_io.field_stale(scene) and scene_io.stale_scenes() == [scene]
+    scene_io.forget_stale()
+    assert not scene_io.field_stale(scene) and scene_io.pre_paint(scene) is None and not paint._RASTERS
+    assert scene_io.coverage_multiplier(scene) == scene.nubis.density_coverage  # the saved one, until a composite
+    assert scene_io.raster_key(layer) != key  # a new lifetime: new keys
+    scene_io.generate_fields(scene)
+    assert scene_io.scene_state(scene).cover_painted
+
+
+def test_the_modifier_keys_pick_the_brush_mode(blender):
+    from types import SimpleNamespace
+
+    from nubis_addon.blender import paint as blender_paint
+
+    def event(ctrl=False, shift=False):
+        return SimpleNamespace(ctrl=ctrl, shift=shift)
+
+    assert blender_paint.mode_of_event(event(), "SMOOTH") == "SMOOTH"
+    assert blender_paint.mode_of_event(event(ctrl=True), "ADD") == "SUBTRACT"
+    assert blender_paint.mode_of_event(event(shift=True), "ADD") == "SMOOTH"
+    assert blender_paint.mode_of_event(event(ctrl=True, shift=True), "ADD") == "SUBTRACT"
+    assert blender_paint.DRAG_HINT == "Drag: add · Ctrl: subtract · Shift: smooth"
+    assert blender_paint.NubisPaintSkyTool.bl_description == (
+        "Paint where the clouds are, from above: drag to add, Ctrl-drag to subtract, Shift-drag to smooth"
+    )

@@ -125,13 +125,13 @@ def test_the_recording_layout_notices_a_missing_setting(blender, make_scene):
     drawn = _draw_all(panels, context)
     keys = {key for _owner, key in drawn}
     assert "cirrus_altitude" in keys
-    original = panels.NUBIS_PT_cirrus.panel
+    original = panels.PANEL_CLASSES["cirrus"].panel
     try:
-        panels.NUBIS_PT_cirrus.panel = "nothing"
+        panels.PANEL_CLASSES["cirrus"].panel = "nothing"
         keys = {key for _owner, key in _draw_all(panels, context)}
         assert "cirrus_altitude" not in keys
     finally:
-        panels.NUBIS_PT_cirrus.panel = original
+        panels.PANEL_CLASSES["cirrus"].panel = original
 
 
 def test_units_and_soft_ranges_come_from_the_schema(blender):

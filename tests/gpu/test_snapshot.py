@@ -203,13 +203,13 @@ def _act_delete_camera(blender, scene, tmp_path):
 
 
 def _act_delete_cloudscape(blender, scene, tmp_path):
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import scene_io, ui
 
     for attr, _name in scene_io.FIELD_IMAGES.values():
         img = getattr(scene.nubis, attr)
         if img is not None:
             blender.data.images.remove(img)
-    assert not scene_io.has_cloudscape(blender.context.scene)
+    assert not ui.has_cloudscape(blender.context.scene)
 
 
 ACTIONS = {

@@ -1,0 +1,46 @@
+"""What the interface's pieces share, stated once, low enough that every Blender-side module can use it:
+whether a scene holds a cloudscape, the poll that needs one, the sidebar panel's placement, and asking
+the views to redraw."""
+
+from __future__ import annotations
+
+import bpy
+
+
+def has_cloudscape(scene) -> bool:
+    """Whether `scene` holds a Nubis cloudscape (New Cloudscape has made its field images)."""
+    settings = getattr(scene, "nubis", None) if scene is not None else None
+    return settings is not None and getattr(settings, "field_a", None) is not None
+
+
+def redraw_views(area_types: tuple[str, ...] = ("VIEW_3D",)) -> None:
+    """Ask every area of these types (the 3D views by default) of every window to redraw."""
+    wm = getattr(bpy.context, "window_manager", None)
+    for window in wm.windows if wm else ():
+        for area in window.screen.areas:
+            if area.type in area_types:
+                area.tag_redraw()
+
+
+class NeedsCloudscape:
+    """An operator's poll: available once the scene has a cloudscape, and says how to make one."""
+
+    @classmethod
+    def poll(cls, context):
+        if not has_cloudscape(context.scene):
+            cls.poll_message_set("Create a cloudscape first (Nubis > New Cloudscape)")
+            return False
+        return True
+
+
+class SidebarPanel:
+    """A panel in the 3D view's sidebar, under the Nubis tab's main panel, shown once there is a cloudscape."""
+
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Nubis"
+    bl_parent_id = "NUBIS_PT_main"
+
+    @classmethod
+    def poll(cls, context):
+        return has_cloudscape(context.scene)
