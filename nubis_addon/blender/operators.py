@@ -166,6 +166,13 @@ class NUBIS_OT_layer_add(NeedsCloudscape, NubisOperator, bpy.types.Operator):
         return None
 
 
+def _active_layer(settings, doing: str):
+    """The active field layer, or the sentence that there is none to `doing`."""
+    if not settings.layers or not 0 <= settings.active_layer < len(settings.layers):
+        raise NubisError(f"there is no layer to {doing}: add one with + first")
+    return settings.layers[settings.active_layer]
+
+
 class NUBIS_OT_layer_remove(NeedsCloudscape, NubisOperator, bpy.types.Operator):
     """Remove the active field layer"""
 
@@ -175,8 +182,7 @@ class NUBIS_OT_layer_remove(NeedsCloudscape, NubisOperator, bpy.types.Operator):
 
     def run(self, context):
         s = context.scene.nubis
-        if not s.layers:
-            raise NubisError("there is no layer to remove")
+        _active_layer(s, "remove")
         s.layers.remove(s.active_layer)
         s.active_layer = max(0, min(s.active_layer, len(s.layers) - 1))
         scene_io.generate_fields(context.scene)
@@ -211,14 +217,16 @@ class NUBIS_OT_layer_duplicate(NeedsCloudscape, NubisOperator, bpy.types.Operato
 
     def run(self, context):
         s = context.scene.nubis
-        if not s.layers:
-            raise NubisError("there is no layer to duplicate")
-        data = scene_io.layer_to_dict(s.layers[s.active_layer])
+        data = scene_io.layer_to_dict(_active_layer(s, "duplicate"))
         data["name"] += " copy"
         with scene_io.batch_edit():
             copy = s.layers.add()
-            scene_io.layer_from_dict(copy, data)
-            scene_io.copy_dabs(s.layers[s.active_layer], copy)
+            try:
+                scene_io.layer_from_dict(copy, data)
+                scene_io.copy_dabs(s.layers[s.active_layer], copy)
+            except NubisError:  # a copy refused (a paint layer on a channel no brush paints) leaves none
+                s.layers.remove(len(s.layers) - 1)
+                raise
         s.layers.move(len(s.layers) - 1, s.active_layer + 1)
         s.active_layer += 1
         scene_io.generate_fields(context.scene)

@@ -273,6 +273,7 @@ class NUBIS_OT_paint_field(NeedsCloudscape, bpy.types.Operator):
     def execute(self, context):
         scene = context.scene
         try:
+            paint.check_stroke_length(len(self.stroke))
             grid = self._checked(context)
             points = []
             for n, el in enumerate(self.stroke):

@@ -140,16 +140,23 @@ _LAYER_KEYS_BY_KIND = {
 _LAYER_COMMON = ("kind", "channel", "blend", "enabled", "opacity")
 
 
+def _list_with_buttons(layout, template: tuple, rows: int, item: str):
+    """A UIList (template_list's arguments) with the add and remove buttons of `item` beside it; returns the
+    buttons' column for more."""
+    row = layout.row()
+    row.template_list(*template, rows=rows)
+    col = row.column(align=True)
+    col.operator(f"nubis.{item}_add", icon="ADD", text="")
+    col.operator(f"nubis.{item}_remove", icon="REMOVE", text="")
+    return col
+
+
 class _FieldDrawing:
     def draw_after(self, context):
         layout = self.layout
         layout.use_property_split = False
         s = context.scene.nubis
-        row = layout.row()
-        row.template_list("NUBIS_UL_layers", "", s, "layers", s, "active_layer", rows=4)
-        col = row.column(align=True)
-        col.operator("nubis.layer_add", icon="ADD", text="")
-        col.operator("nubis.layer_remove", icon="REMOVE", text="")
+        col = _list_with_buttons(layout, ("NUBIS_UL_layers", "", s, "layers", s, "active_layer"), 4, "layer")
         col.operator("nubis.layer_duplicate", icon="DUPLICATE", text="")
         col.operator("nubis.layer_move", icon="TRIA_UP", text="").direction = "UP"
         col.operator("nubis.layer_move", icon="TRIA_DOWN", text="").direction = "DOWN"
@@ -198,11 +205,7 @@ class _StormsDrawing:
     def draw_before(self, context):
         layout = self.layout
         s = context.scene.nubis
-        row = layout.row()
-        row.template_list("UI_UL_list", "nubis_storms", s, "storms", s, "active_storm", rows=2)
-        col = row.column(align=True)
-        col.operator("nubis.storm_add", icon="ADD", text="")
-        col.operator("nubis.storm_remove", icon="REMOVE", text="")
+        _list_with_buttons(layout, ("UI_UL_list", "nubis_storms", s, "storms", s, "active_storm"), 2, "storm")
         if s.storms and 0 <= s.active_storm < len(s.storms):
             storm = s.storms[s.active_storm]
             box = layout.box()

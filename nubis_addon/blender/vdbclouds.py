@@ -29,6 +29,7 @@ from .ui import SidebarPanel, redraw_views
 _CACHE_ENTRIES = 8
 _cache: OrderedDict = OrderedDict()
 _problems: dict[str, str] = {}  # object name -> why it is not drawn (the sidebar shows it)
+_noted: set[str] = set()  # the clouds left out that the console has been told of
 
 
 def _redraw(_self=None, _context=None) -> None:
@@ -212,12 +213,16 @@ def placements(scene, strict: bool = True) -> tuple:
     viewport's draw leaves the cloud out and shows why in the sidebar."""
     out = []
     _problems.clear()
-    for obj in left_out(scene):
+    left = left_out(scene)
+    for obj in left:
         _problems[obj.name] = left_out_sentence(obj)
-        if strict:
-            console.current().line(f"nubis: note: {left_out_sentence(obj)}")
-        else:
+        if not strict:
             status.set_error(left_out_sentence(obj))
+        elif obj.name not in _noted:  # once, though a command reads the clouds more than once
+            console.current().line(f"nubis: note: {left_out_sentence(obj)}")
+    if strict:
+        _noted.clear()
+        _noted.update(o.name for o in left)
     for obj in marked(scene):
         settings = obj.data.nubis_cloud
         path = volume_file(obj, scene.frame_current)

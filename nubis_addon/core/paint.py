@@ -260,6 +260,21 @@ def check_paint_channel(layer: str, channel: str) -> None:
         )
 
 
+# Points one scripted stroke may hold. Blender keeps about 5 KB a point in the operator's properties and copies
+# them once the operator has run: two million points crashed Blender's copy under an 8 GB memory cap
+# (docs/painting.md#what-is-refused); a hand's drag records hundreds.
+MAX_STROKE_POINTS = 1_000_000
+
+
+def check_stroke_length(points: int) -> None:
+    """Rule: a stroke of at most MAX_STROKE_POINTS points (refused before Blender copies them)."""
+    if points > MAX_STROKE_POINTS:
+        raise NubisError(
+            f"the stroke has {points:,} points, over the {MAX_STROKE_POINTS:,} one stroke may hold: paint it as "
+            "several strokes (one call each)"
+        )
+
+
 def check_room(held: int, adding: int, layer: str = "") -> None:
     """Rule: a paint layer holds at most MAX_DABS dabs; `adding` is counted before any is laid."""
     if held + adding <= MAX_DABS:

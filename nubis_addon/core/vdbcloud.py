@@ -16,6 +16,7 @@ from __future__ import annotations
 import functools
 import math
 import os
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -205,16 +206,10 @@ def estimate_gpu_bytes(path: str | os.PathLike, grid_name: str = "") -> tuple[in
     return int(grid.activeVoxelCount()), plan_read(grid).gpu_bytes
 
 
-def check_fits(path: str | os.PathLike, grid_name: str = "", limit: int = brickmod.DEFAULT_GPU_LIMIT) -> ReadPlan:
-    """The file read as far as its tree, and refused in one sentence if it cannot be drawn: what every
-    command asks before any work."""
-    path = str(path)
-    name = choose_grid(path, grid_name)
-    grid = _read_grid(path, name)
-    _check_values(grid, path, name)
-    plan = plan_read(grid)
-    check_plan(plan, path, name, limit)
-    return plan
+def check_fits(path: str | os.PathLike, grid_name: str = "", limit: int = brickmod.DEFAULT_GPU_LIMIT) -> VdbCloud:
+    """The file read and packed as the renderer will draw it, or refused in one sentence: what every command
+    asks of a --vdb file before any work. Remembered (_RECENT), so the draw that follows reads it once."""
+    return read_cloud(path, grid_name, limit)
 
 
 def _read_grid(path: str, name: str):
@@ -279,12 +274,31 @@ def _chunks(plan: ReadPlan, occ: np.ndarray, first: tuple[int, int, int]):
                     yield (cz, cy, cx), n, v0
 
 
+# The last clouds read, by file (path, size, modification time) and reading: a command checks its --vdb
+# files before any work and draws them after, from one read.
+_RECENT: OrderedDict = OrderedDict()
+_RECENT_ENTRIES = 2
+
+
 def read_cloud(
     path: str | os.PathLike, grid_name: str = "", limit: int = brickmod.DEFAULT_GPU_LIMIT, dtype=np.float16
 ) -> VdbCloud:
     """The file's grid, checked and packed into bricks (see the module's note). Refused before any voxel is
     copied when its plan does not fit `limit` bytes, and while packing when the bricks pass it."""
     path = str(path)
+    layout = vdbfile.check(path)
+    key = (path, layout.size, os.stat(path).st_mtime_ns, grid_name, limit, np.dtype(dtype).str)
+    if key in _RECENT:
+        _RECENT.move_to_end(key)
+        return _RECENT[key]
+    cloud = _read_cloud(path, grid_name, limit, dtype)
+    _RECENT[key] = cloud
+    while len(_RECENT) > _RECENT_ENTRIES:
+        _RECENT.popitem(last=False)
+    return cloud
+
+
+def _read_cloud(path: str, grid_name: str, limit: int, dtype) -> VdbCloud:
     name = choose_grid(path, grid_name)
     grid = _read_grid(path, name)
     _vmin, vmax = _check_values(grid, path, name)

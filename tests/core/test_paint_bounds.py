@@ -252,3 +252,13 @@ def test_the_raster_prints_the_notice_before_a_long_composite(monkeypatch):
     paint.raster(12, paint.stroke_dabs([(0.0, 0.0, 1.0, True), (5000.0, 0.0, 1.0, False)], 2500.0, 1.0), GRID)
     paint.forget()
     assert len(lines) == 1 and lines[0].startswith("Nubis: compositing 11 dabs takes about ")
+
+
+def test_a_stroke_of_more_than_a_million_points_is_refused_before_blender_copies_it():
+    paint.check_stroke_length(paint.MAX_STROKE_POINTS)  # at the limit: painted
+    with pytest.raises(NubisError) as err:
+        paint.check_stroke_length(1_100_000)
+    assert str(err.value) == (
+        "the stroke has 1,100,000 points, over the 1,000,000 one stroke may hold: paint it as several strokes "
+        "(one call each)"
+    )
