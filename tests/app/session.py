@@ -514,7 +514,7 @@ def s_grain(step: Step):
     for tv in views:
         tv.first_pass = 1000
         tv.restart("grain")
-    ext_module("scene_io").redraw_views()
+    ext_module("ui").redraw_views()
     took_b = yield from _converge()
     second = shot(step, "02_grain_b", "view")
     for tv in views:
