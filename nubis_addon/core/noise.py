@@ -289,13 +289,18 @@ def worley_fbm_3d(
     it makes tightly packed billow shapes. We layered it like the standard Perlin fBm approach"; GPU Pro 7 alike).
     Octaves finer than 2 texels per cell are dropped and the remaining weights renormalised.
     """
-    gen = _rng(rng)
-    cell_list = _octave_cells(size, cells, len(weights), 3)
+    return _worley_fbm(size, cells, _rng(rng), weights, invert, 3)
+
+
+def _worley_fbm(size: int, cells, gen, weights: Sequence[float], invert: bool, dims: int) -> np.ndarray:
+    """worley_fbm_3d and worley_fbm_2d: the octaves of tiling Worley noise in `dims` dimensions, summed."""
+    worley = tiling_worley_3d if dims == 3 else tiling_worley_2d
+    cell_list = _octave_cells(size, cells, len(weights), dims)
     w = np.asarray(weights[: len(cell_list)], dtype=np.float64)
     w = w / w.sum()
-    acc = np.zeros((size, size, size), dtype=np.float32)
+    acc = np.zeros((size,) * dims, dtype=np.float32)
     for wi, c in zip(w, cell_list, strict=True):
-        f1 = tiling_worley_3d(size, c, gen)
+        f1 = worley(size, c, gen)
         acc += np.float32(wi) * ((1.0 - f1) if invert else f1)
     return acc
 
@@ -440,15 +445,7 @@ def worley_fbm_2d(
     invert: bool = True,
 ) -> np.ndarray:
     """Tiling 2D Worley fBm in [0, 1]; see :func:`worley_fbm_3d`."""
-    gen = _rng(rng)
-    cell_list = _octave_cells(size, cells, len(weights), 2)
-    w = np.asarray(weights[: len(cell_list)], dtype=np.float64)
-    w = w / w.sum()
-    acc = np.zeros((size, size), dtype=np.float32)
-    for wi, c in zip(w, cell_list, strict=True):
-        f1 = tiling_worley_2d(size, c, gen)
-        acc += np.float32(wi) * ((1.0 - f1) if invert else f1)
-    return acc
+    return _worley_fbm(size, cells, _rng(rng), weights, invert, 2)
 
 
 # --------------------------------------------------------------------------------------------------------------
