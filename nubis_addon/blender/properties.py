@@ -16,7 +16,7 @@ from bpy.props import (
 )
 
 from ..core import paint, schema
-from . import events
+from . import events, ui
 
 # Blender keeps pointers to enum item strings: build each list once, at import, and keep it.
 _ENUM_ITEMS: dict[str, list[tuple[str, str, str]]] = {}
@@ -188,13 +188,4 @@ NubisSceneSettings = type(
 CLASSES = (NubisPaintDab, NubisFieldLayer, NubisStorm, NubisSceneSettings)
 
 
-def register() -> None:
-    for cls in CLASSES:
-        bpy.utils.register_class(cls)
-    bpy.types.Scene.nubis = PointerProperty(type=NubisSceneSettings)
-
-
-def unregister() -> None:
-    del bpy.types.Scene.nubis
-    for cls in reversed(CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = ui.property_group_registration(CLASSES, bpy.types.Scene, "nubis", NubisSceneSettings)

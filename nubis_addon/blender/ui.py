@@ -22,6 +22,23 @@ def redraw_views(area_types: tuple[str, ...] = ("VIEW_3D",)) -> None:
                 area.tag_redraw()
 
 
+def property_group_registration(classes: tuple, id_type, attr: str, group):
+    """register() and unregister() for `classes` and a pointer to the property group `group` as `attr` of
+    every `id_type` (bpy.types.Scene, bpy.types.Volume, ...)."""
+
+    def register() -> None:
+        for cls in classes:
+            bpy.utils.register_class(cls)
+        setattr(id_type, attr, bpy.props.PointerProperty(type=group))
+
+    def unregister() -> None:
+        delattr(id_type, attr)
+        for cls in reversed(classes):
+            bpy.utils.unregister_class(cls)
+
+    return register, unregister
+
+
 class NeedsCloudscape:
     """An operator's poll: available once the scene has a cloudscape, and says how to make one."""
 

@@ -16,14 +16,14 @@ import re
 from collections import OrderedDict
 
 import bpy
-from bpy.props import BoolProperty, FloatProperty, PointerProperty, StringProperty
+from bpy.props import BoolProperty, FloatProperty, StringProperty
 
 from ..core import console, vdbcloud, vdbfile
 from ..core.errors import NubisError
 from ..core.sequence import human_bytes
 from ..render import vdbclouds as gpu_side
 from . import cycles_setup, status
-from .ui import SidebarPanel, redraw_views
+from .ui import SidebarPanel, property_group_registration, redraw_views
 
 # Clouds read from disk, by (path, modification time, size, grid): a few, as Blender's own volume cache.
 _CACHE_ENTRIES = 8
@@ -336,14 +336,9 @@ class NUBIS_PT_vdb_clouds(SidebarPanel, bpy.types.Panel):
 _CLASSES = (NubisVolumeCloud, NUBIS_PT_volume_cloud, NUBIS_PT_vdb_clouds)
 
 
-def register() -> None:
-    for cls in _CLASSES:
-        bpy.utils.register_class(cls)
-    bpy.types.Volume.nubis_cloud = PointerProperty(type=NubisVolumeCloud)
+register, _unregister = property_group_registration(_CLASSES, bpy.types.Volume, "nubis_cloud", NubisVolumeCloud)
 
 
 def unregister() -> None:
-    del bpy.types.Volume.nubis_cloud
-    for cls in reversed(_CLASSES):
-        bpy.utils.unregister_class(cls)
+    _unregister()
     _cache.clear()
