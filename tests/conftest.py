@@ -61,8 +61,11 @@ def make_scene(blender):
     return make
 
 
-def run_cli(*args: str, cwd: Path = ROOT, env: dict | None = None, timeout: int = 600) -> subprocess.CompletedProcess:
-    """`python -m nubis_addon ...` in a child process, as a user would run it."""
+def run_cli(
+    *args: str, cwd: Path = ROOT, env: dict | None = None, timeout: int = 600, preexec_fn=None
+) -> subprocess.CompletedProcess:
+    """`python -m nubis_addon ...` in a child process, as a user would run it (`preexec_fn` runs in the child
+    first: a memory cap, say)."""
     full_env = dict(os.environ)
     full_env.update(env or {})
     return subprocess.run(
@@ -72,6 +75,7 @@ def run_cli(*args: str, cwd: Path = ROOT, env: dict | None = None, timeout: int 
         capture_output=True,
         text=True,
         timeout=timeout,
+        preexec_fn=preexec_fn,
     )
 
 

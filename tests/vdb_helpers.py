@@ -134,6 +134,19 @@ def bad_vdb(tmp_path, kind):
     raise AssertionError(kind)
 
 
+def write_two_voxels(path, far, voxel: float = 10.0) -> Path:
+    """A grid 'density' of two voxels: 0.5 at index (0, 0, 0) and 0.25 at `far`, voxels of `voxel` metres."""
+    vdb = _openvdb()
+    grid = vdb.FloatGrid()
+    grid.name = "density"
+    acc = grid.getAccessor()
+    acc.setValueOn((0, 0, 0), 0.5)
+    acc.setValueOn(tuple(far), 0.25)
+    grid.transform = vdb.createLinearTransform(voxelSize=voxel)
+    vdb.write(str(path), grids=[grid])
+    return Path(path)
+
+
 def trilinear(dense: np.ndarray, ijk: np.ndarray) -> np.ndarray:
     """A dense grid (z, y, x) at index coordinates (N, 3): x, y, z; 0 outside, as OpenVDB's background."""
     padded = np.pad(dense.astype(np.float64), 1)

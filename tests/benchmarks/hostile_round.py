@@ -273,7 +273,7 @@ def helper_make_vdbs(repo: Path, d: Path) -> None:
     """The VDB files of the vdb class, written with Blender's own OpenVDB (tests/vdb_helpers.py)."""
     _helper_path(repo)
     import numpy as np
-    from vdb_helpers import DEFAULT_VIEW_BASE, _openvdb, bad_vdb, ball, write_cumulus, write_grid
+    from vdb_helpers import DEFAULT_VIEW_BASE, _openvdb, bad_vdb, ball, write_cumulus, write_grid, write_two_voxels
 
     vdb = _openvdb()
     d.mkdir(parents=True, exist_ok=True)
@@ -310,13 +310,7 @@ def helper_make_vdbs(repo: Path, d: Path) -> None:
     g.transform = vdb.createFrustumTransform(xyzMin=(0, 0, 0), xyzMax=(40, 40, 40), taper=0.5, depth=2000.0)
     vdb.write(str(d / "frustum.vdb"), grids=[g])
     for name, far in (("far_60000", (60_000, 0, 0)), ("far_16000", (16_000, 16_000, 0))):
-        g = vdb.FloatGrid()
-        g.name = "density"
-        acc = g.getAccessor()
-        acc.setValueOn((0, 0, 0), 0.5)
-        acc.setValueOn(far, 0.25)
-        g.transform = vdb.createLinearTransform(voxelSize=10.0)
-        vdb.write(str(d / f"{name}.vdb"), grids=[g])
+        write_two_voxels(d / f"{name}.vdb", far)
     g = vdb.FloatGrid()
     g.name = "density"
     g.fill((0, 0, 0), (4095, 4095, 4095), 0.01, True)

@@ -4,15 +4,13 @@ the issue's machine has: each exits 1 with one sentence, no traceback, no intern
 
 from __future__ import annotations
 
-import os
 import random
 import resource
 import subprocess
-import sys
 
 import pytest
-from conftest import ROOT
-from vdb_helpers import ball, write_cumulus, write_grid
+from conftest import run_cli
+from vdb_helpers import ball, write_cumulus, write_grid, write_two_voxels
 
 CAP = 8 * 1024**3
 
@@ -24,16 +22,8 @@ def _capped() -> None:
 def run_capped(tmp_path, cache_dir, *args: str) -> subprocess.CompletedProcess:
     tmp = tmp_path / "tmp"
     tmp.mkdir(exist_ok=True)
-    env = {**os.environ, "TMPDIR": str(tmp), "NUBIS_CACHE_DIR": str(cache_dir)}
-    return subprocess.run(
-        [sys.executable, "-m", "nubis_addon", *args],
-        cwd=ROOT,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=300,
-        preexec_fn=_capped,
-    )
+    env = {"TMPDIR": str(tmp), "NUBIS_CACHE_DIR": str(cache_dir)}
+    return run_cli(*args, env=env, timeout=300, preexec_fn=_capped)
 
 
 @pytest.fixture(scope="module")
@@ -82,16 +72,7 @@ def test_a_nameless_grid_is_refused_before_any_work(tmp_path, cache_dir):
 
 
 def test_a_grid_too_wide_for_the_index_is_refused_before_any_work(tmp_path, cache_dir):
-    from tests.vdb_helpers import _openvdb
-
-    vdb = _openvdb()
-    grid = vdb.FloatGrid()
-    grid.name = "density"
-    grid.getAccessor().setValueOn((0, 0, 0), 0.5)
-    grid.getAccessor().setValueOn((60_000, 0, 0), 0.5)
-    grid.transform = vdb.createLinearTransform(voxelSize=10.0)
-    path = tmp_path / "wide.vdb"
-    vdb.write(str(path), grids=[grid])
+    path = write_two_voxels(tmp_path / "wide.vdb", (60_000, 0, 0))
     out = tmp_path / "out"
     r = run_capped(tmp_path, cache_dir, "benchmark", "--vdb", str(path), "--out", str(out), "--width", "32")
     _one_error_line(r, "spans 60001 voxels along x")

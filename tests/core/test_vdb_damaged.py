@@ -16,7 +16,7 @@ import pytest
 
 from nubis_addon.core import bricks, vdbcloud, vdbfile
 from nubis_addon.core.errors import NubisError
-from tests.vdb_helpers import _openvdb, ball, write_cumulus, write_grid
+from tests.vdb_helpers import _openvdb, ball, write_cumulus, write_grid, write_two_voxels
 
 
 def one_sentence(err: NubisError) -> str:
@@ -118,16 +118,8 @@ def test_two_voxels_far_apart_are_drawn_or_refused_within_the_memory_bound(tmp_p
     """60,000 voxels apart: refused in one sentence (the index texture holds 2048 leaves a side); 16,000
     apart along x and y: drawn, its index 4 MB and its bricks the sixteen that read the two voxels, the
     copy following the two nodes that hold them (a slab of the box dense in x and y took 121 GiB)."""
-    vdb = _openvdb()
     for name, far, drawn in (("refused", (60_000, 0, 0), False), ("drawn", (16_000, 16_000, 0), True)):
-        grid = vdb.FloatGrid()
-        grid.name = "density"
-        acc = grid.getAccessor()
-        acc.setValueOn((0, 0, 0), 0.5)
-        acc.setValueOn(far, 0.25)
-        grid.transform = vdb.createLinearTransform(voxelSize=10.0)
-        path = tmp_path / f"{name}.vdb"
-        vdb.write(str(path), grids=[grid])
+        path = write_two_voxels(tmp_path / f"{name}.vdb", far)
         tracemalloc.start()
         try:
             if drawn:
