@@ -20,6 +20,8 @@ const float NUBIS_OPAQUE_TRANSMITTANCE = 0.005;
 /* A ray whose horizontal direction is shorter than this (squared) is vertical: it never leaves the draw
  * radius sideways. */
 const float NUBIS_VERTICAL_RAY = 1e-12;
+/* A split farther than any ray reaches: the whole ray is the near part. */
+const float NUBIS_NO_SPLIT = 3.0e38;
 
 /* The single scattering of a thin homogeneous slab of vertical optical depth tau towards the eye, per
  * unit of incoming radiance and phase: with slant factors m = 1 / |cos(zenith)| for the view ray (mu_v,
@@ -256,10 +258,39 @@ float nubis_step_t(NubisSteps s, int i, float jitter, out float dt)
  * fine samples in a row (GPU Pro 7) return to the cheap search. Erosion only removes density, so an
  * empty cheap sample is an empty fine one: the saving costs only slivers thinner than one step. The
  * NUBIS_NAIVE permutation takes the fine sample at every step, for the benchmark. */
-vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out vec4 flash_mask)
+/* The two parts of a march split at the distance `split` along the ray (F12's depth composition,
+ * docs/sky.md#objects-in-the-clouds): the clouds in front of what the scene holds there, and those behind
+ * it, each premultiplied and each with its own flash mask. The step that straddles `split` is divided
+ * at it, so the parts compose exactly into the whole: near + (1 - near.a) * far. */
+struct NubisParts {
+  vec4 near, far;
+  vec4 flash_near, flash_far;
+  float cloud_depth; /* of the whole ray, as nubis_march gives it */
+};
+
+/* Premultiplied light and alpha of one part from its sums, faded into the atmosphere by its own depth. */
+vec4 nubis_faded_part(vec3 dir, vec3 radiance, float transmittance, float depth_sum, inout vec4 flash_mask)
 {
-  cloud_depth = 0.0;
-  flash_mask = vec4(0.0);
+  float alpha = 1.0 - transmittance;
+  /* S15: clouds fade into the atmosphere with the depth of what the ray saw, into the sky's own color
+   * along this ray (the World's radiance behind them), not a flat fog color
+   * (docs/sources.md#aerial-perspective). */
+  if (P.lighting_fade_distance > 0.0 && alpha > 0.0) {
+    float fade = exp(-(depth_sum / alpha) / P.lighting_fade_distance);
+    radiance = mix(nubis_sky_radiance(dir) * alpha, radiance, fade);
+    flash_mask *= fade;
+  }
+  return vec4(radiance, alpha);
+}
+
+NubisParts nubis_march_parts(vec3 origin, vec3 dir, vec2 pixel, float split)
+{
+  NubisParts parts;
+  parts.near = vec4(0.0);
+  parts.far = vec4(0.0);
+  parts.flash_near = vec4(0.0);
+  parts.flash_far = vec4(0.0);
+  parts.cloud_depth = 0.0;
   float R = P.layer_planet_radius;
   /* GPU Pro 7, GDC22: the segment between the shell's spheres; rays that meet the ground see no clouds
    * (docs/sources.md#pixel-culling). */
@@ -267,13 +298,13 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out v
   vec2 inner = nubis_ray_sphere(origin, dir, R, P.shell_bottom);
   vec2 outer = nubis_ray_sphere(origin, dir, R, P.shell_top);
   if (outer.x > outer.y || outer.y <= 0.0) {
-    return vec4(0.0);
+    return parts;
   }
   float altitude = nubis_altitude(origin, R);
   float t0, t1;
   if (altitude < P.shell_bottom) {
     if (ground.x <= ground.y && ground.y > 0.0 && altitude >= 0.0) {
-      return vec4(0.0);
+      return parts;
     }
     t0 = inner.y;
     t1 = outer.y;
@@ -296,12 +327,12 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out v
     float c = dot(oxy, oxy) - P.layer_draw_radius * P.layer_draw_radius;
     float disc = b * b - a * c;
     if (disc < 0.0) {
-      return vec4(0.0);
+      return parts;
     }
     t1 = min(t1, (-b + sqrt(disc)) / a);
   }
   if (t1 <= t0) {
-    return vec4(0.0);
+    return parts;
   }
 
   /* GPU Pro 7, S15: 64 steps looking up, up to 128 towards the horizon (P.march.xy), by the segment's
@@ -326,9 +357,13 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out v
   float dither = P.jitter > 0.5 ? fract(jitter * NUBIS_DITHER_SCRAMBLE + 0.5) : 0.5;
   NubisRayLight ray = nubis_ray_light(dir);
 
-  vec3 radiance = vec3(0.0);
+  /* The sums of the part in front of `split` (index 0) and behind it (1); the far part's
+   * transmittance starts at 1 where the near part ends. */
+  vec3 radiance[2] = vec3[2](vec3(0.0), vec3(0.0));
+  float part_t[2] = float[2](1.0, 1.0);
+  float depth_sum[2] = float[2](0.0, 0.0);
+  vec4 flashes[2] = vec4[2](vec4(0.0), vec4(0.0));
   float transmittance = 1.0;
-  float depth_sum = 0.0;
   int i = 0;                    /* the next step to sample */
   int uncovered = 0;            /* the first step that no empty cheap sample has cleared */
   bool fine = NUBIS_NAIVE != 0; /* taking fine samples (true) or searching with cheap ones */
@@ -379,34 +414,52 @@ vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out v
     empty_fine = 0;
     float absorb = nubis_extinction_factor(p, d.precipitation);
     float sigma = d.fine * P.density_sigma * absorb;
-    float step_t = exp(-sigma * step_dt);
     vec3 s = nubis_in_scattering(p, dir, d, ray, 1.0 - transmittance, absorb, lod, pixel);
-    /* Energy-conserving step (Hillaire 2016): the exact integral of constant in-scattering over
-     * the step, instead of a Riemann sum that brightens with larger steps; the albedo is 1 but
-     * where rain or a storm absorbs. */
-    float weight = transmittance * ((1.0 - step_t) / absorb);
-    radiance += s * weight;
 #if NUBIS_STORMS
-    flash_mask += nubis_flash_energy(p, d.fine) * weight;
+    vec4 flash_energy = nubis_flash_energy(p, d.fine);
 #endif
-    depth_sum += t * transmittance * (1.0 - step_t);
-    transmittance *= step_t;
+    /* The step covers t -+ dt/2: the share of it in front of `split` goes to the near part. */
+    float near_share = clamp((split - (t - 0.5 * step_dt)) / step_dt, 0.0, 1.0);
+    for (int k = 0; k < 2; k++) {
+      float length_k = step_dt * (k == 0 ? near_share : 1.0 - near_share);
+      if (length_k <= 0.0) {
+        continue;
+      }
+      float step_t = exp(-sigma * length_k);
+      /* Energy-conserving step (Hillaire 2016): the exact integral of constant in-scattering over
+       * the step, instead of a Riemann sum that brightens with larger steps; the albedo is 1 but
+       * where rain or a storm absorbs. */
+      float weight = part_t[k] * ((1.0 - step_t) / absorb);
+      radiance[k] += s * weight;
+#if NUBIS_STORMS
+      flashes[k] += flash_energy * weight;
+#endif
+      depth_sum[k] += t * part_t[k] * (1.0 - step_t);
+      part_t[k] *= step_t;
+    }
+    transmittance = part_t[0] * part_t[1];
     /* S15: stop once the ray is practically opaque. */
     if (transmittance < NUBIS_OPAQUE_TRANSMITTANCE) {
       break;
     }
   }
   float alpha = 1.0 - transmittance;
-  cloud_depth = alpha > 0.0 ? depth_sum / alpha : 0.0;
-  /* S15: clouds fade into the atmosphere with the depth of what the ray saw, into the sky's own color
-   * along this ray (the World's radiance behind them), not a flat fog color
-   * (docs/sources.md#aerial-perspective). */
-  if (P.lighting_fade_distance > 0.0 && alpha > 0.0) {
-    float fade = exp(-(depth_sum / alpha) / P.lighting_fade_distance);
-    radiance = mix(nubis_sky_radiance(dir) * alpha, radiance, fade);
-    flash_mask *= fade;
-  }
-  return vec4(radiance, alpha);
+  float whole_depth = depth_sum[0] + part_t[0] * depth_sum[1];
+  parts.cloud_depth = alpha > 0.0 ? whole_depth / alpha : 0.0;
+  parts.near = nubis_faded_part(dir, radiance[0], part_t[0], depth_sum[0], flashes[0]);
+  parts.far = nubis_faded_part(dir, radiance[1], part_t[1], depth_sum[1], flashes[1]);
+  parts.flash_near = flashes[0];
+  parts.flash_far = flashes[1];
+  return parts;
+}
+
+/* The whole view ray (no split): what the viewport, the panorama and the offline stages march. */
+vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out vec4 flash_mask)
+{
+  NubisParts parts = nubis_march_parts(origin, dir, pixel, NUBIS_NO_SPLIT);
+  cloud_depth = parts.cloud_depth;
+  flash_mask = parts.flash_near;
+  return parts.near;
 }
 
 /* One ray as the full-resolution stages show it (the render, the panorama): the march, this frame's
@@ -422,4 +475,30 @@ vec4 nubis_shade_ray(vec3 origin, vec3 dir, vec2 pixel)
   clouds = nubis_with_cirrus(clouds, origin, dir, pixel, behind);
 #endif
   return clouds;
+}
+
+/* One ray of F12's camera view split at `split`, the scene's first surface along it (`split` is
+ * NUBIS_NO_SPLIT where the ray meets none): the near part and, in `far`, what lies behind the surface,
+ * each with its flashes. The cirrus layer goes with the part on its side of the surface: in front when
+ * the eye or the surface is above its altitude, behind otherwise. */
+vec4 nubis_shade_ray_parts(vec3 origin, vec3 dir, vec2 pixel, float split, out vec4 far)
+{
+  NubisParts parts = nubis_march_parts(origin, dir, pixel, split);
+  vec4 near = parts.near;
+  far = parts.far;
+  near.rgb += NUBIS_FLASH_COLOUR * dot(parts.flash_near, nubis_flash_intensities());
+  far.rgb += NUBIS_FLASH_COLOUR * dot(parts.flash_far, nubis_flash_intensities());
+#if NUBIS_CIRRUS
+  float R = P.layer_planet_radius;
+  bool cirrus_near = split >= NUBIS_NO_SPLIT || nubis_altitude(origin, R) > P.cirrus_altitude ||
+                     nubis_altitude(origin + dir * split, R) > P.cirrus_altitude;
+  float behind;
+  if (cirrus_near) {
+    near = nubis_with_cirrus(near, origin, dir, pixel, behind);
+  }
+  else {
+    far = nubis_with_cirrus(far, origin, dir, pixel, behind);
+  }
+#endif
+  return near;
 }

@@ -34,7 +34,8 @@ from ..core.errors import NubisError
 from ..core.fsutil import check_output_path
 from ..core.staging import output_set
 from ..render import engine
-from . import cycles_setup, handlers, mainthread, pipeline, runtime, scene_io, sky, vdbclouds
+from . import composition, cycles_setup, handlers, mainthread, pipeline, runtime, scene_io, sky, vdbclouds
+from .composition import write_image
 
 RENDER_WORLD = "Nubis Render World"
 CAMERA_IMAGE = "Nubis Camera Clouds"
@@ -74,21 +75,14 @@ def render_size(scene) -> tuple[int, int]:
     return max(4, round(scene.render.resolution_x * pct)), max(4, round(scene.render.resolution_y * pct))
 
 
-def _write_image(name: str, pixels: np.ndarray) -> bpy.types.Image:
-    """Float RGBA pixels (bottom row first) into a generated image, made or resized as needed. Scene
-    linear, not packed: renders make them again."""
-    h, w = pixels.shape[:2]
-    img = bpy.data.images.get(name)
-    if img is None or tuple(img.size) != (w, h) or not img.is_float:
-        if img is not None:
-            bpy.data.images.remove(img)
-        img = bpy.data.images.new(name, w, h, alpha=True, float_buffer=True)
-    # Data as stored: the premultiplied light and the alpha as two channels, no conversion on reading.
-    img.colorspace_settings.name = "Non-Color"
-    img.alpha_mode = "CHANNEL_PACKED"
-    img.pixels.foreach_set(np.ascontiguousarray(pixels, dtype=np.float32).ravel())
-    img.update()
-    return img
+_noted: set[str] = set()
+
+
+def _note_once(text: str) -> None:
+    """A documented fallback, said once per session on the console."""
+    if text not in _noted:
+        _noted.add(text)
+        print(f"Nubis: {text}")
 
 
 def prepare_frame(scene) -> None:
@@ -98,22 +92,29 @@ def prepare_frame(scene) -> None:
     sky.sync_sun(scene)
     pipeline.check_scene(scene)
     w, h = render_size(scene)
-    rgba = pipeline.render_shot(pipeline.viewport_shot(scene, w, h))  # top row first
-    _write_image(CAMERA_IMAGE, rgba[::-1])
+    shot = pipeline.viewport_shot(scene, w, h)
+    s = scene.nubis
+    clouds = runtime.cloud_gpu(s.noise_seed)
+    why_not = composition.fallback(scene)
+    if why_not:
+        _note_once(why_not)
+        composition.hide(scene)
+        rgba = pipeline.render_shot(shot)  # top row first
+    else:
+        rgba = composition.split_clouds(scene, shot, clouds)
+    write_image(CAMERA_IMAGE, rgba[::-1])
     last_seconds.clear()
     last_seconds["camera view"] = time.perf_counter() - start
     t = time.perf_counter()
-    s = scene.nubis
     state = scene_io.state_from_scene(scene)
-    clouds = runtime.cloud_gpu(s.noise_seed)
     clouds.update(state)
     eye = scene_io.camera_eye(scene)
     pw = s.sky_environment_width
     pano = engine.render_panorama(clouds, eye, pw, max(pw // 2, 2))
-    _write_image(PANORAMA_IMAGE, pano)
+    write_image(PANORAMA_IMAGE, pano)
     alpha = np.repeat(pano[..., 3:4], 4, axis=-1)
     alpha[..., 3] = 1.0
-    _write_image(PANORAMA_ALPHA, alpha)
+    write_image(PANORAMA_ALPHA, alpha)
     last_seconds["panorama"] = time.perf_counter() - t
     t = time.perf_counter()
     if s.sky_shadows:
@@ -142,7 +143,7 @@ def shadow_frame(scene, sun_dir, cloud_floor: float | None = None) -> tuple[Vect
     sun = Vector(sun_dir).normalized()
     corners = []
     for obj in scene.objects:
-        if obj.type not in _SOLID_TYPES or obj.hide_render or obj.name == CASTER_NAME:
+        if obj.type not in _SOLID_TYPES or obj.hide_render or obj.get(composition.OWN_KEY):
             continue
         m = scene_io.evaluated_matrix(obj)
         corners.extend(m @ Vector(c) for c in obj.bound_box)
@@ -171,7 +172,7 @@ def update_shadow(scene, state, clouds) -> bpy.types.Object:
     res = scene.nubis.sky_shadow_resolution
     clouds.update(state)
     transmittance = engine.render_shadow(clouds, tuple(origin), tuple(u * size), tuple(v * size), res)
-    img = _write_image(SHADOW_IMAGE, transmittance)
+    img = write_image(SHADOW_IMAGE, transmittance)
     caster = ensure_caster(scene, img)
     caster.matrix_world = Matrix(
         (
@@ -195,6 +196,7 @@ def ensure_caster(scene, image) -> bpy.types.Object:
         for loop, co in zip(uv.data, ((0, 0), (1, 0), (1, 1), (0, 1)), strict=True):
             loop.uv = co
         obj = bpy.data.objects.new(CASTER_NAME, mesh)
+    obj[composition.OWN_KEY] = True
     if obj.name not in scene.collection.objects:
         scene.collection.objects.link(obj)
     for ray in ("camera", "diffuse", "glossy", "transmission", "volume_scatter"):
@@ -328,12 +330,14 @@ def attach(scene) -> None:
         _swapped[scene.name] = scene.world.name if scene.world is not None else ""
     name = _swapped[scene.name]
     scene.world = render_world(bpy.data.worlds.get(name) if name else None)
+    composition.lend_bounce(scene)
     vdbclouds.step_aside(scene)  # the VDB clouds are in the clouds' image: not rendered twice
 
 
 def detach(scene) -> None:
     """Give the scene its own World back (and its VDB clouds' render visibility)."""
     vdbclouds.step_back(scene)
+    composition.give_back(scene)
     name = _swapped.pop(scene.name, None)
     if name is None:
         return
@@ -348,6 +352,7 @@ def _before_frame(scene) -> None:
         caster = scene.objects.get(CASTER_NAME)
         if caster is not None and not caster.hide_render:
             caster.hide_render = True
+        composition.hide(scene)
         return
     # An animation rendered from the interface moves the scene's frame on the render thread; the main
     # thread's evaluated scene (the camera, the sun, keyed settings) follows it here.

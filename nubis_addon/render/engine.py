@@ -80,6 +80,9 @@ _RESOLVE = {
 # The bake reads the lighting library too, for the glow grid.
 STAGES: dict[str, Stage] = {
     "raymarch": Stage(_VIEW),
+    # F12's camera view split at the scene's first surface (the depth pre-pass's world positions): the
+    # clouds in front of it and those behind (docs/sky.md#objects-in-the-clouds).
+    "split": Stage(_VIEW, (("FLOAT_2D", "scene_hit"),), outputs=("near", "far")),
     # The clouds in every direction from one point (equirectangular), and their transmittance towards
     # the sun over a plane facing it (the scene's cloud shadows).
     "panorama": Stage((("VEC4", "eye"),)),
@@ -368,9 +371,15 @@ def draw_clouds(gpu_inputs: CloudGPU, inv_view_proj, eye, **switches: int) -> No
     draw_stage("raymarch", gpu_inputs, {"inv_view_proj": inv_view_proj, "eye": tuple(eye)}, switches=switches)
 
 
-def _new_offscreen(width: int, height: int):
+def new_offscreen(width: int, height: int):
+    """A float offscreen (with a depth buffer) of this size, or a NubisError with a size to try."""
+    return _gpu_image(lambda: gpu.types.GPUOffScreen(width, height, format="RGBA32F"), width, height)
+
+
+def _gpu_image(make: Callable, width: int, height: int):
+    """`make()`'s float GPU image of this size, or a NubisError with a smaller size to try."""
     try:
-        return gpu.types.GPUOffScreen(width, height, format="RGBA32F")
+        return make()
     except Exception as err:  # Blender raises a plain error when the GPU refuses the texture
         mb = width * height * 16 / 2**20
         raise NubisError(
@@ -381,7 +390,7 @@ def _new_offscreen(width: int, height: int):
 
 def check_offscreen(width: int, height: int) -> None:
     """Whether the GPU can hold a float image of this size: a NubisError with a size to try if not."""
-    _new_offscreen(width, height).free()
+    new_offscreen(width, height).free()
 
 
 def draw_offscreen(width: int, height: int, draw: Callable[[], None]) -> np.ndarray:
@@ -394,7 +403,7 @@ def draw_offscreen_steps(width: int, height: int, draws: Iterable[Callable[[], N
     the fraction done after each and returns the pixels, bottom row first. The interface's modal operators
     run one draw per timer tick, with the offscreen unbound in between so Blender can redraw its windows.
     Closing the generator frees the offscreen."""
-    offscreen = _new_offscreen(width, height)
+    offscreen = new_offscreen(width, height)
     try:
         with offscreen.bind():
             gpu.state.active_framebuffer_get().clear(color=(0.0, 0.0, 0.0, 0.0))
@@ -523,13 +532,31 @@ def render_shadow(gpu_inputs: CloudGPU, origin, u, v, size: int) -> np.ndarray:
     return _tiled("shadow", gpu_inputs, values, size, size)
 
 
-def read_pixels(fb, width: int, height: int) -> np.ndarray:
-    """Float RGBA of the framebuffer, (height, width, 4), bottom row first.
+def render_split(gpu_inputs: CloudGPU, inv_view_proj, eye, hit_texture, width: int, height: int, tile: int = TILE):
+    """F12's camera view split at the scene's first surface (shaders/nubis_split_frag.glsl): the clouds in
+    front of it and those behind it, premultiplied RGBA (height, width, 4) each, bottom row first.
+    `hit_texture` is the depth pre-pass's (render/depthpass.py) at this size."""
+    targets = [
+        _gpu_image(lambda: gpu.types.GPUTexture((width, height), format="RGBA32F"), width, height) for _ in range(2)
+    ]
+    fb = gpu.types.GPUFrameBuffer(color_slots=targets)
+    values = {"inv_view_proj": inv_view_proj, "eye": tuple(eye)}
+    draw = functools.partial(draw_stage, "split", gpu_inputs, values, samplers={"scene_hit": hit_texture})
+    with fb.bind():
+        fb.clear(color=(0.0, 0.0, 0.0, 0.0))
+        gpu.state.blend_set("NONE")
+        for tile_draw in _tile_draws(width, height, tile, draw):
+            tile_draw()
+        return tuple(read_pixels(fb, width, height, slot) for slot in range(2))
+
+
+def read_pixels(fb, width: int, height: int, slot: int = 0) -> np.ndarray:
+    """Float RGBA of the framebuffer's colour attachment `slot`, (height, width, 4), bottom row first.
 
     Blender's Buffer exports its memory with reversed strides to the buffer protocol (seen in 5.0.1),
     so we view the C-ordered memory with the strides it really has instead of trusting them.
     """
-    view = np.asarray(fb.read_color(0, 0, width, height, 4, 0, "FLOAT"))
+    view = np.asarray(fb.read_color(0, 0, width, height, 4, slot, "FLOAT"))
     if view.dtype != np.float32 or view.size != width * height * 4:
         raise RuntimeError(f"unexpected framebuffer read-back {view.dtype} {view.shape}")
     if view.flags.c_contiguous and view.shape == (height, width, 4):

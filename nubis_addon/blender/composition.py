@@ -1,0 +1,251 @@
+"""F12 with the scene's objects in the clouds (docs/sky.md#objects-in-the-clouds): before each frame the
+scene's surfaces are drawn from the render camera into a depth pre-pass (render/depthpass.py), each
+camera ray's clouds are split where it meets the first of them (shaders/nubis_split_frag.glsl), and:
+
+- the clouds in front of the surfaces go on a veil, a quad the engine renders just in front of the
+  nearest surface, seen by camera rays only: emission for their light and transparency for the rest, so
+  EEVEE and Cycles lay them over the objects sample by sample, with their own anti-aliasing, pixel
+  filter and camera motion blur (the veil is widened by what the shutter's cameras see);
+- the clouds behind the surfaces stay in the World's camera image, seen where an edge lets the sky through.
+
+Frames where no surface stands behind a cloud and nothing blurs keep the background alone, as before.
+"""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+from mathutils import Matrix
+
+from ..core import composition
+from ..render import depthpass, engine
+from . import scene_io
+
+VEIL_NAME = "Nubis Cloud Veil"
+VEIL_IMAGE = "Nubis Veil Clouds"
+VEIL_MATERIAL = "Nubis Cloud Veil"
+# Objects the depth pre-pass draws (as meshes); hair curves and point clouds are left out (docs/limits.md).
+SOLID_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT"}
+# A veil pixel this opaque or more over a surface makes the frame need the veil.
+VISIBLE_ALPHA = 1.0 / 255.0
+# The widest band the shutter may add on each side, as a share of the frame's larger side.
+MAX_BLUR_SHARE = 0.5
+
+OWN_KEY = "nubis_own"  # an ID property on the objects Nubis adds for a render (the veil, the shadow casters)
+_changed: dict[str, dict[str, int]] = {}  # scene name -> the render settings changed for the veil, as they were
+
+
+def fallback(scene) -> str:
+    """Why this scene's render keeps the clouds as a background only, or "" when they are composed."""
+    cam = scene.camera
+    if cam is None or cam.type != "CAMERA":
+        return "the scene camera is not a camera"
+    if getattr(cam.data, "type", "PERSP") == "PANO":
+        return "a panoramic camera sees the clouds as a background only (docs/limits.md)"
+    return ""
+
+
+def write_image(name: str, pixels: np.ndarray) -> bpy.types.Image:
+    """Float RGBA pixels (bottom row first) into a generated image, made or resized as needed. Scene
+    linear, not packed: renders make them again."""
+    h, w = pixels.shape[:2]
+    img = bpy.data.images.get(name)
+    if img is None or tuple(img.size) != (w, h) or not img.is_float:
+        if img is not None:
+            bpy.data.images.remove(img)
+        img = bpy.data.images.new(name, w, h, alpha=True, float_buffer=True)
+    # Data as stored: the premultiplied light and the alpha as two channels, no conversion on reading.
+    img.colorspace_settings.name = "Non-Color"
+    img.alpha_mode = "CHANNEL_PACKED"
+    img.pixels.foreach_set(np.ascontiguousarray(pixels, dtype=np.float32).ravel())
+    img.update()
+    return img
+
+
+def surfaces(scene):
+    """The evaluated scene's solid surfaces that camera rays see, one mesh at a time: world-space
+    vertices (N, 3) and triangles (M, 3). Instances (particles, geometry nodes, collections) included."""
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    for inst in depsgraph.object_instances:
+        obj = inst.object
+        if obj.type not in SOLID_TYPES or obj.original.get(OWN_KEY) or not obj.visible_camera:
+            continue
+        if obj.original.hide_render:
+            continue
+        try:
+            mesh = obj.to_mesh()
+        except RuntimeError:
+            continue
+        try:
+            if mesh is None or not mesh.polygons:
+                continue
+            mesh.calc_loop_triangles()
+            co = np.empty(len(mesh.vertices) * 3, np.float32)
+            mesh.vertices.foreach_get("co", co)
+            tris = np.empty(len(mesh.loop_triangles) * 3, np.int32)
+            mesh.loop_triangles.foreach_get("vertices", tris)
+        finally:
+            obj.to_mesh_clear()
+        m = np.array(inst.matrix_world, np.float64)
+        world = co.reshape(-1, 3).astype(np.float64) @ m[:3, :3].T + m[:3, 3]
+        yield world, tris.reshape(-1, 3)
+
+
+def _forward_matrix(scene, frame: composition.Frame) -> np.ndarray:
+    """The camera's own view-projection (its clipping planes included) for the widened frame."""
+    cam = scene.camera
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    proj = cam.evaluated_get(depsgraph).calc_matrix_camera(
+        depsgraph, x=frame.width, y=frame.height, scale_x=1.0, scale_y=1.0
+    )
+    view = np.linalg.inv(np.array(scene_io.evaluated_matrix(cam).normalized(), np.float64))
+    w, h = frame.size
+    widen = np.diag([frame.width / w, frame.height / h, 1.0, 1.0])
+    return widen @ np.array(proj, np.float64) @ view
+
+
+def shutter_margin(scene, inv_view_proj, width: int, height: int) -> int:
+    """Pixels the veil is widened by for camera motion blur: what the cameras at the shutter's opening and
+    closing see beyond the frame. 0 without motion blur or with a zero shutter."""
+    r = scene.render
+    if not r.use_motion_blur or r.motion_blur_shutter <= 0.0:
+        return 0
+    position = getattr(r, "motion_blur_position", "CENTER")
+    half = r.motion_blur_shutter
+    offsets = {"START": (0.0, half), "END": (-half, 0.0)}.get(position, (-half / 2, half / 2))
+    frame, sub = scene.frame_current, scene.frame_subframe
+    invs = []
+    try:
+        for offset in offsets:
+            t = frame + sub + offset
+            scene.frame_set(int(np.floor(t)), subframe=float(t - np.floor(t)))
+            invs.append(np.array(scene_io.camera_inv_view_proj(scene, width, height)))
+    finally:
+        scene.frame_set(frame, subframe=sub)
+    limit = int(MAX_BLUR_SHARE * max(width, height))
+    return composition.blur_margin(inv_view_proj, invs, width, height, limit)
+
+
+def split_clouds(scene, shot, clouds) -> np.ndarray:
+    """The frame's clouds for the render World's camera image (top row first); when the frame needs the
+    veil (a surface behind a cloud, or camera motion blur) it is placed with the clouds in front of the
+    surfaces, else hidden."""
+    w, h = shot.width, shot.height
+    margin = composition.FILTER_MARGIN + shutter_margin(scene, shot.inv_view_proj, w, h)
+    frame = composition.widened(np.array(shot.inv_view_proj), w, h, margin)
+    ww, hh = frame.size
+    inv = Matrix(frame.inv_view_proj.tolist())
+    with depthpass.scene_hits(surfaces(scene), _forward_matrix(scene, frame), ww, hh) as (hit_texture, hits):
+        clouds.update(shot.state)
+        near, far = engine.render_split(clouds, inv, shot.eye, hit_texture, ww, hh)
+    inside = (slice(margin, margin + h), slice(margin, margin + w))  # bottom row first
+    surface = hits[..., 3] > 0.5
+    veiled = bool((near[..., 3][surface] > VISIBLE_ALPHA).any())
+    if not veiled and margin <= composition.FILTER_MARGIN:
+        hide(scene)
+        whole = near + (1.0 - near[..., 3:4]) * far
+        return whole[inside][::-1].copy()
+    place(scene, frame, hits, near)
+    return far[inside][::-1].copy()
+
+
+def place(scene, frame: composition.Frame, hits: np.ndarray, near: np.ndarray) -> bpy.types.Object:
+    """The veil in front of the nearest surface the widened frame shows, carrying `near`."""
+    cam = scene.camera
+    m = scene_io.evaluated_matrix(cam).normalized()
+    eye = np.array(m.translation, np.float64)
+    forward = -np.array(m.to_3x3().col[2], np.float64)
+    distance = composition.veil_distance(hits, eye, forward, cam.data.clip_start, cam.data.clip_end)
+    corners = composition.veil_corners(frame, eye, forward, distance)
+    image = write_image(VEIL_IMAGE, near)
+    obj = _veil_object(scene, image)
+    obj.data.vertices.foreach_set("co", corners.astype(np.float32).ravel())
+    obj.data.update()
+    obj.matrix_world = Matrix.Identity(4)
+    obj.hide_render = False
+    return obj
+
+
+def _veil_object(scene, image) -> bpy.types.Object:
+    obj = bpy.data.objects.get(VEIL_NAME)
+    if obj is None or obj.type != "MESH":
+        mesh = bpy.data.meshes.new(VEIL_NAME)
+        mesh.from_pydata([(0.0, 0.0, 0.0)] * 4, [], [(0, 1, 2, 3)])
+        uv = mesh.uv_layers.new(name="UVMap")
+        for loop, co in zip(uv.data, ((0, 0), (1, 0), (1, 1), (0, 1)), strict=True):
+            loop.uv = co
+        obj = bpy.data.objects.new(VEIL_NAME, mesh)
+    obj[OWN_KEY] = True
+    if obj.name not in scene.collection.objects:
+        scene.collection.objects.link(obj)
+    for ray in ("diffuse", "glossy", "transmission", "volume_scatter", "shadow"):
+        setattr(obj, f"visible_{ray}", False)
+    obj.visible_camera = True
+    for probe in ("hide_probe_volume", "hide_probe_sphere", "hide_probe_plane"):
+        if hasattr(obj, probe):
+            setattr(obj, probe, True)
+    obj.hide_select = True
+    obj.display_type = "WIRE"
+    obj.hide_viewport = True  # the viewport draws the clouds itself
+    mat = _veil_material(image)
+    if not obj.data.materials:
+        obj.data.materials.append(mat)
+    else:
+        obj.data.materials[0] = mat
+    return obj
+
+
+def _veil_material(image) -> bpy.types.Material:
+    """The clouds' light as emission and what they let through as transparency: premultiplied `over`,
+    exact in both engines. Closest texels, so an edge's samples each take their own pixel's clouds."""
+    mat = bpy.data.materials.get(VEIL_MATERIAL) or bpy.data.materials.new(VEIL_MATERIAL)
+    if mat.node_tree is None:
+        mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    tex.extension = "EXTEND"
+    tex.interpolation = "Closest"
+    light = nt.nodes.new("ShaderNodeEmission")
+    light.inputs["Strength"].default_value = 1.0
+    nt.links.new(tex.outputs["Color"], light.inputs["Color"])
+    through = nt.nodes.new("ShaderNodeMath")
+    through.operation = "SUBTRACT"
+    through.inputs[0].default_value = 1.0
+    nt.links.new(tex.outputs["Alpha"], through.inputs[1])
+    clear = nt.nodes.new("ShaderNodeBsdfTransparent")
+    nt.links.new(through.outputs[0], clear.inputs["Color"])
+    add = nt.nodes.new("ShaderNodeAddShader")
+    nt.links.new(light.outputs[0], add.inputs[0])
+    nt.links.new(clear.outputs[0], add.inputs[1])
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    nt.links.new(add.outputs[0], out.inputs["Surface"])
+    mat.surface_render_method = "BLENDED"
+    mat.use_backface_culling = False
+    for i, node in enumerate(nt.nodes):
+        node.location = (i * 220, 0)
+    return mat
+
+
+def hide(scene) -> None:
+    obj = scene.objects.get(VEIL_NAME)
+    if obj is not None and not obj.hide_render:
+        obj.hide_render = True
+
+
+def lend_bounce(scene) -> None:
+    """Cycles counts the veil as one transparent bounce of every camera ray: one more for this render, so
+    the artist's own transparent surfaces keep theirs. Given back by give_back."""
+    obj = scene.objects.get(VEIL_NAME)
+    if scene.render.engine != "CYCLES" or obj is None or obj.hide_render or scene.name in _changed:
+        return
+    _changed[scene.name] = {"transparent_max_bounces": scene.cycles.transparent_max_bounces}
+    scene.cycles.transparent_max_bounces += 1
+
+
+def give_back(scene) -> None:
+    """The settings lend_bounce changed, as the artist had them; the veil out of later renders."""
+    for key, value in _changed.pop(scene.name, {}).items():
+        setattr(scene.cycles, key, value)
+    hide(scene)
