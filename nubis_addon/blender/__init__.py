@@ -11,6 +11,8 @@ after it.
   steps while the artist keeps working; farm: bakes of frame sequences and bakes spread over Dask workers;
 - events: what a change triggers, and Blender's handlers; pipeline: renders, bakes, Cycles renders and
   comparisons;
+- shadows: the clouds' shadow casters in final renders; composition: F12's depth pre-pass and the veil of
+  the clouds in front of the objects;
 - viewport: the 3D view's draw; snapshot: what a bake reads from the scene when it starts, with GPU inputs
   of its own;
 - scene_io: Blender data to and from the plain data core/ and render/ work on; reference: Cycles' noise

@@ -13,6 +13,8 @@ Frames where no surface stands behind a cloud and nothing blurs keep the backgro
 
 from __future__ import annotations
 
+import time
+
 import bpy
 import numpy as np
 from mathutils import Matrix
@@ -32,6 +34,9 @@ VISIBLE_ALPHA = 1.0 / 255.0
 MAX_BLUR_SHARE = 0.5
 
 OWN_KEY = "nubis_own"  # an ID property on the objects Nubis adds for a render (the veil, the shadow casters)
+# What the last frame's composition did, for the benchmark and the tests: whether it needed the veil, the
+# margin it widened the frame by (pixels) and the veil's distance (metres).
+last_frame: dict[str, float] = {}
 _changed: dict[str, dict[str, int]] = {}  # scene name -> the render settings changed for the veil, as they were
 
 
@@ -66,29 +71,43 @@ def surfaces(scene):
     """The evaluated scene's solid surfaces that camera rays see, one mesh at a time: world-space
     vertices (N, 3) and triangles (M, 3). Instances (particles, geometry nodes, collections) included."""
     depsgraph = bpy.context.evaluated_depsgraph_get()
+    shared: dict[str, tuple[np.ndarray, np.ndarray] | None] = {}  # an instanced object's mesh, read once
     for inst in depsgraph.object_instances:
         obj = inst.object
         if obj.type not in SOLID_TYPES or obj.original.get(OWN_KEY) or not obj.visible_camera:
             continue
         if obj.original.hide_render:
             continue
-        try:
-            mesh = obj.to_mesh()
-        except RuntimeError:
+        if inst.is_instance:
+            if obj.name not in shared:
+                shared[obj.name] = _triangles(obj)
+            found = shared[obj.name]
+        else:
+            found = _triangles(obj)
+        if found is None:
             continue
-        try:
-            if mesh is None or not mesh.polygons:
-                continue
-            mesh.calc_loop_triangles()
-            co = np.empty(len(mesh.vertices) * 3, np.float32)
-            mesh.vertices.foreach_get("co", co)
-            tris = np.empty(len(mesh.loop_triangles) * 3, np.int32)
-            mesh.loop_triangles.foreach_get("vertices", tris)
-        finally:
-            obj.to_mesh_clear()
+        co, tris = found
         m = np.array(inst.matrix_world, np.float64)
-        world = co.reshape(-1, 3).astype(np.float64) @ m[:3, :3].T + m[:3, 3]
-        yield world, tris.reshape(-1, 3)
+        yield co @ m[:3, :3].T + m[:3, 3], tris
+
+
+def _triangles(obj) -> tuple[np.ndarray, np.ndarray] | None:
+    """An evaluated object's surface as vertices (object space, float64) and triangles, or None."""
+    try:
+        mesh = obj.to_mesh()
+    except RuntimeError:  # an object with no surface to give
+        return None
+    try:
+        if mesh is None or not mesh.polygons:
+            return None
+        mesh.calc_loop_triangles()
+        co = np.empty(len(mesh.vertices) * 3, np.float32)
+        mesh.vertices.foreach_get("co", co)
+        tris = np.empty(len(mesh.loop_triangles) * 3, np.int32)
+        mesh.loop_triangles.foreach_get("vertices", tris)
+    finally:
+        obj.to_mesh_clear()
+    return co.reshape(-1, 3).astype(np.float64), tris.reshape(-1, 3)
 
 
 def _forward_matrix(scene, frame: composition.Frame) -> np.ndarray:
@@ -135,18 +154,26 @@ def split_clouds(scene, shot, clouds) -> np.ndarray:
     frame = composition.widened(np.array(shot.inv_view_proj), w, h, margin)
     ww, hh = frame.size
     inv = Matrix(frame.inv_view_proj.tolist())
+    start = time.perf_counter()
     with depthpass.scene_hits(surfaces(scene), _forward_matrix(scene, frame), ww, hh) as (hit_texture, hits):
+        drawn = time.perf_counter()
         clouds.update(shot.state)
         near, far = engine.render_split(clouds, inv, shot.eye, hit_texture, ww, hh)
+    marched = time.perf_counter()
     inside = (slice(margin, margin + h), slice(margin, margin + w))  # bottom row first
     surface = hits[..., 3] > 0.5
     veiled = bool((near[..., 3][surface] > VISIBLE_ALPHA).any())
-    if not veiled and margin <= composition.FILTER_MARGIN:
+    last_frame.clear()
+    last_frame.update(veil=float(veiled or margin > composition.FILTER_MARGIN), margin=float(margin))
+    if not last_frame["veil"]:
         hide(scene)
         whole = near + (1.0 - near[..., 3:4]) * far
-        return whole[inside][::-1].copy()
-    place(scene, frame, hits, near)
-    return far[inside][::-1].copy()
+        clouds_image = whole[inside][::-1].copy()
+    else:
+        place(scene, frame, hits, near)
+        clouds_image = far[inside][::-1].copy()
+    last_frame.update(depth_s=drawn - start, march_s=marched - drawn, veil_s=time.perf_counter() - marched)
+    return clouds_image
 
 
 def place(scene, frame: composition.Frame, hits: np.ndarray, near: np.ndarray) -> bpy.types.Object:
@@ -157,6 +184,7 @@ def place(scene, frame: composition.Frame, hits: np.ndarray, near: np.ndarray) -
     forward = -np.array(m.to_3x3().col[2], np.float64)
     distance = composition.veil_distance(hits, eye, forward, cam.data.clip_start, cam.data.clip_end)
     corners = composition.veil_corners(frame, eye, forward, distance)
+    last_frame["distance"] = distance
     image = write_image(VEIL_IMAGE, near)
     obj = _veil_object(scene, image)
     obj.data.vertices.foreach_set("co", corners.astype(np.float32).ravel())
@@ -234,18 +262,20 @@ def hide(scene) -> None:
         obj.hide_render = True
 
 
-def lend_bounce(scene) -> None:
-    """Cycles counts the veil as one transparent bounce of every camera ray: one more for this render, so
-    the artist's own transparent surfaces keep theirs. Given back by give_back."""
+def lend_bounces(scene, casters: int = 0) -> None:
+    """Cycles counts the veil as one transparent bounce of every camera ray, and each shadow caster one of
+    every shadow ray: as many more for this render (the veil's one and `casters`, those of a stack beyond
+    its first), so the artist's own transparent surfaces keep theirs. Given back by give_back."""
     obj = scene.objects.get(VEIL_NAME)
-    if scene.render.engine != "CYCLES" or obj is None or obj.hide_render or scene.name in _changed:
+    extra = casters + (0 if obj is None or obj.hide_render else 1)
+    if scene.render.engine != "CYCLES" or extra == 0 or scene.name in _changed:
         return
     _changed[scene.name] = {"transparent_max_bounces": scene.cycles.transparent_max_bounces}
-    scene.cycles.transparent_max_bounces += 1
+    scene.cycles.transparent_max_bounces += extra
 
 
 def give_back(scene) -> None:
-    """The settings lend_bounce changed, as the artist had them; the veil out of later renders."""
+    """The settings lend_bounces changed, as the artist had them; the veil out of later renders."""
     for key, value in _changed.pop(scene.name, {}).items():
         setattr(scene.cycles, key, value)
     hide(scene)

@@ -26,7 +26,6 @@ from pathlib import Path
 
 import bpy
 import numpy as np
-from mathutils import Matrix, Vector
 
 from ..core import imageio
 from ..core import sky as skymath
@@ -34,21 +33,14 @@ from ..core.errors import NubisError
 from ..core.fsutil import check_output_path
 from ..core.staging import output_set
 from ..render import engine
-from . import composition, cycles_setup, handlers, mainthread, pipeline, runtime, scene_io, sky, vdbclouds
+from . import composition, cycles_setup, handlers, mainthread, pipeline, runtime, scene_io, shadows, sky, vdbclouds
 from .composition import write_image
 
 RENDER_WORLD = "Nubis Render World"
 CAMERA_IMAGE = "Nubis Camera Clouds"
 PANORAMA_IMAGE = "Nubis Panorama Clouds"
 PANORAMA_ALPHA = "Nubis Panorama Alpha"  # the Environment Texture node has no alpha output
-SHADOW_IMAGE = "Nubis Cloud Shadow"
-CASTER_NAME = "Nubis Cloud Shadow"
-CASTER_MATERIAL = "Nubis Cloud Shadow"
-MAX_SHADOW_SIZE = 20000.0  # metres of ground the shadow map covers at most
-MIN_SHADOW_SIZE = 50.0
 ENGINES = ("CYCLES", "BLENDER_EEVEE", "BLENDER_EEVEE_NEXT")
-# Objects whose extent the shadow caster covers.
-_SOLID_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT", "CURVES", "POINTCLOUD", "GREASEPENCIL"}
 
 _swapped: dict[str, str] = {}  # scene name -> the World it had before the render
 last_error: list[str] = []
@@ -105,6 +97,9 @@ def prepare_frame(scene) -> None:
     write_image(CAMERA_IMAGE, rgba[::-1])
     last_seconds.clear()
     last_seconds["camera view"] = time.perf_counter() - start
+    if not why_not:  # its parts: the depth pre-pass, the split march, the veil and the images it fills
+        parts = composition.last_frame
+        last_seconds.update(depth=parts["depth_s"], march=parts["march_s"], veil=parts["veil_s"])
     t = time.perf_counter()
     state = scene_io.state_from_scene(scene)
     clouds.update(state)
@@ -118,128 +113,10 @@ def prepare_frame(scene) -> None:
     last_seconds["panorama"] = time.perf_counter() - t
     t = time.perf_counter()
     if s.sky_shadows:
-        update_shadow(scene, state, clouds)
+        shadows.update_shadow(scene, state, clouds)
         last_seconds["shadow map"] = time.perf_counter() - t
     else:
-        caster = bpy.data.objects.get(CASTER_NAME)
-        if caster is not None:
-            caster.hide_render = True
-
-
-# ---- cloud shadows ----------------------------------------------------------------------------------
-
-
-# The caster's distance below the clouds' floor when the objects' top would put it higher.
-CASTER_BELOW_CLOUDS = 10.0
-
-
-def shadow_frame(scene, sun_dir, cloud_floor: float | None = None) -> tuple[Vector, Vector, Vector, float]:
-    """Where the shadow caster goes: a horizontal square above the scene's tallest object and below the
-    clouds' floor (`cloud_floor`, the lowest altitude a cloud reaches), wide enough that the sunlight
-    reaching every object crosses it. Returns its centre, its two unit edge directions and its width
-    (metres). The shadow map marches from the caster through the whole layer towards the sun, so a
-    caster above the floor would miss the clouds beneath it: a 200 km ground plane had put it 4.4 km
-    up, above the cumulus, and the renders showed no cloud shadow at all."""
-    sun = Vector(sun_dir).normalized()
-    corners = []
-    for obj in scene.objects:
-        if obj.type not in _SOLID_TYPES or obj.hide_render or obj.get(composition.OWN_KEY):
-            continue
-        m = scene_io.evaluated_matrix(obj)
-        corners.extend(m @ Vector(c) for c in obj.bound_box)
-    if not corners:
-        corners = [Vector((x, y, 0.0)) for x in (-500.0, 500.0) for y in (-500.0, 500.0)]
-    lo = Vector([min(c[i] for c in corners) for i in range(3)])
-    hi = Vector([max(c[i] for c in corners) for i in range(3)])
-    height = hi.z + max(0.02 * max(hi.x - lo.x, hi.y - lo.y), 5.0)
-    if cloud_floor is not None:
-        # Just under the floor, but never below the objects' top (a mountain into the clouds keeps it there).
-        height = max(min(height, cloud_floor - CASTER_BELOW_CLOUDS), hi.z + 1.0)
-    # Sunlight reaching the lowest point crosses the caster this far towards the sun.
-    rise = (height - lo.z) / max(sun.z, 0.05)
-    shift = Vector((sun.x, sun.y, 0.0)) * rise
-    centre = (lo + hi) / 2 + shift / 2
-    centre.z = height
-    extent = max(hi.x - lo.x + abs(shift.x), hi.y - lo.y + abs(shift.y))
-    size = scene.nubis.sky_shadow_size or min(max(1.05 * extent, MIN_SHADOW_SIZE), MAX_SHADOW_SIZE)
-    return centre, Vector((1.0, 0.0, 0.0)), Vector((0.0, 1.0, 0.0)), size
-
-
-def update_shadow(scene, state, clouds) -> bpy.types.Object:
-    """The shadow map of this frame and the caster that carries it."""
-    origin, u, v, size = shadow_frame(scene, state.sun_direction, state.shell()[0])
-    n = u.cross(v)
-    res = scene.nubis.sky_shadow_resolution
-    clouds.update(state)
-    transmittance = engine.render_shadow(clouds, tuple(origin), tuple(u * size), tuple(v * size), res)
-    img = write_image(SHADOW_IMAGE, transmittance)
-    caster = ensure_caster(scene, img)
-    caster.matrix_world = Matrix(
-        (
-            (u.x * size, v.x * size, n.x, origin.x),
-            (u.y * size, v.y * size, n.y, origin.y),
-            (u.z * size, v.z * size, n.z, origin.z),
-            (0.0, 0.0, 0.0, 1.0),
-        )
-    )
-    caster.hide_render = False
-    return caster
-
-
-def ensure_caster(scene, image) -> bpy.types.Object:
-    """A unit square (UVs 0-1) that only shadow rays see, with the shadow map as its transparency."""
-    obj = bpy.data.objects.get(CASTER_NAME)
-    if obj is None or obj.type != "MESH":
-        mesh = bpy.data.meshes.new(CASTER_NAME)
-        mesh.from_pydata([(-0.5, -0.5, 0.0), (0.5, -0.5, 0.0), (0.5, 0.5, 0.0), (-0.5, 0.5, 0.0)], [], [(0, 1, 2, 3)])
-        uv = mesh.uv_layers.new(name="UVMap")
-        for loop, co in zip(uv.data, ((0, 0), (1, 0), (1, 1), (0, 1)), strict=True):
-            loop.uv = co
-        obj = bpy.data.objects.new(CASTER_NAME, mesh)
-    obj[composition.OWN_KEY] = True
-    if obj.name not in scene.collection.objects:
-        scene.collection.objects.link(obj)
-    for ray in ("camera", "diffuse", "glossy", "transmission", "volume_scatter"):
-        setattr(obj, f"visible_{ray}", False)
-    obj.visible_shadow = True
-    obj.hide_select = True
-    obj.display_type = "WIRE"
-    obj.hide_viewport = True  # the viewport draws the clouds itself
-    mat = _caster_material(image)
-    if not obj.data.materials:
-        obj.data.materials.append(mat)
-    else:
-        obj.data.materials[0] = mat
-    return obj
-
-
-def _caster_material(image) -> bpy.types.Material:
-    """Opaque where the clouds block the sun, transparent where they let it through (a mix by the
-    transmittance), so Cycles' and EEVEE's shadow rays carry the clouds' shadow."""
-    mat = bpy.data.materials.get(CASTER_MATERIAL) or bpy.data.materials.new(CASTER_MATERIAL)
-    if mat.node_tree is None:
-        mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.clear()
-    tex = nt.nodes.new("ShaderNodeTexImage")
-    tex.image = image
-    tex.extension = "EXTEND"
-    tex.interpolation = "Linear"
-    opaque = nt.nodes.new("ShaderNodeEmission")
-    opaque.inputs["Strength"].default_value = 0.0
-    clear = nt.nodes.new("ShaderNodeBsdfTransparent")
-    mix = nt.nodes.new("ShaderNodeMixShader")
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
-    nt.links.new(tex.outputs["Color"], mix.inputs["Fac"])
-    nt.links.new(opaque.outputs[0], mix.inputs[1])
-    nt.links.new(clear.outputs[0], mix.inputs[2])
-    nt.links.new(mix.outputs[0], out.inputs["Surface"])
-    # EEVEE: a dithered surface whose shadows follow its transparency.
-    mat.surface_render_method = "DITHERED"
-    mat.use_transparent_shadow = True
-    for i, node in enumerate(nt.nodes):
-        node.location = (i * 220, 0)
-    return mat
+        shadows.hide_casters(scene)
 
 
 # ---- the render World -------------------------------------------------------------------------------
@@ -330,7 +207,7 @@ def attach(scene) -> None:
         _swapped[scene.name] = scene.world.name if scene.world is not None else ""
     name = _swapped[scene.name]
     scene.world = render_world(bpy.data.worlds.get(name) if name else None)
-    composition.lend_bounce(scene)
+    composition.lend_bounces(scene, shadows.stacked(scene))
     vdbclouds.step_aside(scene)  # the VDB clouds are in the clouds' image: not rendered twice
 
 
@@ -349,9 +226,7 @@ def _before_frame(scene) -> None:
     the render World; a render without them gets no stale shadow."""
     if not wants_clouds(scene):
         # An earlier frame's shadow must not fall on a render without the clouds (or on the VDB's).
-        caster = scene.objects.get(CASTER_NAME)
-        if caster is not None and not caster.hide_render:
-            caster.hide_render = True
+        shadows.hide_casters(scene)
         composition.hide(scene)
         return
     # An animation rendered from the interface moves the scene's frame on the render thread; the main

@@ -18,6 +18,8 @@ VEIL_CLEARANCE = 0.98
 # Shadow casters through the layer: at most this many, at least this far apart (metres).
 MAX_CASTERS = 12
 MIN_CASTER_SPACING = 100.0
+# A transmittance this low is opaque: the slab beneath it is not resolved from the ratio of the two.
+OPAQUE = 1e-4
 
 
 @dataclass(frozen=True)
@@ -106,3 +108,16 @@ def caster_altitudes(floor: float, top: float, objects_top: float, spacing: floa
     step = max(spacing, MIN_CASTER_SPACING, (reach - floor) / (MAX_CASTERS - 1))
     count = int(np.ceil((reach - floor) / step))
     return [bottom] + [floor + i * step for i in range(1, count + 1)]
+
+
+def slab_transmittances(maps: list[np.ndarray]) -> list[np.ndarray]:
+    """Each caster's share of the transmittance, from the maps of the whole way up from each (the lowest
+    caster's first): the layer between its altitude and the next caster's, the top one all above it. The
+    maps' texels lie on the same sun rays, so the product of the slabs a shadow ray crosses is the whole
+    way up from the lowest of them. Above a practically opaque slab a slab passes everything."""
+    slabs = []
+    for below, above in zip(maps, maps[1:], strict=False):
+        ratio = np.where(above > OPAQUE, below / np.maximum(above, OPAQUE), 1.0)
+        slabs.append(np.clip(ratio, 0.0, 1.0).astype(np.float32))
+    slabs.append(np.asarray(maps[-1], np.float32))
+    return slabs

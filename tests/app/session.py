@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import re
 import subprocess
@@ -704,6 +705,82 @@ def s_render_cycles(step: Step):
     yield from render_series(step, "CYCLES", "cycles")
 
 
+def _peak_material():
+    """An emission-only material: what the clouds change on it is their veil, not their shadow."""
+    mat = bpy.data.materials.new("App Peak")
+    if mat.node_tree is None:
+        mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    light = nt.nodes.new("ShaderNodeEmission")
+    light.inputs["Color"].default_value = (0.3, 0.15, 0.08, 1.0)
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    nt.links.new(light.outputs[0], out.inputs["Surface"])
+    return mat
+
+
+def _veiled_share(render: str, clear: str, mask) -> float:
+    """The share of the peak's pixels the clouds change by more than 0.05 (display-referred luminance)."""
+    import numpy as np
+
+    return float((np.abs(_luminance(render) - _luminance(clear))[mask] > 0.05).mean())
+
+
+def s_peak(step: Step):
+    """F12 of a peak through the clouds (a 5 km cone 16 km ahead of a camera 1 km up), in EEVEE and in Cycles
+    from the interface: the share of its pixels the clouds veil is within 30 % of Cycles rendering the
+    camera's bake of the same clouds."""
+    import numpy as np
+
+    scene = bpy.context.scene
+    cam = scene.camera
+    keep = (cam.location.copy(), cam.rotation_euler.copy(), cam.data.lens, cam.data.clip_end, scene.render.engine)
+    cam.location, cam.rotation_euler = (0.0, 0.0, 1000.0), (math.radians(92.0), 0.0, 0.0)
+    cam.data.lens, cam.data.clip_end = 30.0, 100000.0
+    mesh = bpy.data.meshes.new("App Peak")
+    peak = bpy.data.objects.new("App Peak", mesh)
+    scene.collection.objects.link(peak)
+    import bmesh
+
+    bm = bmesh.new()
+    bmesh.ops.create_cone(bm, segments=64, radius1=6000.0, radius2=0.0, depth=5000.0, cap_ends=True)
+    bm.to_mesh(mesh)
+    bm.free()
+    peak.location = (0.0, 16000.0, 2500.0)
+    mesh.materials.append(_peak_material())
+    renders = {}
+    for engine, tag in ((eevee(), "peak_eevee"), ("CYCLES", "peak_cycles")):
+        small_render(scene, engine)
+        renders[engine] = yield from render_ui(step, f"{tag}_f12", "key")
+    scene.render.film_transparent, scene.render.image_settings.color_mode = True, "RGBA"
+    clear = render_script(step, "peak_clear", clouds=False)
+    scene.render.film_transparent = False
+    vdb = os.path.join(OUT, "bake", "peak.vdb")
+    os.makedirs(os.path.dirname(vdb), exist_ok=True)
+    ext_module("pipeline").bake(scene, vdb, _core_module("jobs").BakeOptions(camera_only=True, voxel_size=80.0))
+    volume = ext_module("cycles_setup").import_volume(scene, vdb)
+    scene.cycles.volume_bounces = 16
+    reference = render_script(step, "peak_bake_in_cycles")
+    ext_module("cycles_setup").remove_volume(scene)
+    img = bpy.data.images.load(clear)
+    try:
+        alpha = np.empty(img.size[0] * img.size[1] * 4, np.float32)
+        img.pixels.foreach_get(alpha)
+        mask = alpha.reshape(img.size[1], img.size[0], 4)[..., 3] > 0.99
+    finally:
+        bpy.data.images.remove(img)
+    step.check(volume is not None and mask.sum() > 500, f"the peak covers {mask.sum()} pixels")
+    want = _veiled_share(reference, clear, mask)
+    step.check(want > 0.05, f"Cycles rendering the camera's bake veils {want:.1%} of the peak")
+    for engine, path in renders.items():
+        if step.check(bool(path) and os.path.exists(path), f"{engine}: the F12 result was saved"):
+            got = _veiled_share(path, clear, mask)
+            step.check(abs(got - want) <= 0.3 * want, f"{engine}: F12 veils {got:.1%} of the peak (bake {want:.1%})")
+    bpy.data.objects.remove(peak)
+    cam.location, cam.rotation_euler, cam.data.lens, cam.data.clip_end, scene.render.engine = keep
+    yield 1.0
+
+
 def s_animation(step: Step):
     """Render > Render Animation of three frames 120 apart (five seconds of wind): each frame has clouds,
     and they move."""
@@ -1060,6 +1137,7 @@ MAIN = [
     s_edit,
     s_render_eevee,
     s_render_cycles,
+    s_peak,
     s_animation,
     s_bake,
     s_bake_disturbed,

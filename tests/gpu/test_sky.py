@@ -254,10 +254,10 @@ def _masks(scene):
 
 def _shadow_at(blender, scene, points):
     """The shadow map's transmittance where sunlight reaching `points` crosses the caster."""
-    from nubis_addon.blender import scene_render
+    from nubis_addon.blender import shadows
 
-    caster = scene.objects[scene_render.CASTER_NAME]
-    img = blender.data.images[scene_render.SHADOW_IMAGE]
+    caster = scene.objects[shadows.CASTER_NAME]
+    img = blender.data.images[shadows.SHADOW_IMAGE]
     res = img.size[0]
     tmap = np.array(img.pixels[:], np.float32).reshape(res, res, 4)[..., 0]
     m = np.array(caster.matrix_world)
@@ -276,7 +276,7 @@ def _shadow_at(blender, scene, points):
 
 @pytest.mark.parametrize("engine", ["CYCLES", "EEVEE"])
 def test_final_render_shows_clouds_behind_the_cube_and_their_moving_shadows(blender, f12_scene, engine, tmp_path):
-    from nubis_addon.blender import pipeline, scene_render
+    from nubis_addon.blender import pipeline, scene_render, shadows
 
     scene = f12_scene
     name = _engine_name(blender, engine)
@@ -311,16 +311,16 @@ def test_final_render_shows_clouds_behind_the_cube_and_their_moving_shadows(blen
     la, lb = (x[mask] @ np.array([0.2126, 0.7152, 0.0722]) for x in (a, b))
     # ... and the ground brightens where the map cleared and darkens where it closed.
     assert np.corrcoef(lb - la, tb - ta)[0, 1] > 0.3, (engine, np.corrcoef(lb - la, tb - ta)[0, 1])
-    caster = scene.objects[scene_render.CASTER_NAME]
+    caster = scene.objects[shadows.CASTER_NAME]
     assert not caster.visible_camera and caster.visible_shadow
 
 
 def test_renders_without_the_clouds_get_no_stale_shadow(blender, f12_scene):
-    from nubis_addon.blender import scene_render
+    from nubis_addon.blender import scene_render, shadows
 
     scene = f12_scene
     scene_render.prepare_frame(scene)
-    caster = scene.objects[scene_render.CASTER_NAME]
+    caster = scene.objects[shadows.CASTER_NAME]
     assert not caster.hide_render
     scene.nubis.sky_render_clouds = False
     try:
@@ -415,7 +415,7 @@ def test_cloud_shadows_over_a_large_ground_start_below_the_clouds(make_scene, bl
     """A 200 km ground plane put the shadow caster at the objects' top plus 2 % of their extent, 4.4 km
     up and above the cumulus: the map marched from there saw no cloud and F12 showed no shadow. The
     caster now sits under the clouds' floor and its map holds the shadows."""
-    from nubis_addon.blender import runtime, scene_io, scene_render
+    from nubis_addon.blender import runtime, scene_io, shadows
 
     scene = make_scene("default")
     blender.ops.mesh.primitive_plane_add(size=200000.0)
@@ -423,13 +423,13 @@ def test_cloud_shadows_over_a_large_ground_start_below_the_clouds(make_scene, bl
     blender.context.view_layer.update()
     state = scene_io.state_from_scene(scene)
     floor = state.shell()[0]
-    centre, _u, _v, size = scene_render.shadow_frame(scene, state.sun_direction, floor)
+    centre, _u, _v, size = shadows.shadow_frame(scene, state.sun_direction, floor)
     assert 100.0 < centre.z < floor, (centre.z, floor)
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
     clouds.update(state)
-    caster = scene_render.update_shadow(scene, state, clouds)
+    caster = shadows.update_shadow(scene, state, clouds)
     assert caster.matrix_world.translation.z < floor
-    pixels = np.array(blender.data.images[scene_render.SHADOW_IMAGE].pixels[:]).reshape(-1, 4)[:, 0]
+    pixels = np.array(blender.data.images[shadows.SHADOW_IMAGE].pixels[:]).reshape(-1, 4)[:, 0]
     assert pixels.min() < 0.5 and pixels.max() > 0.9, (pixels.min(), pixels.max())  # shade and sun
 
 

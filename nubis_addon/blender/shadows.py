@@ -1,0 +1,194 @@
+"""The clouds' shadows in final renders: horizontal squares that only shadow rays see, each carrying a map
+of the clouds' transmittance towards the sun as its transparency, so the Sun lamp's shadows in EEVEE and
+Cycles hold the clouds' shadows and move with the wind.
+
+Where no object reaches the clouds' floor, one caster just above the objects (or just under the floor)
+carries the transmittance through the whole layer. Where objects rise into the layer, a stack of casters
+climbs through it, each carrying the layer between its altitude and the next one's, so a point's shadow
+rays gather the clouds above that point and not the ones below it (docs/sky.md#objects-in-the-clouds)."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+from mathutils import Matrix, Vector
+
+from ..core import composition as plan
+from ..render import engine
+from . import scene_io
+from .composition import OWN_KEY, write_image
+
+SHADOW_IMAGE = "Nubis Cloud Shadow"
+CASTER_NAME = "Nubis Cloud Shadow"
+CASTER_MATERIAL = "Nubis Cloud Shadow"
+MAX_SHADOW_SIZE = 20000.0  # metres of ground the shadow map covers at most
+MIN_SHADOW_SIZE = 50.0
+# The caster's distance below the clouds' floor when the objects' top would put it higher.
+CASTER_BELOW_CLOUDS = 10.0
+# Objects whose extent the shadow casters cover.
+_SOLID_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT", "CURVES", "POINTCLOUD", "GREASEPENCIL"}
+
+
+def caster_name(index: int) -> str:
+    """The caster (and its map and material) at this place in the stack, the lowest first."""
+    return CASTER_NAME if index == 0 else f"{CASTER_NAME} {index}"
+
+
+def objects_box(scene) -> tuple[Vector, Vector]:
+    """The world box of the scene's solid objects (Nubis's own left out); a 1 km square at the ground
+    when there are none."""
+    corners = []
+    for obj in scene.objects:
+        if obj.type not in _SOLID_TYPES or obj.hide_render or obj.get(OWN_KEY):
+            continue
+        m = scene_io.evaluated_matrix(obj)
+        corners.extend(m @ Vector(c) for c in obj.bound_box)
+    if not corners:
+        corners = [Vector((x, y, 0.0)) for x in (-500.0, 500.0) for y in (-500.0, 500.0)]
+    lo = Vector([min(c[i] for c in corners) for i in range(3)])
+    hi = Vector([max(c[i] for c in corners) for i in range(3)])
+    return lo, hi
+
+
+def shadow_frame(scene, sun_dir, cloud_floor: float | None = None) -> tuple[Vector, Vector, Vector, float]:
+    """Where the single shadow caster goes: a horizontal square above the scene's tallest object and below
+    the clouds' floor (`cloud_floor`, the lowest altitude a cloud reaches), wide enough that the sunlight
+    reaching every object crosses it. Returns its centre, its two unit edge directions and its width
+    (metres). The shadow map marches from the caster through the whole layer towards the sun, so a
+    caster above the floor would miss the clouds beneath it: a 200 km ground plane had put it 4.4 km
+    up, above the cumulus, and the renders showed no cloud shadow at all."""
+    lo, hi = objects_box(scene)
+    height = hi.z + max(0.02 * max(hi.x - lo.x, hi.y - lo.y), 5.0)
+    if cloud_floor is not None:
+        # Just under the floor, but never below the objects' top (stack_frames serves objects in the layer).
+        height = max(min(height, cloud_floor - CASTER_BELOW_CLOUDS), hi.z + 1.0)
+    centres, u, v, size = stack_frames(scene, sun_dir, [height], (lo, hi))
+    return centres[0], u, v, size
+
+
+def stack_frames(scene, sun_dir, altitudes: list[float], box=None) -> tuple[list[Vector], Vector, Vector, float]:
+    """The casters' squares at these altitudes: each the lowest moved along the sun, so texel (i, j) of every
+    map lies on one sun ray; wide enough that the sunlight reaching every point of every object crosses each.
+    Returns their centres, the edge directions and the width (metres)."""
+    sun = Vector(sun_dir).normalized()
+    lo, hi = box or objects_box(scene)
+    slope = Vector((sun.x, sun.y, 0.0)) / max(sun.z, 0.05)
+    base = altitudes[0]
+    # Where the sun rays through the objects' lowest and highest points cross the lowest square.
+    # (A caster above the objects keeps the span from their own footprint, as one caster always had.)
+    rise_lo, rise_hi = slope * (base - lo.z), slope * min(base - hi.z, 0.0)
+    centre = (lo + hi) / 2 + (rise_lo + rise_hi) / 2
+    spread = rise_lo - rise_hi
+    extent = max(hi.x - lo.x + abs(spread.x), hi.y - lo.y + abs(spread.y))
+    size = scene.nubis.sky_shadow_size or min(max(1.05 * extent, MIN_SHADOW_SIZE), MAX_SHADOW_SIZE)
+    centres = []
+    for h in altitudes:
+        c = centre + slope * (h - base)
+        c.z = h
+        centres.append(c)
+    return centres, Vector((1.0, 0.0, 0.0)), Vector((0.0, 1.0, 0.0)), size
+
+
+def update_shadow(scene, state, clouds) -> bpy.types.Object:
+    """This frame's shadow maps and the casters that carry them; returns the lowest caster."""
+    floor, top = state.shell()
+    lo, hi = objects_box(scene)
+    res = scene.nubis.sky_shadow_resolution
+    clouds.update(state)
+    if hi.z <= floor:
+        altitudes = [shadow_frame(scene, state.sun_direction, floor)[0].z]
+    else:
+        altitudes = plan.caster_altitudes(floor, top, hi.z, plan.MIN_CASTER_SPACING)
+    centres, u, v, size = stack_frames(scene, state.sun_direction, altitudes, (lo, hi))
+    maps = [engine.render_shadow(clouds, tuple(c), tuple(u * size), tuple(v * size), res)[..., 0] for c in centres]
+    for index, (centre, slab) in enumerate(zip(centres, plan.slab_transmittances(maps), strict=True)):
+        rgba = np.ones(slab.shape + (4,), np.float32)
+        rgba[..., :3] = slab[..., None]
+        image = write_image(caster_name(index), rgba)
+        caster = ensure_caster(scene, image, index)
+        n = u.cross(v)
+        caster.matrix_world = Matrix(
+            (
+                (u.x * size, v.x * size, n.x, centre.x),
+                (u.y * size, v.y * size, n.y, centre.y),
+                (u.z * size, v.z * size, n.z, centre.z),
+                (0.0, 0.0, 0.0, 1.0),
+            )
+        )
+        caster.hide_render = False
+    hide_casters(scene, first=len(centres))
+    return scene.objects[CASTER_NAME]
+
+
+def stacked(scene) -> int:
+    """How many casters of a stack this render has beyond the lowest (0 for one caster or none)."""
+    index = 1
+    while (obj := scene.objects.get(caster_name(index))) is not None and not obj.hide_render:
+        index += 1
+    return index - 1
+
+
+def hide_casters(scene, first: int = 0) -> None:
+    """Keep the casters from `first` up out of the render (all of them by default)."""
+    index = first
+    while (obj := bpy.data.objects.get(caster_name(index))) is not None:
+        if not obj.hide_render:
+            obj.hide_render = True
+        index += 1
+
+
+def ensure_caster(scene, image, index: int = 0) -> bpy.types.Object:
+    """A unit square (UVs 0-1) that only shadow rays see, with the shadow map as its transparency."""
+    name = caster_name(index)
+    obj = bpy.data.objects.get(name)
+    if obj is None or obj.type != "MESH":
+        mesh = bpy.data.meshes.new(name)
+        mesh.from_pydata([(-0.5, -0.5, 0.0), (0.5, -0.5, 0.0), (0.5, 0.5, 0.0), (-0.5, 0.5, 0.0)], [], [(0, 1, 2, 3)])
+        uv = mesh.uv_layers.new(name="UVMap")
+        for loop, co in zip(uv.data, ((0, 0), (1, 0), (1, 1), (0, 1)), strict=True):
+            loop.uv = co
+        obj = bpy.data.objects.new(name, mesh)
+    obj[OWN_KEY] = True
+    if obj.name not in scene.collection.objects:
+        scene.collection.objects.link(obj)
+    for ray in ("camera", "diffuse", "glossy", "transmission", "volume_scatter"):
+        setattr(obj, f"visible_{ray}", False)
+    obj.visible_shadow = True
+    obj.hide_select = True
+    obj.display_type = "WIRE"
+    obj.hide_viewport = True  # the viewport draws the clouds itself
+    mat = _caster_material(name, image)
+    if not obj.data.materials:
+        obj.data.materials.append(mat)
+    else:
+        obj.data.materials[0] = mat
+    return obj
+
+
+def _caster_material(name: str, image) -> bpy.types.Material:
+    """Opaque where the clouds block the sun, transparent where they let it through (a mix by the
+    transmittance), so Cycles' and EEVEE's shadow rays carry the clouds' shadow."""
+    mat = bpy.data.materials.get(name) or bpy.data.materials.new(name)
+    if mat.node_tree is None:
+        mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    tex.extension = "EXTEND"
+    tex.interpolation = "Linear"
+    opaque = nt.nodes.new("ShaderNodeEmission")
+    opaque.inputs["Strength"].default_value = 0.0
+    clear = nt.nodes.new("ShaderNodeBsdfTransparent")
+    mix = nt.nodes.new("ShaderNodeMixShader")
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    nt.links.new(tex.outputs["Color"], mix.inputs["Fac"])
+    nt.links.new(opaque.outputs[0], mix.inputs[1])
+    nt.links.new(clear.outputs[0], mix.inputs[2])
+    nt.links.new(mix.outputs[0], out.inputs["Surface"])
+    # EEVEE: a dithered surface whose shadows follow its transparency.
+    mat.surface_render_method = "DITHERED"
+    mat.use_transparent_shadow = True
+    for i, node in enumerate(nt.nodes):
+        node.location = (i * 220, 0)
+    return mat
