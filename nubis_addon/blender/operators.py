@@ -14,7 +14,7 @@ from ..core.errors import NubisError
 from ..core.jobs import BenchmarkOptions
 from ..core.limits import MAX_LAYERS
 from ..core.state import MAX_STORMS
-from . import cycles_setup, preview, runtime, scene_io, status, ui, viewport, work
+from . import cycles_setup, preview, runtime, scene_io, sky, status, ui, viewport, work
 from .presetlist import active_preset, find_preset_entry, preset_entries
 from .ui import NeedsCloudscape
 
@@ -644,14 +644,15 @@ class NUBIS_OT_benchmark(NeedsCloudscape, NubisOperator, bpy.types.Operator):
 
 
 class NUBIS_OT_clear_cache(NubisOperator, bpy.types.Operator):
-    """Delete the cached noise volumes; they are made again when a seed needs them"""
+    """Delete the cached noise volumes and sky captures; they are made again when needed"""
 
     bl_idname = "nubis.clear_cache"
     bl_label = "Clear Cache"
 
     def run(self, context):
         freed = noise.clear_cache(runtime.cache_dir())
-        return f"Cleared {freed.sets} cached noise sets ({freed.nbytes / 2**20:.1f} MB)"
+        skies = sky.clear_stored()
+        return f"Cleared {freed.sets} cached noise sets ({freed.nbytes / 2**20:.1f} MB) and {skies} sky captures"
 
 
 class NUBIS_OT_preset_load(KeepOptions, NubisOperator, bpy.types.Operator):

@@ -8,7 +8,9 @@ SINGLE_SCATTERING and MULTIPLE_SCATTERING and calls them `aerosol_density`. Both
 
 from __future__ import annotations
 
+import hashlib
 import math
+import os
 from pathlib import Path
 
 import bpy
@@ -16,8 +18,9 @@ import numpy as np
 
 from ..core import imageio, interrupt, metrics
 from ..core import sky as skymath
+from ..core.errors import NubisError
 from ..render import gpu_context
-from . import handlers, mainthread
+from . import handlers, mainthread, runtime
 from .ui import redraw_views
 
 WORLD_NAME = "Nubis Sky"
@@ -325,12 +328,68 @@ def capture_world(scene, width: int = ENV_WIDTH, samples: int = ENV_SAMPLES, wor
     hit = _captures.get(key)
     if hit is not None:
         return hit
-    env = _capture_ground(scene, world, _render_world(world, width, max(width // 2, 1), samples))
+    env = _capture_ground(scene, world, _stored_render(world, width, max(width // 2, 1), samples))
     if len(_captures) > 16:
         _captures.clear()
     # Under the key it was asked by, and under the World as it is now (the ground may have changed).
     _captures[key] = _captures[(fingerprint(world), width, samples)] = env
     return env
+
+
+def _stored_render(world, width: int, height: int, samples: int) -> np.ndarray:
+    """_render_world, kept in the user's cache between sessions: every headless command (a farm's every
+    frame) otherwise renders the same sky again, about a second each time. Keyed by the World's settings
+    and Blender's version (its Cycles); Worlds that read an image are rendered each session (the file may
+    change under the same name). An unreadable or unwritable cache only costs the render."""
+    if any(isinstance(getattr(n, "image", None), bpy.types.Image) for n in getattr(world.node_tree, "nodes", ())):
+        return _render_world(world, width, height, samples)
+    key = repr((fingerprint(world), width, height, samples, bpy.app.version_string))
+    try:
+        path = runtime.cache_dir() / "worlds" / f"{hashlib.sha1(key.encode()).hexdigest()}.npy"
+    except NubisError:
+        return _render_world(world, width, height, samples)
+    try:
+        env = np.load(path, allow_pickle=False)
+        if env.shape == (height, width, 3) and env.dtype == np.float32 and np.isfinite(env).all():
+            return env
+    except (OSError, ValueError):
+        pass
+    env = _render_world(world, width, height, samples)
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.npy")
+    try:
+        path.parent.mkdir(exist_ok=True)
+        np.save(tmp, env)
+        os.replace(tmp, path)
+        _evict(path.parent)
+    except OSError:
+        tmp.unlink(missing_ok=True)
+    return env
+
+
+STORED_MAX = 64  # sky captures kept in the cache (an animated sun makes one per frame), the newest
+
+
+def _evict(folder: Path) -> None:
+    files = sorted(folder.glob("*.npy"), key=lambda p: p.stat().st_mtime_ns, reverse=True)
+    for old in files[STORED_MAX:]:
+        old.unlink(missing_ok=True)
+
+
+def clear_stored() -> int:
+    """Delete the sky captures kept in the cache (Clear Cache); how many were deleted."""
+    folder = runtime.cache_dir() / "worlds"
+    count = 0
+    for path in folder.glob("*.npy") if folder.is_dir() else ():
+        try:
+            path.unlink()
+            count += 1
+        except FileNotFoundError:
+            continue
+        except OSError as err:
+            raise NubisError(
+                f"cannot delete the cached sky '{path}' ({err.strerror}): check the folder's permissions"
+            ) from None
+    return count
 
 
 def _render_world(world, width: int, height: int, samples: int) -> np.ndarray:

@@ -133,6 +133,32 @@ def test_the_sky_behind_the_clouds_is_not_one_colour(tmp_path):
     assert top[:, 2].mean() - top[:, 0].mean() > low[:, 2].mean() - low[:, 0].mean()
 
 
+def test_a_sky_capture_is_kept_between_sessions_and_a_damaged_one_is_rendered_again(blender, monkeypatch):
+    """Every headless command rendered the same sky again (about a second each); the capture is now kept in
+    the cache by the World's settings, a damaged file is rendered again, and Clear Cache removes them."""
+    from nubis_addon.blender import runtime, sky
+
+    world = blender.data.worlds.new("Stored Sky")
+    if world.node_tree is None:
+        world.use_nodes = True
+    background = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
+    background.inputs["Color"].default_value = (0.2, 0.3, 0.5, 1.0)
+    renders = []
+    real = sky._render_world
+    monkeypatch.setattr(sky, "_render_world", lambda *a: renders.append(a) or real(*a))
+    first = sky._stored_render(world, 16, 8, 2)
+    again = sky._stored_render(world, 16, 8, 2)
+    assert len(renders) == 1 and np.array_equal(first, again) and first.shape == (8, 16, 3)
+    stored = list((runtime.cache_dir() / "worlds").glob("*.npy"))
+    newest = max(stored, key=lambda p: p.stat().st_mtime_ns)
+    newest.write_bytes(b"not a capture")
+    assert np.array_equal(sky._stored_render(world, 16, 8, 2), first) and len(renders) == 2
+    background.inputs["Color"].default_value = (0.5, 0.3, 0.2, 1.0)  # another sky: another capture
+    assert not np.array_equal(sky._stored_render(world, 16, 8, 2), first) and len(renders) == 3
+    assert sky.clear_stored() >= 2 and not list((runtime.cache_dir() / "worlds").glob("*.npy"))
+    blender.data.worlds.remove(world)
+
+
 def test_an_artists_world_is_kept_and_lights_the_clouds(blender):
     from nubis_addon.blender import ensure_registered, scene_io, sky
 
