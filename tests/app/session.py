@@ -655,7 +655,7 @@ def s_edit(step: Step):
     before = shot(step, "04_before_edit", "view")
     old = scene.nubis.density_sigma
     scene.nubis.density_sigma = 0.03
-    yield 15.0
+    yield 8.0
     after = shot(step, "04_after_edit", "view")
     d = mae(before, after)
     step.check(d >= 0.005, f"the viewport changed after Extinction {old:.3g} -> 0.03 (MAE {d:.4f})")
@@ -663,17 +663,17 @@ def s_edit(step: Step):
         not ext_module("status").last_error(), f"the sidebar shows no error ({ext_module('status').last_error()})"
     )
     scene.nubis.density_sigma = old
-    yield 10.0
+    yield 4.0
     # Shape > Coverage is the fraction of the sky covered; an edit reaches the viewport's clouds.
     coverage = scene.nubis.density_cover
     scene.nubis.density_cover = 0.45
-    yield 15.0
+    yield 8.0
     yield from view_has_clouds(step, "04_coverage_045", min_mae=0.002)
     step.check(
         not ext_module("status").last_error(), f"the sidebar shows no error ({ext_module('status').last_error()})"
     )
     scene.nubis.density_cover = coverage
-    yield 10.0
+    yield 4.0
 
 
 def render_series(step: Step, engine: str, tag: str):

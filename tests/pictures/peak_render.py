@@ -28,9 +28,10 @@ def _peak(bpy):
     subdivide = peak.modifiers.new("Detail", "SUBSURF")
     subdivide.subdivision_type, subdivide.levels, subdivide.render_levels = "SIMPLE", 5, 5
     texture = bpy.data.textures.new("Rock", "CLOUDS")
-    texture.noise_scale = 0.35
+    texture.noise_scale, texture.noise_depth = 1800.0, 4  # metres: ridges a few kilometres across
     displace = peak.modifiers.new("Rock", "DISPLACE")
-    displace.texture, displace.strength, displace.texture_coords = texture, 700.0, "GLOBAL"
+    displace.texture, displace.strength, displace.texture_coords = texture, 1600.0, "GLOBAL"
+    displace.mid_level = 0.5
     rock = bpy.data.materials.new("Rock")
     if rock.node_tree is None:
         rock.use_nodes = True
@@ -53,6 +54,11 @@ def main(out: str, width: int = 480, height: int = 270) -> None:
     bpy.ops.nubis.new_cloudscape(preset="default")
     scene = bpy.context.scene
     bpy.ops.mesh.primitive_plane_add(size=80000.0, location=(0.0, 20000.0, 0.0))
+    land = bpy.data.materials.new("Land")
+    if land.node_tree is None:
+        land.use_nodes = True
+    land.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (0.09, 0.1, 0.07, 1.0)
+    bpy.context.object.data.materials.append(land)
     _peak(bpy)
     cam = scene.camera
     cam.location = (0.0, 0.0, 1000.0)
