@@ -195,38 +195,44 @@ def place(scene, frame: composition.Frame, hits: np.ndarray, near: np.ndarray) -
 
 
 def _veil_object(scene, image) -> bpy.types.Object:
-    obj = bpy.data.objects.get(VEIL_NAME)
-    if obj is None or obj.type != "MESH":
-        mesh = bpy.data.meshes.new(VEIL_NAME)
-        mesh.from_pydata([(0.0, 0.0, 0.0)] * 4, [], [(0, 1, 2, 3)])
-        uv = mesh.uv_layers.new(name="UVMap")
-        for loop, co in zip(uv.data, ((0, 0), (1, 0), (1, 1), (0, 1)), strict=True):
-            loop.uv = co
-        obj = bpy.data.objects.new(VEIL_NAME, mesh)
-    obj[OWN_KEY] = True
-    if obj.name not in scene.collection.objects:
-        scene.collection.objects.link(obj)
+    obj = render_quad(scene, VEIL_NAME, _veil_material(image))
     for ray in ("diffuse", "glossy", "transmission", "volume_scatter", "shadow"):
         setattr(obj, f"visible_{ray}", False)
     obj.visible_camera = True
     for probe in ("hide_probe_volume", "hide_probe_sphere", "hide_probe_plane"):
         if hasattr(obj, probe):
             setattr(obj, probe, True)
-    obj.hide_select = True
-    obj.display_type = "WIRE"
-    obj.hide_viewport = True  # the viewport draws the clouds itself
-    mat = _veil_material(image)
-    if not obj.data.materials:
-        obj.data.materials.append(mat)
-    else:
-        obj.data.materials[0] = mat
     return obj
 
 
-def _veil_material(image) -> bpy.types.Material:
-    """The clouds' light as emission and what they let through as transparency: premultiplied `over`,
-    exact in both engines. Closest texels, so an edge's samples each take their own pixel's clouds."""
-    mat = bpy.data.materials.get(VEIL_MATERIAL) or bpy.data.materials.new(VEIL_MATERIAL)
+def render_quad(scene, name: str, material) -> bpy.types.Object:
+    """A square (UVs 0-1 over its corners) of Nubis's own that only renders see, with `material`: the
+    veil, a shadow caster. Made once, then kept."""
+    obj = bpy.data.objects.get(name)
+    if obj is None or obj.type != "MESH":
+        mesh = bpy.data.meshes.new(name)
+        mesh.from_pydata([(-0.5, -0.5, 0.0), (0.5, -0.5, 0.0), (0.5, 0.5, 0.0), (-0.5, 0.5, 0.0)], [], [(0, 1, 2, 3)])
+        uv = mesh.uv_layers.new(name="UVMap")
+        for loop, co in zip(uv.data, ((0, 0), (1, 0), (1, 1), (0, 1)), strict=True):
+            loop.uv = co
+        obj = bpy.data.objects.new(name, mesh)
+    obj[OWN_KEY] = True
+    if obj.name not in scene.collection.objects:
+        scene.collection.objects.link(obj)
+    obj.hide_select = True
+    obj.display_type = "WIRE"
+    obj.hide_viewport = True  # the viewport draws the clouds itself
+    if not obj.data.materials:
+        obj.data.materials.append(material)
+    else:
+        obj.data.materials[0] = material
+    return obj
+
+
+def image_material(name: str, image, interpolation: str):
+    """The material `name`, emptied, with one Image Texture node reading `image` (data as stored, edges
+    extended); returns the material, its node tree and that node."""
+    mat = bpy.data.materials.get(name) or bpy.data.materials.new(name)
     if mat.node_tree is None:
         mat.use_nodes = True
     nt = mat.node_tree
@@ -234,7 +240,14 @@ def _veil_material(image) -> bpy.types.Material:
     tex = nt.nodes.new("ShaderNodeTexImage")
     tex.image = image
     tex.extension = "EXTEND"
-    tex.interpolation = "Closest"
+    tex.interpolation = interpolation
+    return mat, nt, tex
+
+
+def _veil_material(image) -> bpy.types.Material:
+    """The clouds' light as emission and what they let through as transparency: premultiplied `over`,
+    exact in both engines. Closest texels, so an edge's samples each take their own pixel's clouds."""
+    mat, nt, tex = image_material(VEIL_MATERIAL, image, "Closest")
     light = nt.nodes.new("ShaderNodeEmission")
     light.inputs["Strength"].default_value = 1.0
     nt.links.new(tex.outputs["Color"], light.inputs["Color"])
@@ -249,9 +262,14 @@ def _veil_material(image) -> bpy.types.Material:
     nt.links.new(clear.outputs[0], add.inputs[1])
     out = nt.nodes.new("ShaderNodeOutputMaterial")
     nt.links.new(add.outputs[0], out.inputs["Surface"])
-    mat.surface_render_method = "BLENDED"
     mat.use_backface_culling = False
-    for i, node in enumerate(nt.nodes):
+    return finished(mat, "BLENDED")
+
+
+def finished(mat, method: str) -> bpy.types.Material:
+    """`mat` with EEVEE's render method (BLENDED, DITHERED) and its nodes laid out in a row."""
+    mat.surface_render_method = method
+    for i, node in enumerate(mat.node_tree.nodes):
         node.location = (i * 220, 0)
     return mat
 

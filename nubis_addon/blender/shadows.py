@@ -16,7 +16,7 @@ from mathutils import Matrix, Vector
 from ..core import composition as plan
 from ..render import engine
 from . import scene_io
-from .composition import OWN_KEY, write_image
+from .composition import OWN_KEY, finished, image_material, render_quad, write_image
 
 SHADOW_IMAGE = "Nubis Cloud Shadow"
 CASTER_NAME = "Nubis Cloud Shadow"
@@ -138,45 +138,19 @@ def hide_casters(scene, first: int = 0) -> None:
 
 
 def ensure_caster(scene, image, index: int = 0) -> bpy.types.Object:
-    """A unit square (UVs 0-1) that only shadow rays see, with the shadow map as its transparency."""
+    """A unit square that only shadow rays see, with the shadow map as its transparency."""
     name = caster_name(index)
-    obj = bpy.data.objects.get(name)
-    if obj is None or obj.type != "MESH":
-        mesh = bpy.data.meshes.new(name)
-        mesh.from_pydata([(-0.5, -0.5, 0.0), (0.5, -0.5, 0.0), (0.5, 0.5, 0.0), (-0.5, 0.5, 0.0)], [], [(0, 1, 2, 3)])
-        uv = mesh.uv_layers.new(name="UVMap")
-        for loop, co in zip(uv.data, ((0, 0), (1, 0), (1, 1), (0, 1)), strict=True):
-            loop.uv = co
-        obj = bpy.data.objects.new(name, mesh)
-    obj[OWN_KEY] = True
-    if obj.name not in scene.collection.objects:
-        scene.collection.objects.link(obj)
+    obj = render_quad(scene, name, _caster_material(name, image))
     for ray in ("camera", "diffuse", "glossy", "transmission", "volume_scatter"):
         setattr(obj, f"visible_{ray}", False)
     obj.visible_shadow = True
-    obj.hide_select = True
-    obj.display_type = "WIRE"
-    obj.hide_viewport = True  # the viewport draws the clouds itself
-    mat = _caster_material(name, image)
-    if not obj.data.materials:
-        obj.data.materials.append(mat)
-    else:
-        obj.data.materials[0] = mat
     return obj
 
 
 def _caster_material(name: str, image) -> bpy.types.Material:
     """Opaque where the clouds block the sun, transparent where they let it through (a mix by the
     transmittance), so Cycles' and EEVEE's shadow rays carry the clouds' shadow."""
-    mat = bpy.data.materials.get(name) or bpy.data.materials.new(name)
-    if mat.node_tree is None:
-        mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.clear()
-    tex = nt.nodes.new("ShaderNodeTexImage")
-    tex.image = image
-    tex.extension = "EXTEND"
-    tex.interpolation = "Linear"
+    mat, nt, tex = image_material(name, image, "Linear")
     opaque = nt.nodes.new("ShaderNodeEmission")
     opaque.inputs["Strength"].default_value = 0.0
     clear = nt.nodes.new("ShaderNodeBsdfTransparent")
@@ -187,8 +161,5 @@ def _caster_material(name: str, image) -> bpy.types.Material:
     nt.links.new(clear.outputs[0], mix.inputs[2])
     nt.links.new(mix.outputs[0], out.inputs["Surface"])
     # EEVEE: a dithered surface whose shadows follow its transparency.
-    mat.surface_render_method = "DITHERED"
     mat.use_transparent_shadow = True
-    for i, node in enumerate(nt.nodes):
-        node.location = (i * 220, 0)
-    return mat
+    return finished(mat, "DITHERED")

@@ -21,6 +21,7 @@ EXPECTED = {
         "edit",
         "render_eevee",
         "render_cycles",
+        "peak",
         "animation",
         "bake",
         "bake_disturbed",

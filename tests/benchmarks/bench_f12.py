@@ -1,6 +1,8 @@
 """What the clouds add to an F12 frame: the default cloudscape with a ground plane and a cube, rendered
 with `bpy.ops.render.render()` in EEVEE and Cycles with the clouds off and on, and the clouds' own
-parts (the camera's view, the panorama, the shadow map: blender/scene_render.py) timed inside.
+parts (the camera's view, the panorama, the shadow map: blender/scene_render.py) timed inside; the
+camera's view is split into its depth composition's parts (the depth pre-pass, the split march, the
+veil and its images: blender/composition.py).
 
 Run from the repository root:
     .venv-5.3/bin/python tests/benchmarks/bench_f12.py [WIDTH HEIGHT [CYCLES_SAMPLES]]

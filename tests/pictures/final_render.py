@@ -19,12 +19,13 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 
-def main(out: str, width: int = 320, height: int = 180) -> None:
+def new_cloudscape():
+    """Blender as a module with the extension registered and a fresh scene holding New Cloudscape (the
+    default preset); the scene. The other final-render pictures start here too."""
     import bpy
 
     import nubis_addon
     from nubis_addon.blender import ensure_registered
-    from nubis_addon.core import imageio
     from nubis_addon.render.gpu_context import ensure_gpu_context
 
     nubis_addon.register()
@@ -32,7 +33,22 @@ def main(out: str, width: int = 320, height: int = 180) -> None:
     bpy.ops.wm.read_factory_settings(use_empty=True)
     ensure_registered()
     bpy.ops.nubis.new_cloudscape(preset="default")
-    scene = bpy.context.scene
+    return bpy.context.scene
+
+
+def eevee_name() -> str:
+    import bpy
+
+    engines = {e.identifier for e in bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items}
+    return "BLENDER_EEVEE_NEXT" if "BLENDER_EEVEE_NEXT" in engines else "BLENDER_EEVEE"
+
+
+def main(out: str, width: int = 320, height: int = 180) -> None:
+    import bpy
+
+    from nubis_addon.core import imageio
+
+    scene = new_cloudscape()
     bpy.ops.mesh.primitive_plane_add(size=40000.0, location=(0.0, 0.0, 0.0))
     ground = bpy.data.materials.new("Ground")
     ground.diffuse_color = (0.3, 0.3, 0.28, 1.0)
@@ -49,8 +65,7 @@ def main(out: str, width: int = 320, height: int = 180) -> None:
     scene.cycles.device = "CPU"
     scene.cycles.samples = 32
     scene.eevee.taa_render_samples = 8
-    engines = {e.identifier for e in bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items}
-    eevee = "BLENDER_EEVEE_NEXT" if "BLENDER_EEVEE_NEXT" in engines else "BLENDER_EEVEE"
+    eevee = eevee_name()
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for engine in (eevee, "CYCLES"):

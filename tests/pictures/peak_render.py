@@ -41,18 +41,11 @@ def _peak(bpy):
 
 def main(out: str, width: int = 480, height: int = 270) -> None:
     import bpy
+    from final_render import eevee_name, new_cloudscape
 
-    import nubis_addon
-    from nubis_addon.blender import ensure_registered
     from nubis_addon.core import imageio
-    from nubis_addon.render.gpu_context import ensure_gpu_context
 
-    nubis_addon.register()
-    ensure_gpu_context()
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    ensure_registered()
-    bpy.ops.nubis.new_cloudscape(preset="default")
-    scene = bpy.context.scene
+    scene = new_cloudscape()
     bpy.ops.mesh.primitive_plane_add(size=80000.0, location=(0.0, 20000.0, 0.0))
     land = bpy.data.materials.new("Land")
     if land.node_tree is None:
@@ -68,8 +61,7 @@ def main(out: str, width: int = 480, height: int = 270) -> None:
     scene.cycles.device = "CPU"
     scene.cycles.samples = 32
     scene.eevee.taa_render_samples = 8
-    engines = {e.identifier for e in bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items}
-    eevee = "BLENDER_EEVEE_NEXT" if "BLENDER_EEVEE_NEXT" in engines else "BLENDER_EEVEE"
+    eevee = eevee_name()
     row = []
     with tempfile.TemporaryDirectory() as tmp:
         for engine in (eevee, "CYCLES"):
