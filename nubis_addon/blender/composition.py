@@ -263,6 +263,8 @@ def _veil_material(image) -> bpy.types.Material:
     out = nt.nodes.new("ShaderNodeOutputMaterial")
     nt.links.new(add.outputs[0], out.inputs["Surface"])
     mat.use_backface_culling = False
+    if hasattr(mat, "cycles") and hasattr(mat.cycles, "emission_sampling"):
+        mat.cycles.emission_sampling = "NONE"  # its light is for the camera's rays, not a lamp for the scene
     return finished(mat, "BLENDED")
 
 
