@@ -16,7 +16,7 @@ from mathutils import Matrix, Vector
 from ..core import composition as plan
 from ..render import engine
 from . import scene_io
-from .composition import OWN_KEY, finished, image_material, render_quad, write_image
+from .composition import OWN_KEY, SOLID_TYPES, finished, image_material, render_quad, write_image
 
 SHADOW_IMAGE = "Nubis Cloud Shadow"
 CASTER_NAME = "Nubis Cloud Shadow"
@@ -25,8 +25,8 @@ MAX_SHADOW_SIZE = 20000.0  # metres of ground the shadow map covers at most
 MIN_SHADOW_SIZE = 50.0
 # The caster's distance below the clouds' floor when the objects' top would put it higher.
 CASTER_BELOW_CLOUDS = 10.0
-# Objects whose extent the shadow casters cover.
-_SOLID_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT", "CURVES", "POINTCLOUD", "GREASEPENCIL"}
+# Objects whose extent the shadow casters cover: the depth pre-pass's, and those it cannot draw as meshes.
+_SOLID_TYPES = SOLID_TYPES | {"CURVES", "POINTCLOUD", "GREASEPENCIL"}
 
 
 def caster_name(index: int) -> str:
