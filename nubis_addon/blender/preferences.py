@@ -8,8 +8,9 @@ line); runtime.py derives it the same way for the user folders."""
 from __future__ import annotations
 
 import bpy
+from bpy.props import IntProperty
 
-from ..core import noise
+from ..core import bricks, noise
 from ..core.errors import NubisError
 from . import runtime
 
@@ -31,6 +32,17 @@ def cache_summary() -> str:
 class NubisPreferences(bpy.types.AddonPreferences):
     bl_idname = runtime._EXT_PACKAGE
 
+    vdb_gpu_budget: IntProperty(
+        name="VDB Cloud GPU Budget (MB)",
+        description=(
+            "GPU memory the VDB clouds may take together. A cloud whose finest bricks need more is drawn "
+            "from a coarser level of its file (2x, 4x, ... fewer voxels per side), in the viewport, F12 and bakes"
+        ),
+        default=bricks.DEFAULT_GPU_LIMIT // 2**20,
+        min=16,
+        max=65536,
+    )
+
     def draw(self, _context):
         layout = self.layout
         try:
@@ -49,6 +61,9 @@ class NubisPreferences(bpy.types.AddonPreferences):
         if generating is not None:
             box.label(text=f"Generating noise for seed {generating}...", icon="TIME")
         box.operator("nubis.clear_cache", icon="TRASH")
+        box = layout.box()
+        box.label(text="VDB Clouds", icon="OUTLINER_OB_VOLUME")
+        box.prop(self, "vdb_gpu_budget")
         box = layout.box()
         box.label(text="User Presets", icon="PRESET")
         row = box.row()

@@ -101,11 +101,28 @@ def _object_items(obj) -> list:
     elif obj.type == "CAMERA":
         items += [data.type, data.lens, data.sensor_width, data.sensor_fit, data.shift_x, data.shift_y]
         items += [data.clip_start, data.clip_end]
+    elif obj.type == "VOLUME":
+        items += _volume_items(data)
     elif obj.type == "MESH":
         co = np.empty(len(data.vertices) * 3, np.float32)
         data.vertices.foreach_get("co", co)
         items += [hashlib.sha256(co.tobytes()).hexdigest(), [m.name if m else "" for m in data.materials]]
     return items
+
+
+def _volume_items(volume) -> list:
+    """A Volume as Cycles renders it: its file (and when it last changed), how its frames are read, its
+    render settings and the Nubis cloud settings its comparison material is made from."""
+    path = bpy.path.abspath(volume.filepath, library=volume.library)
+    try:
+        st = Path(path).stat()
+        stamp = [st.st_size, st.st_mtime_ns]
+    except OSError:
+        stamp = []
+    frames = [volume.is_sequence, volume.frame_start, volume.frame_duration, volume.frame_offset]
+    render = [volume.render.space, volume.render.step_size, volume.render.clipping]
+    cloud = volume.nubis_cloud
+    return [path, stamp, frames, volume.sequence_mode, render, [cloud.enabled, cloud.grid, cloud.density]]
 
 
 def key(scene, vdb_path: Path, width: int, height: int, bounces: int) -> str:
@@ -128,7 +145,7 @@ def key(scene, vdb_path: Path, width: int, height: int, bounces: int) -> str:
         "world": repr(sky.fingerprint(scene.world)),
         "objects": objects,
         "camera": scene.camera.name if scene.camera else "",
-        "render": [width, height, bounces, scene.cycles.seed, scene.cycles.max_bounces],
+        "render": [width, height, bounces, scene.cycles.seed, scene.cycles.max_bounces, scene.frame_current],
         "blender": list(bpy.app.version),
     }
     return hashlib.sha256(json.dumps(items, sort_keys=True, default=str).encode()).hexdigest()

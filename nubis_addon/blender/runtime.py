@@ -18,7 +18,7 @@ from pathlib import Path
 
 import bpy
 
-from ..core import noise
+from ..core import bricks, noise
 from ..core.errors import NubisError
 from ..render.engine import CloudGPU
 from ..render.gpu_context import ensure_gpu_context
@@ -44,6 +44,15 @@ def _user_folder(env: str, name: str) -> Path:
             f"cannot create the folder '{path}' ({err.strerror}): set {env} to a writable folder"
         ) from None
     return path
+
+
+def vdb_gpu_budget() -> int:
+    """Bytes the VDB clouds may take on the GPU: the preference, or its default where the add-on's
+    preferences are not registered (a script that imports the package without enabling it)."""
+    addon = bpy.context.preferences.addons.get(_EXT_PACKAGE)
+    prefs = getattr(addon, "preferences", None)
+    megabytes = getattr(prefs, "vdb_gpu_budget", None)
+    return int(megabytes) * 2**20 if megabytes else bricks.DEFAULT_GPU_LIMIT
 
 
 def cache_dir() -> Path:

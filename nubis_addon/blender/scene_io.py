@@ -807,6 +807,7 @@ def state_from_scene(scene, camera_location=None, fields: tuple | None = None, w
         time=time,
         storms=storm_lights(settings, scene, time),
         vdb_clouds=vdbclouds.placements(scene, strict=wait),
+        vdb_gpu_budget=vdbclouds.gpu_budget(),
     )
 
 

@@ -22,13 +22,15 @@ from ..core import console, vdbcloud, vdbfile
 from ..core.errors import NubisError
 from ..core.sequence import human_bytes
 from ..render import vdbclouds as gpu_side
-from . import cycles_setup, status
+from . import cycles_setup, runtime, status
 from .ui import SidebarPanel, property_group_registration, redraw_views
 
 # Clouds read from disk, by (path, modification time, size, grid): a few, as Blender's own volume cache.
 _CACHE_ENTRIES = 8
 _cache: OrderedDict = OrderedDict()
 _problems: dict[str, str] = {}  # object name -> why it is not drawn (the sidebar shows it)
+_levels: dict[str, int] = {}  # object name -> the level it is drawn at, when coarser than its file
+_level_noted: set[tuple[str, int]] = set()  # (cloud, level) the console has been told of
 _noted: set[str] = set()  # the clouds left out that the console has been told of
 
 
@@ -194,14 +196,16 @@ def sequence_frame(frame: int, start: int, duration: int, offset: int, mode: str
 
 
 def read(path: str, grid: str) -> vdbcloud.VdbCloud:
-    """The packed cloud of a file, read once per change of the file on disk."""
+    """The packed cloud of a file, read once per change of the file on disk or of the GPU budget: the finest
+    level of it that fits the budget (core/vdbcloud.py)."""
     vdbfile.check(path)  # missing, a folder, damaged: one sentence before OpenVDB opens it
     st = os.stat(path)
-    key = (path, st.st_mtime_ns, st.st_size, grid)
+    budget = runtime.vdb_gpu_budget()
+    key = (path, st.st_mtime_ns, st.st_size, grid, budget)
     if key in _cache:
         _cache.move_to_end(key)
         return _cache[key]
-    cloud = vdbcloud.read_cloud(path, grid)
+    cloud = vdbcloud.read_cloud(path, grid, budget)
     _cache[key] = cloud
     while len(_cache) > _CACHE_ENTRIES:
         _cache.popitem(last=False)
@@ -213,6 +217,7 @@ def placements(scene, strict: bool = True) -> tuple:
     viewport's draw leaves the cloud out and shows why in the sidebar."""
     out = []
     _problems.clear()
+    _levels.clear()
     left = left_out(scene)
     for obj in left:
         _problems[obj.name] = left_out_sentence(obj)
@@ -230,9 +235,10 @@ def placements(scene, strict: bool = True) -> tuple:
             continue  # a clipped sequence before its first frame or after its last
         try:
             cloud = read(path, settings.grid.strip())
-            placed = vdbcloud.Placement(cloud, [list(r) for r in obj.matrix_world], float(settings.density))
+            matrix = [list(r) for r in obj.matrix_world]
+            placed = vdbcloud.Placement(cloud, matrix, float(settings.density), obj.data.render.space)
             placed.check(obj.name)
-            crowded = vdbcloud.why_not_together([*out, placed])
+            crowded = vdbcloud.why_not_together([*out, placed], runtime.vdb_gpu_budget())
             if crowded:
                 raise NubisError(f"it is left out: {crowded}; unmark a cloud or use coarser ones")
         except NubisError as err:
@@ -241,8 +247,27 @@ def placements(scene, strict: bool = True) -> tuple:
             _problems[obj.name] = str(err)
             status.set_error(f"the Nubis cloud '{obj.name}' is not drawn: {err}")
             continue
+        if cloud.level:
+            _levels[obj.name] = cloud.level
+            if strict and (obj.name, cloud.level) not in _level_noted:  # once, though a command reads it again
+                console.current().line(f"nubis: note: the Nubis cloud '{obj.name}' is {cloud.level_note}")
+                _level_noted.add((obj.name, cloud.level))
         out.append(placed)
     return tuple(out)
+
+
+def gpu_budget() -> int:
+    """Bytes the VDB clouds may take on the GPU together (Preferences > VDB Cloud GPU Budget)."""
+    return runtime.vdb_gpu_budget()
+
+
+def level_note(obj) -> str:
+    """The sidebar's short line for a cloud drawn coarser than its file ("" at its own voxels); the
+    command line's note says it in full."""
+    level = _levels.get(obj.name, 0)
+    if not level:
+        return ""
+    return f"Level {level}: {2**level}x coarser, over the GPU budget (Preferences)"
 
 
 def add_files(scene, paths) -> list:
@@ -308,6 +333,8 @@ class NUBIS_PT_volume_cloud(bpy.types.Panel):
         obj = context.object
         if obj is not None and problem(obj):
             self.layout.label(text=problem(obj), icon="ERROR")
+        elif obj is not None and level_note(obj):
+            self.layout.label(text=level_note(obj), icon="INFO")
 
 
 class NUBIS_PT_vdb_clouds(SidebarPanel, bpy.types.Panel):
@@ -329,6 +356,8 @@ class NUBIS_PT_vdb_clouds(SidebarPanel, bpy.types.Panel):
             row.label(text=cloud.name, icon="ERROR" if problem(cloud) else "OUTLINER_OB_VOLUME")
             if problem(cloud):
                 layout.label(text=problem(cloud))
+            elif level_note(cloud):
+                layout.label(text=level_note(cloud), icon="INFO")
         if clouds:
             layout.label(text=f"GPU memory: {human_bytes(gpu_bytes(context.scene))}")
 

@@ -49,10 +49,25 @@ class VdbCloud:
     value_scale: float = 1.0
     # The bricks hold value / storage_scale: half floats end at 65504 (read_cloud).
     storage_scale: float = 1.0
+    # 0: the file's own voxels; n: each voxel the mean of 2^n x 2^n x 2^n of them (read_cloud's levels).
+    level: int = 0
+    # Why a coarser level is drawn ("" at the file's own voxels).
+    level_reason: str = ""
 
     @property
     def gpu_bytes(self) -> int:
         return self.bricks.gpu_bytes
+
+    @property
+    def level_note(self) -> str:
+        """Why the cloud is drawn coarser than its file, in a sentence's end ("" at the file's own voxels)."""
+        if not self.level:
+            return ""
+        step = 2**self.level
+        return (
+            f"drawn at level {self.level}, {self.voxel_size:g} m voxels each the mean of {step} x {step} x {step} of "
+            f"its file's: {self.level_reason}"
+        )
 
 
 @dataclass(frozen=True)
@@ -168,6 +183,20 @@ class ReadPlan:
             return self.least_bricks * brickmod.BRICK**3 * 2 + self.index_leaves * 4
         return brickmod.gpu_bytes_estimate(self.least_bricks, self.index_leaves)
 
+    def coarser(self, level: int) -> ReadPlan:
+        """The plan of the grid averaged 2^level voxels per side: its box divided, its bricks at least the
+        finest ones' share (each coarse leaf holds up to 8^level fine ones; more when the cloud is sparse,
+        which the packing finds)."""
+        if level == 0:
+            return self
+        step = 2**level
+        lo = tuple(c // step for c in self.lo)
+        hi = tuple(c // step for c in self.hi)
+        return ReadPlan(lo, hi, max(1, -(-self.least_bricks // step**3)))
+
+    def fits(self, limit: int) -> bool:
+        return max(self.leaves) <= brickmod.MAX_ATLAS_SIDE and self.gpu_bytes <= limit
+
     @property
     def host_bytes(self) -> int:
         """The least the read holds in memory at its peak: the bricks twice (packed, then stacked), the
@@ -182,20 +211,24 @@ def plan_read(grid) -> ReadPlan:
     return ReadPlan(lo, hi, least)
 
 
-def check_plan(plan: ReadPlan, path: str, name: str, limit: int) -> None:
-    """One sentence when the plan cannot be drawn: its index too large for a 3D texture, or its bricks and
-    index over the GPU budget (applied before any voxel is copied)."""
-    widest = max(plan.leaves)
+def check_plan(plan: ReadPlan, path: str, name: str, limit: int, level: int = 0) -> None:
+    """One sentence when the plan, averaged to `level`, cannot be drawn: its index too large for a 3D
+    texture, or its bricks and index over the GPU budget (applied before any voxel is copied)."""
+    coarse = plan.coarser(level)
+    step = 2**level
+    averaged = f" averaged {step} x {step} x {step} voxels to one" if level else ""
+    widest = max(coarse.leaves)
     if widest > brickmod.MAX_ATLAS_SIDE:
-        axis = "xyz"[plan.leaves.index(widest)]
-        span = (plan.hi[plan.leaves.index(widest)] - plan.lo[plan.leaves.index(widest)]) + 1
+        a = coarse.leaves.index(widest)
         raise NubisError(
-            f"grid '{name}' of '{vdbfile.named(path)}' spans {span} voxels along {axis}, more than the "
-            f"{brickmod.MAX_ATLAS_SIDE * brickmod.LEAF} a cloud's index texture can hold: crop it to the cloud "
-            "(stray voxels far from it widen its box) or export it at a coarser voxel size"
+            f"grid '{name}' of '{vdbfile.named(path)}' spans {plan.hi[a] - plan.lo[a] + 1} voxels along "
+            f"{'xyz'[a]}, more than the {brickmod.MAX_ATLAS_SIDE * brickmod.LEAF * step} a cloud's index texture "
+            f"can hold{averaged}: crop it to the cloud (stray voxels far from it widen its box) or export it at a "
+            "coarser voxel size"
         )
-    if plan.gpu_bytes > limit:
-        raise NubisError(_too_large(path, name, plan.gpu_bytes, limit))
+    if coarse.gpu_bytes > limit:
+        why = f" even{averaged}" if level else ""
+        raise NubisError(_too_large(path, name, coarse.gpu_bytes, limit, why))
 
 
 def estimate_gpu_bytes(path: str | os.PathLike, grid_name: str = "") -> tuple[int, int]:
@@ -259,18 +292,31 @@ def node_occupancy(grid, plan: ReadPlan) -> tuple[np.ndarray, tuple[int, int, in
     return occ, first
 
 
-def _chunks(plan: ReadPlan, occ: np.ndarray, first: tuple[int, int, int]):
-    """The blocks to copy: (leaf0 (lz, ly, lx), leaves (nz, ny, nx), first voxel (i, j, k)), for each
-    block of CHUNK_LEAVES leaves per side of the index that meets a node holding anything."""
+def _occupied(occ: np.ndarray, first: tuple[int, int, int], v0, shape) -> bool:
+    """Whether the file's voxels from `v0` (i, j, k), `shape` (x, y, z) per side, meet a node holding
+    anything."""
+    sel = []
+    for a in (2, 1, 0):
+        lo = v0[a] // NODE - first[a]
+        hi = (v0[a] + shape[a] - 1) // NODE - first[a] + 1
+        if hi <= 0 or lo >= occ.shape[2 - a]:
+            return False
+        sel.append(slice(max(lo, 0), hi))
+    return bool(occ[tuple(sel)].any())
+
+
+def _chunks(plan: ReadPlan, occ: np.ndarray, first: tuple[int, int, int], step: int = 1):
+    """The blocks to copy: (leaf0 (lz, ly, lx), leaves (nz, ny, nx), first voxel (i, j, k)) of the plan's
+    index, for each block of CHUNK_LEAVES leaves per side whose file voxels (`step` per voxel of the plan)
+    meet a node holding anything."""
     lx, ly, lz = plan.leaves
     for cz in range(0, lz, CHUNK_LEAVES):
         for cy in range(0, ly, CHUNK_LEAVES):
             for cx in range(0, lx, CHUNK_LEAVES):
                 n = (min(CHUNK_LEAVES, lz - cz), min(CHUNK_LEAVES, ly - cy), min(CHUNK_LEAVES, lx - cx))
                 v0 = tuple(plan.leaf_lo[a] + (cx, cy, cz)[a] * brickmod.LEAF for a in range(3))
-                v1 = tuple(v0[a] + n[2 - a] * brickmod.LEAF for a in range(3))  # the extra voxel included
-                sel = tuple(slice(v0[a] // NODE - first[a], v1[a] // NODE - first[a] + 1) for a in (2, 1, 0))
-                if occ[sel].any():
+                fine = tuple((n[2 - a] * brickmod.LEAF + 1) * step for a in range(3))  # the extra voxel included
+                if _occupied(occ, first, tuple(c * step for c in v0), fine):
                     yield (cz, cy, cx), n, v0
 
 
@@ -298,32 +344,132 @@ def read_cloud(
     return cloud
 
 
+MAX_LEVEL = 4  # the coarsest level drawn: 16 x 16 x 16 of the file's voxels to one
+# The most voxels a coarser level is averaged from (every voxel of the nodes the tree holds, copied a node at a
+# time): the copy's time follows it, and a small file can state billions of voxels of active tiles.
+MAX_LEVEL_READ = 2**30
+
+
+@dataclass(frozen=True)
+class _Source:
+    """A grid being read: what every block of it needs."""
+
+    path: str
+    name: str
+    grid: object
+    limit: int
+    dtype: object
+    storage: float  # values are stored divided by this (half floats end at 65504)
+    occupancy: tuple  # node_occupancy() of the finest plan
+
+
+class _OverBudget(Exception):
+    def __init__(self, need: int):
+        super().__init__(need)
+        self.need = need
+
+
 def _read_cloud(path: str, grid_name: str, limit: int, dtype) -> VdbCloud:
     name = choose_grid(path, grid_name)
     grid = _read_grid(path, name)
     _vmin, vmax = _check_values(grid, path, name)
     m = index_to_world(grid, path)
-    plan = plan_read(grid)
-    check_plan(plan, path, name, limit)
-    lx, ly, lz = plan.leaves
-    packer = brickmod.BrickPacker((lz, ly, lx), plan.leaf_lo, dtype)
+    finest = plan_read(grid)
+    fitting = [n for n in range(MAX_LEVEL + 1) if finest.coarser(n).fits(limit)]
+    if not fitting:
+        check_plan(finest, path, name, limit, MAX_LEVEL)  # says why even the coarsest level does not fit
     # Half floats end at 65504: larger values are stored divided, the factor kept (stays exact in ratio).
-    storage = max(1.0, vmax / (HALF_MAX * 0.5)) if packer.dtype == np.float16 else 1.0
-    occ, first = node_occupancy(grid, plan)
-    for leaf0, n, v0 in _chunks(plan, occ, first):
-        block_xyz = np.zeros(tuple(n[2 - a] * brickmod.LEAF + 1 for a in range(3)), np.float32)
-        vdbfile.guarded(path, f"grid '{name}'", lambda b=block_xyz, at=v0: grid.copyToArray(b, ijk=at))
-        block = _checked_block(block_xyz.transpose(2, 1, 0), path, name, storage)
-        packer.add(block, leaf0)
-        if packer.held_bytes > limit:
-            raise NubisError(_too_large(path, name, packer.held_bytes, limit))
+    storage = max(1.0, vmax / (HALF_MAX * 0.5)) if np.dtype(dtype) == np.float16 else 1.0
+    src = _Source(path, name, grid, limit, dtype, storage, node_occupancy(grid, finest))
+    copied = int(src.occupancy[0].sum()) * NODE**3
+    if fitting[0] > 0 and copied > MAX_LEVEL_READ:
+        why = (
+            f", and a coarser level would be averaged from the {copied / 1e9:.1f} billion voxels of its tree's nodes, "
+            f"more than the {MAX_LEVEL_READ / 1e9:.1f} billion one is built from"
+        )
+        raise NubisError(_too_large(path, name, finest.gpu_bytes, limit, why))
+    for level in range(fitting[0], MAX_LEVEL + 1):
+        plan = finest.coarser(level)
+        try:
+            packed = _pack(src, plan, level)
+        except _OverBudget as over:
+            if level == MAX_LEVEL:
+                raise NubisError(_too_large(path, name, over.need, limit)) from None
+            continue  # the cloud is sparser than its counts said: one level coarser
+        step = 2**level
+        # A coarse voxel's centre is the centre of the 2^level file voxels it averages.
+        coarse = np.diag([step, step, step, 1.0])
+        coarse[:3, 3] = (step - 1) / 2.0
+        at = m @ coarse
+        voxel = float(np.linalg.norm(at[:3, 0]))
+        active = int(grid.activeVoxelCount())
+        cloud = VdbCloud(path, name, packed, at, voxel, active, vmax, (plan.lo, plan.hi), _value_scale(path), storage)
+        cloud.level, cloud.level_reason = level, _level_reason(finest, limit) if level else ""
+        return cloud
+    raise AssertionError("unreachable: the last level returns or raises")
+
+
+def _level_reason(finest: ReadPlan, limit: int) -> str:
+    if max(finest.leaves) > brickmod.MAX_ATLAS_SIDE:
+        a = finest.leaves.index(max(finest.leaves))
+        return (
+            f"it spans {finest.hi[a] - finest.lo[a] + 1} voxels along {'xyz'[a]}, more than the "
+            f"{brickmod.MAX_ATLAS_SIDE * brickmod.LEAF} a cloud's index texture holds; crop it to draw it finer"
+        )
+    return (
+        f"its own voxels need at least {human_bytes(finest.gpu_bytes)} on the GPU, over the {human_bytes(limit)} "
+        "budget for VDB clouds; raise the budget in the preferences to draw it finer"
+    )
+
+
+def _pack(src: _Source, plan: ReadPlan, level: int) -> brickmod.Bricks:
+    """The grid at `level` packed into bricks, block by block; _OverBudget when the bricks pass the limit."""
+    lx, ly, lz = plan.leaves
+    packer = brickmod.BrickPacker((lz, ly, lx), plan.leaf_lo, src.dtype)
+    occ, first = src.occupancy
+    for leaf0, n, v0 in _chunks(plan, occ, first, 2**level):
+        shape = tuple(n[a] * brickmod.LEAF + 1 for a in range(3))  # (z, y, x), the extra voxel included
+        block = _block(src, v0, shape) if level == 0 else _averaged_block(src, v0, shape, 2**level)
+        packer.add(_checked_block(block, src.path, src.name, src.storage), leaf0)
+        if packer.held_bytes > src.limit:
+            raise _OverBudget(packer.held_bytes)
     packed = packer.finish()
-    if packed.gpu_bytes > limit:
-        raise NubisError(_too_large(path, name, packed.gpu_bytes, limit))
-    voxel = float(np.linalg.norm(m[:3, 0]))
-    bounds = (plan.lo, plan.hi)
-    active = int(grid.activeVoxelCount())
-    return VdbCloud(path, name, packed, m, voxel, active, vmax, bounds, _value_scale(path), storage)
+    if packed.gpu_bytes > src.limit:
+        raise _OverBudget(packed.gpu_bytes)
+    return packed
+
+
+def _copied(src: _Source, v0, shape_xyz) -> np.ndarray:
+    """The file's voxels from v0 (i, j, k), shaped (x, y, z), as OpenVDB copies them."""
+    out = np.zeros(shape_xyz, np.float32)
+    vdbfile.guarded(src.path, f"grid '{src.name}'", lambda: src.grid.copyToArray(out, ijk=tuple(v0)))
+    return out
+
+
+def _block(src: _Source, v0, shape) -> np.ndarray:
+    return _copied(src, v0, shape[::-1]).transpose(2, 1, 0)
+
+
+def _averaged_block(src: _Source, v0, shape, step: int) -> np.ndarray:
+    """A block (z, y, x) of the grid averaged `step` voxels per side from coarse voxel v0 (i, j, k): the
+    file's voxels copied a node's worth at a time, where its tree has nodes. The mean keeps each coarse
+    voxel's optical depth on average (a box filter); inactive values below zero count as empty."""
+    out = np.zeros(shape, np.float32)
+    occ, first = src.occupancy
+    sub = max(1, NODE // step)  # coarse voxels per side of one copy
+    for cz in range(0, shape[0], sub):
+        for cy in range(0, shape[1], sub):
+            for cx in range(0, shape[2], sub):
+                size = (min(sub, shape[2] - cx), min(sub, shape[1] - cy), min(sub, shape[0] - cz))  # x, y, z
+                f0 = tuple((v0[a] + (cx, cy, cz)[a]) * step for a in range(3))
+                fine_shape = tuple(c * step for c in size)
+                if not _occupied(occ, first, f0, fine_shape):
+                    continue
+                fine = _copied(src, f0, fine_shape)
+                np.maximum(fine, 0.0, out=fine)
+                pooled = fine.reshape(size[0], step, size[1], step, size[2], step).mean(axis=(1, 3, 5))
+                out[cz : cz + size[2], cy : cy + size[1], cx : cx + size[0]] = pooled.transpose(2, 1, 0)
+    return out
 
 
 def _checked_block(block: np.ndarray, path: str, name: str, storage: float) -> np.ndarray:
@@ -352,10 +498,10 @@ def _value_scale(path: str) -> float:
     return scale if np.isfinite(scale) and scale > 0 else 1.0
 
 
-def _too_large(path: str, name: str, need: int, limit: int) -> str:
+def _too_large(path: str, name: str, need: int, limit: int, why: str = "") -> str:
     return (
         f"grid '{name}' of '{vdbfile.named(path)}' needs at least {human_bytes(need)} on the GPU as bricks, over the "
-        f"{human_bytes(limit)} a cloud may take: export it at a coarser voxel size (or a coarser level of its "
+        f"{human_bytes(limit)} a cloud may take{why}: export it at a coarser voxel size (or a coarser level of its "
         "simulation), or crop it"
     )
 
@@ -366,12 +512,13 @@ MAX_CLOUDS = 4  # VDB clouds drawn at once (the uniform block holds their placem
 @dataclass(eq=False)
 class Placement:
     """A VDB cloud where its Volume object puts it: `object_to_world` (4x4) after the grid's own transform,
-    its values times `multiplier` as extinction per metre (Blender's Principled Volume at Density
-    `multiplier`)."""
+    its values times `multiplier` as extinction (Blender's Principled Volume at Density `multiplier`), per
+    metre of the space Blender's Volume > Render > Space names (`space`, see render_space_factor)."""
 
     cloud: VdbCloud
     object_to_world: np.ndarray
     multiplier: float = 1.0
+    space: str = "OBJECT"  # Blender's default for a Volume
 
     def check(self, label: str) -> None:
         """One sentence when the placement cannot be drawn: an object scaled to zero (its matrix has no
@@ -391,8 +538,10 @@ class Placement:
 
     @property
     def extinction_scale(self) -> float:
-        """Extinction per metre per unit of the grid's value: the Density times the file's own scale."""
-        return self.multiplier * self.cloud.value_scale * self.cloud.storage_scale
+        """Extinction per metre of world per unit of the grid's value: the Density times the file's own scale,
+        and Render > Space's factor for the object's scale."""
+        scale = self.multiplier * self.cloud.value_scale * self.cloud.storage_scale
+        return scale * render_space_factor(self.object_to_world, self.space)
 
     # Where the cloud stands is fixed once placed (a moved object is a new Placement): its geometry is
     # computed once, not on every upload of the uniform block.
@@ -427,6 +576,25 @@ class Placement:
         """World length of a voxel's edge (the object's scale included; its smallest axis if not uniform)."""
         m = self.index_to_world
         return float(min(np.linalg.norm(m[:3, a]) for a in range(3)))
+
+
+RENDER_SPACES = ("OBJECT", "WORLD")  # Blender's Volume > Render > Space
+
+
+def render_space_factor(object_to_world, space: str) -> float:
+    """What Blender's renderers multiply a Volume's extinction by for its object's transform. Space = World:
+    the values are per metre of the world whatever the object's scale (1). Space = Object: per unit of the
+    object's own space, so a larger object is thinner per metre; Cycles takes one factor for the whole
+    object, one over the length its transform gives the unit diagonal (1, 1, 1)/sqrt(3): 1/s for a uniform
+    scale s, the scales' root mean square for a non-uniform one, whatever the rotation (Cycles'
+    `object_volume_density`, docs/vdb.md#render-space)."""
+    if space not in RENDER_SPACES:
+        raise NubisError(f"unknown Volume render space {space!r}: use one of {', '.join(RENDER_SPACES)}")
+    if space == "WORLD":
+        return 1.0
+    m = np.asarray(object_to_world, np.float64)[:3, :3]
+    length = float(np.linalg.norm(m @ np.full(3, 1.0 / math.sqrt(3.0))))
+    return 1.0 / length if length > 0.0 and math.isfinite(length) else 1.0
 
 
 @dataclass(frozen=True)

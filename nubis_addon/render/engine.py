@@ -250,7 +250,7 @@ class CloudGPU:
             self.sky_env = sky_texture(env if env is not None else sky.uniform(state.ambient))
             self._sky_key, self._sky_array = sky_key, env
         try:
-            self.vdb.update(state.vdb_clouds)
+            self.vdb.update(state.vdb_clouds, state.vdb_gpu_budget)
         except Exception:
             self.switches["NUBIS_VDB"] = 0  # no half-made VDB textures are ever bound
             raise

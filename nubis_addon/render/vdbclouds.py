@@ -56,7 +56,7 @@ class VdbTextures:
         self.index = None
         self.bytes = 0
 
-    def update(self, placements) -> None:
+    def update(self, placements, limit: int = bricks.DEFAULT_GPU_LIMIT) -> None:
         key = tuple(id(p.cloud.bricks) for p in placements)
         if key == self.key and (self.atlas is not None or not placements):
             return
@@ -68,10 +68,10 @@ class VdbTextures:
             self.key = key
             return
         need = gpu_bytes(placements)
-        if need > bricks.DEFAULT_GPU_LIMIT:
+        if need > limit:
             raise NubisError(
-                f"the VDB clouds need {human_bytes(need)} on the GPU together, over the "
-                f"{human_bytes(bricks.DEFAULT_GPU_LIMIT)} they may take: draw fewer of them, or coarser ones"
+                f"the VDB clouds need {human_bytes(need)} on the GPU together, over the {human_bytes(limit)} they "
+                "may take: draw fewer of them, or coarser ones, or raise the budget in the preferences"
             )
         atlas, _per_side, _firsts = bricks.layout([p.cloud.bricks.data for p in placements])
         atlas_texture = _texture(atlas, ATLAS_FORMAT)

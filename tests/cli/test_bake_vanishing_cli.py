@@ -6,6 +6,7 @@ The commands run as child processes (`python -m nubis_addon`), each with a TMPDI
 
 from __future__ import annotations
 
+import errno
 import os
 import pty
 import re
@@ -52,7 +53,16 @@ def _take_away(folder: Path, how: str) -> None:
     if how == "moved away":  # `mv frames elsewhere`: what the run staged in it goes along
         folder.rename(folder.parent / "elsewhere")
         return
-    shutil.rmtree(folder)
+    # `rm -rf frames`: the run may write into the folder between rmtree's listing and its last rmdir (the
+    # folder is still there then); a user's rm meets the same race, and runs again.
+    for _ in range(50):
+        try:
+            shutil.rmtree(folder)
+            break
+        except OSError as err:
+            if err.errno != errno.ENOTEMPTY:
+                raise
+    assert not folder.exists()
     if how == "replaced by a file":
         folder.write_text("not a folder")
 

@@ -72,8 +72,10 @@ def test_a_nameless_grid_is_refused_before_any_work(tmp_path, cache_dir):
 
 
 def test_a_grid_too_wide_for_the_index_is_refused_before_any_work(tmp_path, cache_dir):
-    path = write_two_voxels(tmp_path / "wide.vdb", (60_000, 0, 0))
+    """Wider than the index texture holds even at the coarsest level (16 voxels to one per side); a grid
+    narrower than that is drawn at a coarser level (tests/core/test_vdb_damaged.py)."""
+    path = write_two_voxels(tmp_path / "wide.vdb", (16_400 * 16, 0, 0))
     out = tmp_path / "out"
     r = run_capped(tmp_path, cache_dir, "benchmark", "--vdb", str(path), "--out", str(out), "--width", "32")
-    _one_error_line(r, "spans 60001 voxels along x")
+    _one_error_line(r, "spans 262401 voxels along x")
     assert not out.exists()

@@ -114,29 +114,32 @@ def test_what_is_not_a_vdb_file_is_named_for_what_it_is(tmp_path):
         assert len(text) < 400  # the 300-character name is shortened
 
 
-def test_two_voxels_far_apart_are_drawn_or_refused_within_the_memory_bound(tmp_path):
-    """60,000 voxels apart: refused in one sentence (the index texture holds 2048 leaves a side); 16,000
-    apart along x and y: drawn, its index 4 MB and its bricks the sixteen that read the two voxels, the
-    copy following the two nodes that hold them (a slab of the box dense in x and y took 121 GiB)."""
-    for name, far, drawn in (("refused", (60_000, 0, 0), False), ("drawn", (16_000, 16_000, 0), True)):
+def test_two_voxels_far_apart_are_drawn_within_the_memory_bound(tmp_path):
+    """16,000 voxels apart along x and y: drawn, its index 4 MB and its bricks the sixteen that read the
+    two voxels, the copy following the two nodes that hold them (a slab of the box dense in x and y took
+    121 GiB). 60,000 apart along x: wider than the index texture's 2048 leaves at the file's voxels, so
+    drawn at level 2 (4 x 4 x 4 voxels to one, each voxel's value a 64th), copying its two nodes only. A
+    cloud too wide even at the coarsest level is refused in one sentence."""
+    for name, far, level in (("wide", (60_000, 0, 0), 2), ("drawn", (16_000, 16_000, 0), 0)):
         path = write_two_voxels(tmp_path / f"{name}.vdb", far)
         tracemalloc.start()
         try:
-            if drawn:
-                cloud = vdbcloud.read_cloud(path, dtype=np.float32)
-                assert cloud.bricks.count == 16  # each voxel in the 8 bricks that read it, no more
-                ijk = np.array([[16_000.0, 16_000.0, 0.0], [0.0, 0.0, 0.0]]) - cloud.bricks.leaf_origin
-                atlas, per_side, _ = bricks.layout([cloud.bricks.data])
-                got = bricks.sample(atlas, per_side, cloud.bricks.index, 0, ijk)
-                np.testing.assert_allclose(got, [0.25, 0.5])
-            else:
-                with pytest.raises(NubisError, match="spans 60001 voxels along x, more than the 16384") as err:
-                    vdbcloud.read_cloud(path)
-                one_sentence(err.value)
+            cloud = vdbcloud.read_cloud(path, dtype=np.float32)
             peak = tracemalloc.get_traced_memory()[1]
         finally:
             tracemalloc.stop()
         assert peak < 64 * 1024**2, (name, peak)
+        assert cloud.level == level and cloud.bricks.count == 16  # each voxel in the 8 bricks that read it
+        step = 2**level
+        ijk = np.array([[far[0] // step, far[1] // step, 0.0], [0.0, 0.0, 0.0]]) - cloud.bricks.leaf_origin
+        atlas, per_side, _ = bricks.layout([cloud.bricks.data])
+        got = bricks.sample(atlas, per_side, cloud.bricks.index, 0, ijk)
+        np.testing.assert_allclose(got, np.array([0.25, 0.5]) / step**3)
+    path = write_two_voxels(tmp_path / "widest.vdb", (16_400 * 16, 0, 0))
+    too_wide = "spans 262401 voxels along x, more than the 262144 .* averaged 16 x 16 x 16 voxels to one"
+    with pytest.raises(NubisError, match=too_wide) as err:
+        vdbcloud.read_cloud(path)
+    one_sentence(err.value)
 
 
 def test_active_tiles_count_in_the_estimate(tmp_path):
@@ -148,7 +151,8 @@ def test_active_tiles_count_in_the_estimate(tmp_path):
     grid.transform = vdb.createLinearTransform(voxelSize=1.0)
     path = tmp_path / "tiles.vdb"
     vdb.write(str(path), grids=[grid])
-    with pytest.raises(NubisError, match="needs at least .* on the GPU as bricks") as err:
+    # A coarser level's bricks would fit, but it would be averaged from 69 billion voxels: refused.
+    with pytest.raises(NubisError, match="needs at least .* on the GPU as bricks.*68.7 billion voxels") as err:
         vdbcloud.check_fits(path)
     one_sentence(err.value)
     assert vdbcloud.estimate_gpu_bytes(path)[1] > 131072 * 729 * 2  # 16^3 leaves of tile per node, 32 nodes

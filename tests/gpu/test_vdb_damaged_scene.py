@@ -124,23 +124,20 @@ def test_an_object_scaled_to_zero_is_one_sentence(blender, make_scene, small_clo
         status.clear_error()
 
 
-def test_a_refused_upload_leaves_no_half_made_textures(blender, make_scene, small_cloud, monkeypatch):
+def test_a_refused_upload_leaves_no_half_made_textures(blender, make_scene, small_cloud):
     """Clouds over the GPU budget at upload: the sentence, no VDB textures bound, and the next update
     without them draws (a refused cloud used to raise a TypeError on the redraw after)."""
     import dataclasses
 
     from nubis_addon.blender import pipeline, runtime, scene_io
     from nubis_addon.core.errors import NubisError
-    from nubis_addon.render import vdbclouds as gpu_side
 
     scene, _objs = _scene_with(blender, make_scene, [("Cloud", small_cloud)])
     state = scene_io.state_from_scene(scene)
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed).fork()
-    monkeypatch.setattr(gpu_side.bricks, "DEFAULT_GPU_LIMIT", 1024)
     with pytest.raises(NubisError, match="the VDB clouds need .* on the GPU together, over the 1.0 KB"):
-        clouds.update(state)
+        clouds.update(dataclasses.replace(state, vdb_gpu_budget=1024))
     assert clouds.switches["NUBIS_VDB"] == 0 and clouds.vdb.atlas is None and clouds.vdb.key == ()
-    monkeypatch.undo()
     clouds.update(dataclasses.replace(state, vdb_clouds=()))
     clouds.update(state)  # within the budget again: drawn
     assert clouds.switches["NUBIS_VDB"] == 1 and clouds.vdb.atlas is not None
