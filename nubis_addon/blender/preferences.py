@@ -39,7 +39,7 @@ class NubisPreferences(bpy.types.AddonPreferences):
             "from a coarser level of its file (2x, 4x, ... fewer voxels per side), in the viewport, F12 and bakes"
         ),
         default=bricks.DEFAULT_GPU_LIMIT // 2**20,
-        min=16,
+        min=1,
         max=65536,
     )
 

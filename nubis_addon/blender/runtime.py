@@ -47,8 +47,20 @@ def _user_folder(env: str, name: str) -> Path:
 
 
 def vdb_gpu_budget() -> int:
-    """Bytes the VDB clouds may take on the GPU: the preference, or its default where the add-on's
-    preferences are not registered (a script that imports the package without enabling it)."""
+    """Bytes the VDB clouds may take on the GPU: NUBIS_VDB_GPU_BUDGET (megabytes) for the command line, else
+    the preference, or its default where the add-on's preferences are not registered (a script that
+    imports the package without enabling it)."""
+    override = os.environ.get("NUBIS_VDB_GPU_BUDGET", "").strip()
+    if override:
+        try:
+            megabytes = int(override)
+        except ValueError:
+            megabytes = 0
+        if not 1 <= megabytes <= 65536:
+            raise NubisError(
+                f"NUBIS_VDB_GPU_BUDGET is {override!r}: set it to a whole number of megabytes from 1 to 65536"
+            )
+        return megabytes * 2**20
     addon = bpy.context.preferences.addons.get(_EXT_PACKAGE)
     prefs = getattr(addon, "preferences", None)
     megabytes = getattr(prefs, "vdb_gpu_budget", None)
