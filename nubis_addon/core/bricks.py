@@ -98,52 +98,76 @@ class BrickPacker:
     one voxel per axis whose first leaf is `leaf0` (lz, ly, lx) of the index, and keeps its occupied
     leaves; `finish()` returns the Bricks."""
 
-    def __init__(self, leaves: tuple[int, int, int], leaf_origin: tuple[int, int, int], dtype=np.float16):
+    def __init__(
+        self, leaves: tuple[int, int, int], leaf_origin: tuple[int, int, int], dtype=np.float16, expected: int = 0
+    ):
         self.leaves = leaves  # (lz, ly, lx)
         self.leaf_origin = leaf_origin
         self.dtype = np.dtype(dtype)
         self.index = np.full(leaves, EMPTY, np.int32)
-        self._bricks: list[np.ndarray] = []
-
-    @property
-    def count(self) -> int:
-        return len(self._bricks)
+        # One array grown by a quarter when full, from the bricks expected (a read's plan knows at least
+        # how many): the bricks are never held twice, as stacking a list of them at the end did.
+        self._data = np.zeros((max(expected, 16), BRICK, BRICK, BRICK), self.dtype)
+        self.count = 0
 
     @property
     def held_bytes(self) -> int:
-        """The bricks packed so far, as they are held before finish() stacks them."""
+        """The bricks packed so far."""
         return self.count * BRICK**3 * self.dtype.itemsize
 
     def add(self, block: np.ndarray, leaf0: tuple[int, int, int] = (0, 0, 0), tolerance: float = 0.0) -> None:
         occ = occupied_leaves(block, tolerance)
         z0, y0, x0 = leaf0
-        for lz, ly, lx in zip(*np.nonzero(occ), strict=True):
+        kept = np.nonzero(occ)
+        need = self.count + len(kept[0])
+        if need > self._data.shape[0]:
+            grown = np.zeros((max(need, self._data.shape[0] * 5 // 4),) + self._data.shape[1:], self.dtype)
+            grown[: self.count] = self._data[: self.count]
+            self._data = grown
+        for lz, ly, lx in zip(*kept, strict=True):
             z, y, x = lz * LEAF, ly * LEAF, lx * LEAF
-            self.index[z0 + lz, y0 + ly, x0 + lx] = len(self._bricks)
-            self._bricks.append(block[z : z + BRICK, y : y + BRICK, x : x + BRICK].astype(self.dtype))
+            self.index[z0 + lz, y0 + ly, x0 + lx] = self.count
+            self._data[self.count] = block[z : z + BRICK, y : y + BRICK, x : x + BRICK]
+            self.count += 1
 
     def finish(self) -> Bricks:
-        data = np.stack(self._bricks) if self._bricks else np.zeros((0, BRICK, BRICK, BRICK), self.dtype)
-        self._bricks = []
+        data = self._data[: self.count]  # a view: the unused end of the last growth is not copied away
+        self._data = np.zeros((0, BRICK, BRICK, BRICK), self.dtype)
         return Bricks(data, self.index, self.leaf_origin)
 
 
-def layout(data: list[np.ndarray]) -> tuple[np.ndarray, tuple[int, int, int], list[int]]:
-    """Several clouds' bricks in one atlas texture: the atlas (bz*9, by*9, bx*9), bricks per side (bx, by,
-    bz), and each cloud's first brick number (its index values are offset by it). Brick n sits at
-    (n % bx, n // bx % by, n // (bx * by))."""
+def layout(data: list[np.ndarray], dtype=np.float32, out=None) -> tuple[np.ndarray, tuple[int, int, int], list[int]]:
+    """Several clouds' bricks in one atlas texture: the atlas (bz*9, by*9, bx*9) in `dtype` (the GPU upload's
+    float32 by default), bricks per side (bx, by, bz), and each cloud's first brick number (its index values
+    are offset by it). Brick n sits at (n % bx, n // bx % by, n // (bx * by)). Written one z slab of bricks
+    at a time straight from each cloud's bricks: no copy of all of them is made on the way. `out`: a
+    contiguous array of the atlas's size to write into (the GPU upload's own buffer), instead of a new one."""
     firsts, n = [], 0
     for d in data:
         firsts.append(n)
         n += d.shape[0]
     bx, by, bz = atlas_shape(max(n, 1))
-    dtype = data[0].dtype if data else np.float16
-    atlas = np.zeros((bz, BRICK, by, BRICK, bx, BRICK), dtype)
-    if n:
-        allb = np.concatenate(data).reshape(n, BRICK, BRICK, BRICK)
-        full = np.zeros((bx * by * bz, BRICK, BRICK, BRICK), dtype)
-        full[:n] = allb
-        atlas[:] = full.reshape(bz, by, bx, BRICK, BRICK, BRICK).transpose(0, 3, 1, 4, 2, 5)
+    shape = (bz, BRICK, by, BRICK, bx, BRICK)
+    if out is None:
+        atlas = np.zeros(shape, dtype)
+    else:
+        atlas = out.reshape(shape)  # a view: `out` must be contiguous and of the atlas's size
+        atlas.fill(0)
+    per_slab = bx * by
+    for first, d in zip(firsts, data, strict=True):
+        done = 0
+        while done < d.shape[0]:
+            m = first + done  # the next brick's number
+            z, in_slab = divmod(m, per_slab)
+            take = min(d.shape[0] - done, per_slab - in_slab)
+            chunk = d[done : done + take]
+            if in_slab == 0 and take == per_slab:  # a whole slab: one strided copy
+                atlas[z] = chunk.reshape(by, bx, BRICK, BRICK, BRICK).transpose(2, 0, 3, 1, 4)
+            else:
+                for k in range(take):
+                    y, x = divmod(in_slab + k, bx)
+                    atlas[z, :, y, :, x, :] = chunk[k]
+            done += take
     return atlas.reshape(bz * BRICK, by * BRICK, bx * BRICK), (bx, by, bz), firsts
 
 

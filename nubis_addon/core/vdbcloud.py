@@ -425,7 +425,8 @@ def _level_reason(finest: ReadPlan, limit: int) -> str:
 def _pack(src: _Source, plan: ReadPlan, level: int) -> brickmod.Bricks:
     """The grid at `level` packed into bricks, block by block; _OverBudget when the bricks pass the limit."""
     lx, ly, lz = plan.leaves
-    packer = brickmod.BrickPacker((lz, ly, lx), plan.leaf_lo, src.dtype)
+    # A few more than the plan's least: a leaf whose neighbour's first voxels hold cloud is kept too.
+    packer = brickmod.BrickPacker((lz, ly, lx), plan.leaf_lo, src.dtype, plan.least_bricks * 23 // 20)
     occ, first = src.occupancy
     for leaf0, n, v0 in _chunks(plan, occ, first, 2**level):
         shape = tuple(n[a] * brickmod.LEAF + 1 for a in range(3))  # (z, y, x), the extra voxel included

@@ -20,16 +20,31 @@ ATLAS_FORMAT = "R16F"  # half floats: a density needs no more (Nubis³ compresse
 INDEX_FORMAT = "R32F"  # brick numbers, exact up to 2^24
 
 
-def _texture(arr: np.ndarray, fmt: str) -> gpu.types.GPUTexture:
-    data = np.ascontiguousarray(arr, np.float32)
-    size = tuple(reversed(data.shape))  # (W, H, D)
+def _check_size(size, fmt: str) -> None:
     if max(size) > bricks.MAX_ATLAS_SIDE:
         raise NubisError(
             f"a VDB cloud's {'index' if fmt == INDEX_FORMAT else 'atlas'} would be {size[0]}x{size[1]}x{size[2]} "
             f"texels, over the {bricks.MAX_ATLAS_SIDE} per side a GPU texture may have: use fewer or coarser clouds"
         )
+
+
+def _texture(arr: np.ndarray, fmt: str) -> gpu.types.GPUTexture:
+    data = np.ascontiguousarray(arr, np.float32)
+    size = tuple(reversed(data.shape))  # (W, H, D)
+    _check_size(size, fmt)
     buf = gpu.types.Buffer("FLOAT", data.size, data.ravel())
     return gpu.types.GPUTexture(size, format=fmt, data=buf)
+
+
+def _atlas_texture(placements) -> gpu.types.GPUTexture:
+    """The bricks written straight into the upload's own float buffer (a numpy view of it): the atlas is
+    never held twice on the host (docs/measurements.md#vdb-import)."""
+    bx, by, bz = bricks.atlas_shape(max(sum(p.cloud.bricks.count for p in placements), 1))
+    size = (bx * bricks.BRICK, by * bricks.BRICK, bz * bricks.BRICK)
+    _check_size(size, ATLAS_FORMAT)
+    buf = gpu.types.Buffer("FLOAT", size[0] * size[1] * size[2])
+    bricks.layout([p.cloud.bricks.data for p in placements], out=np.asarray(buf))
+    return gpu.types.GPUTexture(size, format=ATLAS_FORMAT, data=buf)
 
 
 def combined_index(placements, layout: vdbcloud.GpuLayout) -> np.ndarray:
@@ -73,7 +88,6 @@ class VdbTextures:
                 f"the VDB clouds need {human_bytes(need)} on the GPU together, over the {human_bytes(limit)} they "
                 "may take: draw fewer of them, or coarser ones, or raise the budget in the preferences"
             )
-        atlas, _per_side, _firsts = bricks.layout([p.cloud.bricks.data for p in placements])
-        atlas_texture = _texture(atlas, ATLAS_FORMAT)
+        atlas_texture = _atlas_texture(placements)
         index_texture = _texture(combined_index(placements, vdbcloud.gpu_layout(placements)), INDEX_FORMAT)
         self.atlas, self.index, self.bytes, self.key = atlas_texture, index_texture, need, key
