@@ -3,9 +3,11 @@ bake, a Mesh to Volume result), then Nubis Cloud on in the Volume's properties o
 
 A marked Volume is drawn by the real-time renderer with the procedural clouds (core/vdbcloud.py,
 render/vdbclouds.py): the same light model, its object's transform live, its frame's file for a
-sequence. Its values are extinction per metre as Blender's Principled Volume reads them at Density 1,
-times the Density here. Blender's own drawing of it steps aside: the viewport shows its bounds only, and
-final renders draw it through the extension's path (blender/scene_render.py), never both at once.
+sequence. Its values are extinction as Blender's Principled Volume reads them at Density 1, per unit of
+its Render > Space (as Cycles reads them), times the Density here; a file too large for the GPU budget
+(a preference) is drawn from a coarser level of it, and the sidebar says so. Blender's own drawing of it
+steps aside: the viewport shows its bounds only, and final renders draw it through the extension's path
+(blender/scene_render.py), never both at once.
 """
 
 from __future__ import annotations

@@ -1,14 +1,16 @@
 """An artist's OpenVDB cloud read for the real-time renderer: checked, then packed into bricks.
 
 Any float grid of a .vdb file (Houdini, EmberGen, Blender's Mesh to Volume, the extension's own bake) is
-read as Blender's Principled Volume reads it at Density 1: its values are extinction per metre of world
-space. The file is checked before anything large is made: its layout first (core/vdbfile.py: a damaged
-or cut-short file is one sentence, never an allocation it states), then one sentence for a file with no
-float grid, an empty grid, negative or NaN values, a transform that is not a uniform scale with a
-rotation and a translation, or a size whose bricks and index would not fit the GPU budget, estimated from
-the tree's own counts (ReadPlan). The grid is then copied out of OpenVDB one block of 16 leaves per side
-at a time, only where its tree has nodes, so the memory and the time this takes follow the cloud, not
-its bounding box (core/bricks.py).
+read as Blender's Principled Volume reads it at Density 1: its values are extinction per unit of the
+space its Volume's Render > Space names (render_space_factor). The file is checked before anything large
+is made: its layout first (core/vdbfile.py: a damaged or cut-short file is one sentence, never an
+allocation it states), then one sentence for a file with no float grid, an empty grid, negative or NaN
+values, or a transform that is not a uniform scale with a rotation and a translation. Its size is planned
+from the tree's own counts (ReadPlan): a grid whose bricks and index would not fit the GPU budget is read
+at a coarser level (its voxels averaged 2, 4, ... per side), refused only when even the coarsest does not
+fit. The grid is copied out of OpenVDB one block of 16 leaves per side at a time (one node's voxels at a
+time for a coarser level), only where its tree has nodes, so the memory and the time this takes follow
+the cloud, not its bounding box (core/bricks.py, docs/vdb.md#levels-of-detail).
 """
 
 from __future__ import annotations
