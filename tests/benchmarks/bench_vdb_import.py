@@ -81,18 +81,11 @@ def make_cloud(path: Path, millions: int) -> dict:
     return {"active": int(grid.activeVoxelCount()), "box": [int(c) for c in size]}
 
 
-def _peak_rss_bytes() -> int:
+def _status_bytes(field: str) -> int:
+    """A memory field of /proc/self/status (VmRSS: resident now; VmHWM: its peak), in bytes."""
     with open("/proc/self/status", encoding="utf-8") as f:
         for line in f:
-            if line.startswith("VmHWM:"):
-                return int(line.split()[1]) * 1024
-    return 0
-
-
-def _rss_bytes() -> int:
-    with open("/proc/self/status", encoding="utf-8") as f:
-        for line in f:
-            if line.startswith("VmRSS:"):
+            if line.startswith(field + ":"):
                 return int(line.split()[1]) * 1024
     return 0
 
@@ -117,7 +110,7 @@ def child(path: str) -> None:
     # Where the default camera looks: the mass's base centred about 5 km ahead, 1.4 km up.
     size = np.array(json.loads(Path(path).with_suffix(".json").read_text())["box"]) * VOXEL
     obj.location = (-1500.0 - size[0] / 2, -2000.0 - size[1] / 2, 1400.0)
-    before = _rss_bytes()
+    before = _status_bytes("VmRSS")
     with open("/proc/self/clear_refs", "w", encoding="utf-8") as f:
         f.write("5")  # resets VmHWM to the current resident size (Linux)
     t = time.perf_counter()
@@ -133,7 +126,7 @@ def child(path: str) -> None:
                 "seconds": seconds,
                 "level": cloud.level,
                 "gpu_bytes": cloud.gpu_bytes,
-                "peak_over_before": _peak_rss_bytes() - before,
+                "peak_over_before": _status_bytes("VmHWM") - before,
                 "dense_box_half": int(np.prod(box.astype(np.int64))) * 2 * 8**cloud.level,
                 "cloud_pixels": float((image[..., 3] > 0.5).mean()),
             }
