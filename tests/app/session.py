@@ -991,6 +991,7 @@ def s_vdb_cloud(step: Step):
     d = mae(moved, marked)
     step.check(d >= VIEW_MIN_MAE, f"moving the object moves the cloud (MAE {d:.4f})")
     obj.location.x -= 1500.0
+    yield from _vdb_level(step, obj, without)
     for engine in (eevee(), "CYCLES"):
         small_render(scene, engine)
         tag = "cycles" if engine == "CYCLES" else "eevee"
@@ -1005,6 +1006,38 @@ def s_vdb_cloud(step: Step):
     bpy.data.objects.remove(obj)
     scene.nubis.density_cover = keep_cover
     yield 2.0
+
+
+def _vdb_level(step: Step, obj, without: str):
+    """Levels of detail (docs/vdb.md#levels-of-detail): the Volume reads a finer file (a soft ball of 20 m
+    voxels, 1.4 MB of bricks) and the preference's GPU budget goes to its least, 1 MB: the viewport draws
+    the cloud from a coarser level and the Volume's Nubis Cloud panel says so."""
+    vdb = _core_module("bundled").openvdb()
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "src", "tests"))
+    import vdb_helpers
+
+    v, n, (x, y, z) = 20.0, 120, vdb_helpers.DEFAULT_VIEW_BASE
+    grid = vdb.FloatGrid()
+    grid.copyFromArray(vdb_helpers.ball(n, 0.004).transpose(2, 1, 0).copy(), tolerance=0.0)
+    grid.name = "density"
+    grid.transform = vdb.createLinearTransform(
+        [[v, 0, 0, 0], [0, v, 0, 0], [0, 0, v, 0], [x - n / 2 * v, y - n / 2 * v, z, 1]]
+    )
+    fine = os.path.join(OUT, "vdb", "fine_ball.vdb")
+    vdb.write(fine, grids=[grid])
+    first, prefs = obj.data.filepath, bpy.context.preferences.addons[EXT].preferences
+    obj.data.filepath = fine
+    prefs.vdb_gpu_budget = 1
+    yield 3.0
+    yield from _converge()
+    coarse = shot(step, "07_vdb_level_1", "view")
+    note = ext_module("vdbclouds").level_note(obj)
+    step.check(note.startswith("Level 1: 2x coarser"), f"over the 1 MB budget the panel says: {note!r}")
+    d = mae(coarse, without)
+    step.check(d >= VIEW_MIN_MAE, f"the coarser level is drawn (MAE {d:.4f} against no cloud)")
+    prefs.vdb_gpu_budget = 1024
+    obj.data.filepath = first
+    yield 3.0
 
 
 def _paint_layer_dabs() -> int:
