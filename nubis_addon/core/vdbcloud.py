@@ -199,12 +199,6 @@ class ReadPlan:
     def fits(self, limit: int) -> bool:
         return max(self.leaves) <= brickmod.MAX_ATLAS_SIDE and self.gpu_bytes <= limit
 
-    @property
-    def host_bytes(self) -> int:
-        """The least the read holds in memory at its peak: the bricks twice (packed, then stacked), the
-        index and the blocks in flight."""
-        return 2 * self.least_bricks * brickmod.BRICK**3 * 2 + self.index_leaves * 4 + CHUNK_BYTES
-
 
 def plan_read(grid) -> ReadPlan:
     lo, hi = (tuple(int(c) for c in corner) for corner in grid.evalActiveVoxelBoundingBox())
@@ -390,6 +384,7 @@ def _read_cloud(path: str, grid_name: str, limit: int, dtype) -> VdbCloud:
             f"more than the {MAX_LEVEL_READ / 1e9:.1f} billion one is built from"
         )
         raise NubisError(_too_large(path, name, finest.gpu_bytes, limit, why))
+    finest_need = finest.gpu_bytes  # what the file's own voxels take at least, for the note
     for level in range(fitting[0], MAX_LEVEL + 1):
         plan = finest.coarser(level)
         try:
@@ -397,6 +392,7 @@ def _read_cloud(path: str, grid_name: str, limit: int, dtype) -> VdbCloud:
         except _OverBudget as over:
             if level == MAX_LEVEL:
                 raise NubisError(_too_large(path, name, over.need, limit)) from None
+            finest_need = over.need if level == 0 else finest_need
             continue  # the cloud is sparser than its counts said: one level coarser
         step = 2**level
         # A coarse voxel's centre is the centre of the 2^level file voxels it averages.
@@ -406,12 +402,12 @@ def _read_cloud(path: str, grid_name: str, limit: int, dtype) -> VdbCloud:
         voxel = float(np.linalg.norm(at[:3, 0]))
         active = int(grid.activeVoxelCount())
         cloud = VdbCloud(path, name, packed, at, voxel, active, vmax, (plan.lo, plan.hi), _value_scale(path), storage)
-        cloud.level, cloud.level_reason = level, _level_reason(finest, limit) if level else ""
+        cloud.level, cloud.level_reason = level, _level_reason(finest, finest_need, limit) if level else ""
         return cloud
     raise AssertionError("unreachable: the last level returns or raises")
 
 
-def _level_reason(finest: ReadPlan, limit: int) -> str:
+def _level_reason(finest: ReadPlan, need: int, limit: int) -> str:
     if max(finest.leaves) > brickmod.MAX_ATLAS_SIDE:
         a = finest.leaves.index(max(finest.leaves))
         return (
@@ -419,7 +415,7 @@ def _level_reason(finest: ReadPlan, limit: int) -> str:
             f"{brickmod.MAX_ATLAS_SIDE * brickmod.LEAF} a cloud's index texture holds; crop it to draw it finer"
         )
     return (
-        f"its own voxels need at least {human_bytes(finest.gpu_bytes)} on the GPU, over the {human_bytes(limit)} "
+        f"its own voxels need at least {human_bytes(need)} on the GPU, over the {human_bytes(limit)} "
         "budget for VDB clouds; raise the budget in the preferences to draw it finer"
     )
 
