@@ -351,9 +351,13 @@ def check_arguments(args) -> None:
         ("bounces", limits.BOUNCES_RANGE),
         ("passes", limits.PASSES_RANGE),
         ("frame", limits.FRAME_RANGE),
+        ("redraws", limits.REDRAWS_RANGE),
     ):
         limits.check_int(f"--{name}", getattr(args, name, None), lo, hi)
     limits.check_voxel_size("--voxel-size", getattr(args, "voxel_size", None))
+    limits.check_orbit("--orbit", getattr(args, "orbit", None))
+    if args.command == "preview" and args.frames:
+        sequence.parse_frames(args.frames, limits.PREVIEW_FRAMES_MAX, "preview")
     files = getattr(args, "vdb", None) or []
     if len(files) > vdbcloud.MAX_CLOUDS:
         raise NubisError(f"--vdb names {len(files)} files: at most {vdbcloud.MAX_CLOUDS} VDB clouds are drawn at once")

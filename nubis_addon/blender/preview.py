@@ -16,7 +16,7 @@ import bpy
 import mathutils
 import numpy as np
 
-from ..core import camera, imageio, interrupt, quality, sequence, staging
+from ..core import camera, imageio, interrupt, limits, quality, sequence, staging
 from ..core.bakeplan import comparison_voxel_size, view_footprint
 from ..core.errors import NubisError
 from ..core.fsutil import check_output_dir
@@ -26,15 +26,13 @@ from ..render.gpu_context import renderer_name
 from . import cycles_setup, pipeline, runtime, scene_io
 
 Progress = Callable[[float], None]
-MAX_FRAMES = 100000
-MAX_REDRAWS = 4096
 
 
 def parse_frames(text: str | None, current: int) -> list[int]:
     """'A-B' or 'N' to the frames it names; None is the current frame."""
     if text is None:
         return [current]
-    return sequence.parse_frames(text, MAX_FRAMES, "preview")
+    return sequence.parse_frames(text, limits.PREVIEW_FRAMES_MAX, "preview")
 
 
 def apply_quality(scene, name: str | None) -> str:
@@ -97,10 +95,8 @@ def preview(scene, out_dir, options: PreviewOptions, progress: Progress | None =
     width, height, frames, redraws, orbit, naive = (
         options.width, options.height, list(options.frames), options.redraws, options.orbit, options.naive
     )  # fmt: skip
-    if not 1 <= redraws <= MAX_REDRAWS:
-        raise NubisError(f"--redraws must be between 1 and {MAX_REDRAWS}, not {redraws}")
-    if not math.isfinite(orbit) or abs(orbit) > 360:
-        raise NubisError(f"--orbit must be a number of degrees between -360 and 360, not {orbit}")
+    limits.check_int("--redraws", redraws, *limits.REDRAWS_RANGE)
+    limits.check_orbit("--orbit", orbit)
     out = check_output_dir(out_dir)
     engine.check_offscreen(width, height)  # the full-size image read at the end, refused before the minutes of drawing
     q = apply_quality(scene, options.quality)

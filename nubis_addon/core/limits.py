@@ -17,6 +17,9 @@ SAMPLES_RANGE = (1, 65536)
 BOUNCES_RANGE = (0, 1024)  # Cycles' own limit on volume bounces
 SIZE_RANGE = (4, 16384)
 PASSES_RANGE = (1, 1024)
+REDRAWS_RANGE = (1, 4096)  # preview's viewport redraws per frame
+PREVIEW_FRAMES_MAX = 100000  # frames one preview draws
+ORBIT_MAX = 360.0  # degrees preview's camera may turn per frame, either way
 VOXEL_MAX = 10000.0  # metres: the bake_voxel_size setting's maximum (core/schema.py)
 # metres: below a centimetre the box's voxel count overflows the arithmetic before the memory estimate can
 # name a size that fits; clouds need nothing near it (the finest bakes use metres).
@@ -35,6 +38,11 @@ def check_int(flag: str, value: int | None, lo: int, hi: int, unit: str = "") ->
     if value is None or lo <= value <= hi:
         return
     raise NubisError(f"{flag} {value} is out of range: use a whole number between {lo} and {hi}{unit}")
+
+
+def check_orbit(flag: str, value: float | None) -> None:
+    if value is not None and not (math.isfinite(value) and abs(value) <= ORBIT_MAX):
+        raise NubisError(f"{flag} must be a number of degrees between -{ORBIT_MAX:g} and {ORBIT_MAX:g}, not {value}")
 
 
 def check_voxel_size(flag: str, value: float | None) -> None:
