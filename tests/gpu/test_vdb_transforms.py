@@ -143,7 +143,8 @@ def _constrained(blender, scene, obj):
 def test_a_moved_object_is_where_cycles_renders_it(blender, make_scene, files, move):
     """Rotation, a parent, delta transforms and a constraint: the cloud is where Cycles renders it (and
     not where the object alone would put it). Its light is the scaled cases' comparison; here its
-    opacity, pixel by pixel, against Cycles' (single scattering, 32 samples: alpha converges fast)."""
+    opacity, pixel by pixel, against Cycles' (single scattering, 128 samples). Measured alpha RMSE
+    0.011-0.014 on 5.3; 0.012-0.021 on 4.5, whose Cycles reads the delta-scaled cloud 0.02 apart."""
     from nubis_addon.blender import pipeline
     from nubis_addon.core import metrics
 
@@ -153,7 +154,9 @@ def test_a_moved_object_is_where_cycles_renders_it(blender, make_scene, files, m
     blender.context.view_layer.update()
     moved = pipeline.render_viewport(scene, W, H)
     assert np.abs(moved[..., 3] - still[..., 3]).max() > 0.2, "the move must change the shot"
-    cycles = pipeline.render_cycles(scene, W, H, 32, bounces=0, exact_samples=True)
-    m = metrics.compare(moved, cycles)
+    # The viewport at twice the size, averaged down: each pixel its area's mean, as Cycles' box filter gives.
+    area = pipeline.downsample(pipeline.render_viewport(scene, 2 * W, 2 * H), 2)
+    cycles = pipeline.render_cycles(scene, W, H, 128, bounces=0, exact_samples=True)
+    m = metrics.compare(area, cycles)
     assert m["mean_alpha_b"] > 0.03, "the shot must see the cloud: " + str(m)
     assert m["alpha_rmse"] <= 0.025 and m["silhouette_iou"] >= 0.9, m
