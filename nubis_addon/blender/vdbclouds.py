@@ -197,12 +197,17 @@ def sequence_frame(frame: int, start: int, duration: int, offset: int, mode: str
     return n + offset
 
 
-def read(path: str, grid: str) -> vdbcloud.VdbCloud:
-    """The packed cloud of a file, read once per change of the file on disk or of the GPU budget: the finest
-    level of it that fits the budget (core/vdbcloud.py)."""
+def gpu_budget() -> int:
+    """Bytes the VDB clouds may take on the GPU together (Preferences > VDB Cloud GPU Budget)."""
+    return runtime.vdb_gpu_budget()
+
+
+def read(path: str, grid: str, budget: int | None = None) -> vdbcloud.VdbCloud:
+    """The packed cloud of a file, read once per change of the file on disk or of the GPU budget (the
+    preference's by default): the finest level of it that fits the budget (core/vdbcloud.py)."""
     vdbfile.check(path)  # missing, a folder, damaged: one sentence before OpenVDB opens it
     st = os.stat(path)
-    budget = runtime.vdb_gpu_budget()
+    budget = gpu_budget() if budget is None else budget
     key = (path, st.st_mtime_ns, st.st_size, grid, budget)
     if key in _cache:
         _cache.move_to_end(key)
@@ -220,6 +225,7 @@ def placements(scene, strict: bool = True) -> tuple:
     out = []
     _problems.clear()
     _levels.clear()
+    budget = gpu_budget()  # one reading of the preference for every cloud of this call
     left = left_out(scene)
     for obj in left:
         _problems[obj.name] = left_out_sentence(obj)
@@ -236,11 +242,11 @@ def placements(scene, strict: bool = True) -> tuple:
         if path is None:
             continue  # a clipped sequence before its first frame or after its last
         try:
-            cloud = read(path, settings.grid.strip())
+            cloud = read(path, settings.grid.strip(), budget)
             matrix = [list(r) for r in obj.matrix_world]
             placed = vdbcloud.Placement(cloud, matrix, float(settings.density), obj.data.render.space)
             placed.check(obj.name)
-            crowded = vdbcloud.why_not_together([*out, placed], runtime.vdb_gpu_budget())
+            crowded = vdbcloud.why_not_together([*out, placed], budget)
             if crowded:
                 raise NubisError(f"it is left out: {crowded}; unmark a cloud or use coarser ones")
         except NubisError as err:
@@ -256,11 +262,6 @@ def placements(scene, strict: bool = True) -> tuple:
                 _level_noted.add((obj.name, cloud.level))
         out.append(placed)
     return tuple(out)
-
-
-def gpu_budget() -> int:
-    """Bytes the VDB clouds may take on the GPU together (Preferences > VDB Cloud GPU Budget)."""
-    return runtime.vdb_gpu_budget()
 
 
 def level_note(obj) -> str:

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from . import schema
+from .bricks import DEFAULT_GPU_LIMIT
 from .schema import defaults
 
 _STORM = {s.name: s.default for s in schema.STORM}
@@ -72,7 +73,7 @@ class CloudState:
     pixel_size: float = 0.0
     # Artists' OpenVDB clouds drawn with the sky (core/vdbcloud.py Placement), at most vdbcloud.MAX_CLOUDS.
     vdb_clouds: tuple = ()
-    vdb_gpu_budget: int = 1024**3  # bytes the VDB clouds may take on the GPU (core/bricks.py DEFAULT_GPU_LIMIT)
+    vdb_gpu_budget: int = DEFAULT_GPU_LIMIT  # bytes the VDB clouds may take on the GPU (the preference)
 
     def has_cirrus(self) -> bool:
         return self.field_c is not None and self.params["cirrus_coverage"] > 0 and float(self.field_c[..., 0].max()) > 0

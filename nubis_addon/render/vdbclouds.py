@@ -39,7 +39,7 @@ def _texture(arr: np.ndarray, fmt: str) -> gpu.types.GPUTexture:
 def _atlas_texture(placements) -> gpu.types.GPUTexture:
     """The bricks written straight into the upload's own float buffer (a numpy view of it): the atlas is
     never held twice on the host (docs/measurements.md#vdb-import)."""
-    bx, by, bz = bricks.atlas_shape(max(sum(p.cloud.bricks.count for p in placements), 1))
+    bx, by, bz = vdbcloud.gpu_layout(placements).per_side
     size = (bx * bricks.BRICK, by * bricks.BRICK, bz * bricks.BRICK)
     _check_size(size, ATLAS_FORMAT)
     buf = gpu.types.Buffer("FLOAT", size[0] * size[1] * size[2])
