@@ -12,7 +12,7 @@
     python -m nubis_addon preview [--preset NAME | --blend FILE] --out DIR [--width W --height H --frames A-B
                                   --redraws N --orbit DEG --quality Q --naive]
     python -m nubis_addon benchmark [--preset NAME | --blend FILE] --out DIR [--width W --height H --quality Q]
-                                    [--vdb FILE ... --with-cloudscape]
+                                    [--eevee-samples N] [--vdb FILE ... --with-cloudscape]
     python -m nubis_addon panorama [--preset NAME | --blend FILE] --out PATH.exr [--width W --frame F]
 
 and the same as ``blender -b [FILE.blend] --command nubis ...``. Each command prints a one-line summary and
@@ -171,6 +171,7 @@ def _realtime_commands(sub, common, size, vdb) -> None:
     size(p)
     vdb(p)
     p.add_argument("--quality", choices=levels, help="quality level (default: the scene's settings)")
+    p.add_argument("--eevee-samples", type=int, default=16, metavar="N", help="EEVEE's samples in its row (default 16)")
 
 
 _CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
@@ -352,8 +353,9 @@ def check_arguments(args) -> None:
         ("passes", limits.PASSES_RANGE),
         ("frame", limits.FRAME_RANGE),
         ("redraws", limits.REDRAWS_RANGE),
+        ("eevee_samples", limits.SAMPLES_RANGE),
     ):
-        limits.check_int(f"--{name}", getattr(args, name, None), lo, hi)
+        limits.check_int(f"--{name.replace('_', '-')}", getattr(args, name, None), lo, hi)
     limits.check_voxel_size("--voxel-size", getattr(args, "voxel_size", None))
     limits.check_orbit("--orbit", getattr(args, "orbit", None))
     if args.command == "preview" and args.frames:

@@ -248,7 +248,7 @@ def _preview(job: Job) -> str:
 
 def _benchmark(job: Job) -> str:
     args = job.args
-    options = BenchmarkOptions(*job.size(), quality=args.quality)
+    options = BenchmarkOptions(*job.size(), quality=args.quality, eevee_samples=args.eevee_samples)
     with console.quiet(job.log):
         try:
             if args.vdb:

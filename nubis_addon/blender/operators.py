@@ -622,6 +622,9 @@ class NUBIS_OT_benchmark(NeedsCloudscape, NubisOperator, bpy.types.Operator):
     width: IntProperty(name="Width", default=480, min=16, max=7680)
     height: IntProperty(name="Height", default=270, min=16, max=4320)
     eevee: BoolProperty(name="Include EEVEE", default=True, description="Also bake and render the view with EEVEE")
+    eevee_samples: IntProperty(
+        name="EEVEE Samples", default=16, min=1, max=4096, description="EEVEE's samples when it renders the view"
+    )
 
     def run(self, context):
         scene = context.scene
@@ -629,7 +632,11 @@ class NUBIS_OT_benchmark(NeedsCloudscape, NubisOperator, bpy.types.Operator):
         wm = context.window_manager
         wm.progress_begin(0, 1)
         try:
-            result = preview.benchmark(scene, out, BenchmarkOptions(self.width, self.height, eevee=self.eevee))
+            result = preview.benchmark(
+                scene,
+                out,
+                BenchmarkOptions(self.width, self.height, eevee=self.eevee, eevee_samples=self.eevee_samples),
+            )
         finally:
             wm.progress_end()
         status.last_benchmark[:] = preview.sidebar_rows(result)

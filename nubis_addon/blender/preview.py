@@ -388,11 +388,12 @@ def _benchmark_eevee(scene, view, options: BenchmarkOptions, result: dict) -> np
         bake_options = BakeOptions(voxel, camera_only=True, size=(options.width, options.height))
         baked = pipeline.bake(scene, Path(tmp) / "clouds.vdb", bake_options)
         # A first render of one sample compiles EEVEE's shaders (on llvmpipe each sample costs about as much
-        # as the compile, so the warm-up takes one); the second, of 16 samples, is EEVEE's own cost.
+        # as the compile, so the warm-up takes one); the second, of the options' samples, is EEVEE's own cost.
         render_eevee(scene, options.width, options.height, str(baked.path), 1)
-        eevee_img, seconds = render_eevee(scene, options.width, options.height, str(baked.path), 16)
+        eevee_img, seconds = render_eevee(scene, options.width, options.height, str(baked.path), options.eevee_samples)
     result["eevee_ms"] = seconds * 1000.0
     result["eevee_voxel_size"] = baked.plan.voxel_size
+    result["eevee_samples"] = options.eevee_samples
     result["eevee_over_redraw"] = result["eevee_ms"] / result["redraw_ms"]
     return pipeline.display_image(scene, eevee_img)
 
@@ -417,6 +418,10 @@ def sidebar_rows(result: dict) -> list[tuple[str, str]]:
     return rows
 
 
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
 def table(result: dict) -> str:
     rows = [
         ("naive march (every pixel, full samples)", f"{result['naive_ms']:.1f} ms"),
@@ -424,8 +429,9 @@ def table(result: dict) -> str:
         ("  naive / redraw", f"{result['naive_over_redraw']:.1f}x"),
     ]
     if "eevee_ms" in result:
+        samples = _count(result.get("eevee_samples", 16), "sample")
         rows += [
-            (f"EEVEE, 16 samples, bake of {result['eevee_voxel_size']:g} m voxels", f"{result['eevee_ms']:.0f} ms"),
+            (f"EEVEE, {samples}, bake of {result['eevee_voxel_size']:g} m voxels", f"{result['eevee_ms']:.0f} ms"),
             ("  EEVEE / redraw", f"{result['eevee_over_redraw']:.0f}x"),
         ]
     f = result["fetches"]

@@ -84,6 +84,7 @@ class BenchmarkOptions:
     height: int
     quality: str | None = None
     eevee: bool = True  # also EEVEE rendering the bake of the same view
+    eevee_samples: int = 16  # EEVEE's samples in that render (its cost on llvmpipe is per sample)
     rounds: int = 3  # alternating rounds; each measurement reports its median
 
     def but(self, **changes) -> BenchmarkOptions:

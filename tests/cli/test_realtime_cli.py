@@ -61,11 +61,12 @@ def test_preview_refuses_bad_ranges_before_any_work(tmp_path):
 
 def test_benchmark_prints_a_table_and_writes_its_report(tmp_path):
     out = tmp_path / "bench"
-    r = run_cli("benchmark", "--out", str(out), "--width", "64", "--height", "36")
+    r = run_cli("benchmark", "--out", str(out), "--width", "64", "--height", "36", "--eevee-samples", "1")
     assert r.returncode == 0, r.stderr
     assert "naive / redraw" in r.stdout and "EEVEE / redraw" in r.stdout
     assert r.stdout.strip().splitlines()[-1].startswith("benchmarked default at 64x36 (standard)")
     report = json.loads((out / "benchmark.json").read_text())
+    assert "EEVEE, 1 sample," in r.stdout and report["eevee_samples"] == 1
     for key in ("naive_ms", "redraw_ms", "eevee_ms"):
         assert report[key] > 0
     f = report["fetches"]

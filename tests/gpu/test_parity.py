@@ -2,8 +2,10 @@
 
 The shot looks steeply up into the default cumulus so the camera-only bake is small enough for
 20 m voxels; the cirrus is off because the 2D layer becomes a slab only approximately. Cycles
-renders 2 x 2048 samples with different seeds: their mean is the reference and their difference
-measures its noise, which must sit well below the limits for the comparison to mean anything.
+renders 2 x 1024 samples with different seeds: their mean is the reference and their difference
+measures its noise, which must sit well below the limits for the comparison to mean anything
+(2026-12-06, Blender 5.3: luminance 0.015 flat and 0.017 sky, alpha 0.0035; twice the samples took
+twice Cycles' time for noise 0.010 and 0.0025).
 """
 
 import pytest
@@ -57,12 +59,12 @@ def _compare_single(blender, preset, out, samples: int) -> dict:
 def single(tmp_path_factory, blender, world):
     preset = _looking_up(world == "sky")
     preset.params["cirrus_coverage"] = 0.0
-    return _compare_single(blender, preset, tmp_path_factory.mktemp("parity"), 4096)
+    return _compare_single(blender, preset, tmp_path_factory.mktemp("parity"), 2048)
 
 
 def test_single_scattering_parity(single, world):
     m = single
-    assert m["mode"] == "single" and m["volume_bounces"] == 0 and m["samples"] == 4096
+    assert m["mode"] == "single" and m["volume_bounces"] == 0 and m["samples"] == 2048
     assert m["alpha_rmse"] <= ALPHA_RMSE_MAX, m
     assert m["luminance_rel_error"] <= (LUMINANCE_ERROR_MAX if world == "flat" else SKY_LUMINANCE_ERROR_MAX), m
     assert abs(m["luminance_bias"]) <= (0.02 if world == "flat" else SKY_BIAS_MAX), m
