@@ -40,22 +40,36 @@ def _value_noise(shape, cells: int, rng) -> np.ndarray:
     return out
 
 
-def cumulus(n_xy: int = 64, n_z: int = 44, seed: int = 7, peak: float = 0.04) -> np.ndarray:
-    """The cloud's extinction per metre, indexed [z, y, x]."""
+CUMULUS_OCTAVES = ((4, 0.55), (9, 0.3), (18, 0.15))  # value noise: (cells per side, amplitude)
+
+
+def cumulus(
+    n_xy: int = 64,
+    n_z: int = 44,
+    seed: int = 7,
+    peak: float = 0.04,
+    puffs: int = 34,
+    erosion: float = 7.0,
+    octaves=CUMULUS_OCTAVES,
+) -> np.ndarray:
+    """The cloud's extinction per metre, indexed [z, y, x]. Sizes are in voxels of a 64-voxel-wide cloud,
+    scaled with `n_xy` (a finer cloud of the same shape at 128); `erosion` is how many such voxels the noise
+    moves the surface, and `octaves` its cells per side and amplitudes."""
     rng = np.random.default_rng(seed)
     z, y, x = np.mgrid[0:n_z, 0:n_xy, 0:n_xy].astype(np.float64)
+    k = n_xy / 64
     shape = np.full(z.shape, -1e9)
     centre = n_xy / 2
-    for _ in range(34):
+    for _ in range(puffs):
         cx, cy = rng.normal(centre, n_xy * 0.14, 2)
-        cz = rng.uniform(8, n_z * 0.6)
-        r = rng.uniform(9, 15) * (1.0 - 0.4 * cz / n_z)
+        cz = rng.uniform(8 * k, n_z * 0.6)
+        r = rng.uniform(9, 15) * k * (1.0 - 0.4 * cz / n_z)
         d = r - np.sqrt((x - cx) ** 2 + (y - cy) ** 2 + ((z - cz) * 1.1) ** 2)
         shape = np.maximum(shape, d)
-    noise = sum(_value_noise(z.shape, c, rng) * a for c, a in ((4, 0.55), (9, 0.3), (18, 0.15)))
-    field = shape + (noise - 0.5) * 7.0
-    base = np.clip((z - 2.0) / 3.0, 0.0, 1.0)  # a flat, slightly soft base
-    density = np.clip(field / 4.0, 0.0, 1.0) * base
+    noise = sum(_value_noise(z.shape, c, rng) * a for c, a in octaves)
+    field = shape + (noise - 0.5) * erosion * k
+    base = np.clip((z - 2.0 * k) / (3.0 * k), 0.0, 1.0)  # a flat, slightly soft base
+    density = np.clip(field / (4.0 * k), 0.0, 1.0) * base
     return (density * peak).astype(np.float32)
 
 

@@ -1,0 +1,220 @@
+"""Benchmark: the VDB clouds' light on a family of clouds against converged Cycles (docs/vdb.md#light).
+
+Run from the repository root:  .venv-5.3/bin/python tests/benchmarks/bench_vdb_light.py [OUTDIR] [--only A,B]
+                                                                                          [--checkout DIR]
+
+Makes each cloud once with OpenVDB's own Python module (Blender's bundle), into OUTDIR (the system's temporary
+folder by default), then runs `compare --mode full --noise-target 5` at 160x90 on each with the default
+preset's sky, sun and camera, reusing the Cycles reference of an earlier run when nothing Cycles sees has
+changed (`--reuse-reference`): a second run with other light factors in the shaders costs only the viewport.
+`--checkout DIR` runs another checkout's `compare` on the same clouds and references (a candidate's shaders).
+
+The family, fixed before the light factors were fitted (docs/vdb.md#light):
+- fit: `cumulus` (the tests' cauliflower, 50 m voxels), `billowy` (a finer, more eroded one, 25 m), `deck`
+  (a broken stratocumulus deck 6.4 km across seen from below, 50 m), `wisps` (thin streaks, 25 m);
+- check, never seen by the fit: `cumulus_s3` (another seed, turned), `tower_object` and `tower_world` (a
+  detailed tower of 5 m voxels on an object scaled x4, Render > Space Object and World, through a .blend).
+
+Prints one table: cloud, set, world voxel size, active voxels, luminance error, bias, alpha RMSE, silhouette
+IoU, Cycles' samples and noise, and the run's seconds; writes OUTDIR/light.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))
+
+import vdb_helpers  # noqa: E402
+
+BASE = vdb_helpers.DEFAULT_VIEW_BASE
+FINE = ((4, 0.5), (9, 0.25), (18, 0.15), (36, 0.1))  # one more octave than the cumulus: a billowy edge
+
+
+def _noise(shape, cells, rng) -> np.ndarray:
+    """Value noise in [0, 1] with its own cells per axis (z, y, x): streaks where one axis has few."""
+    lattice = rng.random(tuple(c + 1 for c in cells))
+    axes = [np.linspace(0, c, n, endpoint=False) for n, c in zip(shape, cells, strict=True)]
+    z, y, x = np.meshgrid(*axes, indexing="ij")
+    i, j, k = (np.minimum(a.astype(int), c - 1) for a, c in zip((z, y, x), cells, strict=True))
+    fz, fy, fx = ((f * f * (3 - 2 * f)) for f in (z - i, y - j, x - k))
+    out = np.zeros(shape)
+    for dz in (0, 1):
+        for dy in (0, 1):
+            for dx in (0, 1):
+                w = (fz if dz else 1 - fz) * (fy if dy else 1 - fy) * (fx if dx else 1 - fx)
+                out += w * lattice[i + dz, j + dy, k + dx]
+    return out
+
+
+def deck(seed: int = 5, n: int = 128, nz: int = 16, peak: float = 0.02) -> np.ndarray:
+    """A broken deck: cells of cover from two octaves, a lumpy top, a flat base, holes where cover is low."""
+    rng = np.random.default_rng(seed)
+    cover = 0.6 * _noise((1, n, n), (1, 6, 6), rng)[0] + 0.4 * _noise((1, n, n), (1, 16, 16), rng)[0]
+    z = np.arange(nz, dtype=np.float64)[:, None, None]
+    top = nz * (0.3 + 0.7 * cover)[None]
+    lumps = 0.5 + 2.0 * _noise((nz, n, n), (3, 24, 24), rng)
+    density = np.clip((top - z) / lumps, 0, 1) * np.clip((z - 1.0) / 1.5, 0, 1)
+    density *= np.clip((cover - 0.38) / 0.12, 0, 1)[None]
+    return (density * peak).astype(np.float32)
+
+
+def wisps(seed: int = 9, n: int = 128, nz: int = 24, peak: float = 0.006) -> np.ndarray:
+    """Thin streaks along x: noise with long cells along x, kept in a narrow band, under a soft envelope."""
+    rng = np.random.default_rng(seed)
+    streak = _noise((nz, n, n), (4, 20, 3), rng) * 0.7 + _noise((nz, n, n), (8, 40, 6), rng) * 0.3
+    band = np.clip(1.0 - np.abs(streak - 0.5) / 0.08, 0, 1)
+    zz, yy, xx = np.meshgrid(*(np.linspace(-1, 1, s) for s in (nz, n, n)), indexing="ij")
+    envelope = np.clip(1.0 - (xx**2 + yy**2 + (zz * 1.2) ** 2), 0, 1)
+    return (band * envelope * peak).astype(np.float32)
+
+
+def _write(path: Path, dense: np.ndarray, voxel: float, turn: float, base) -> None:
+    vdb = vdb_helpers._openvdb()
+    nz, ny, nx = dense.shape
+    grid = vdb.FloatGrid()
+    grid.copyFromArray(np.ascontiguousarray(dense.transpose(2, 1, 0)), tolerance=1e-5)
+    grid.name = "density"
+    grid.gridClass = vdb.GridClass.FOG_VOLUME
+    c, s = np.cos(turn), np.sin(turn)
+    half = np.array([nx / 2, ny / 2, 0.0]) * voxel
+    origin = np.array(base, np.float64) - np.array([c * half[0] - s * half[1], s * half[0] + c * half[1], 0.0])
+    grid.transform = vdb.createLinearTransform(
+        [[voxel * c, voxel * s, 0, 0], [-voxel * s, voxel * c, 0, 0], [0, 0, voxel, 0], [*origin, 1.0]]
+    )
+    tmp = path.with_suffix(".tmp.vdb")
+    vdb.write(str(tmp), grids=[grid])
+    tmp.replace(path)
+
+
+# name: (set, dense maker, voxel size in the file, turn, object scale, render space)
+CLOUDS = {
+    "cumulus": ("fit", lambda: vdb_helpers.cumulus(), 50.0, 0.5, 1.0, None),
+    "billowy": (
+        "fit",
+        lambda: vdb_helpers.cumulus(128, 88, seed=11, puffs=50, erosion=9.0, octaves=FINE),
+        25.0,
+        0.9,
+        1.0,
+        None,
+    ),
+    "deck": ("fit", deck, 50.0, 0.2, 1.0, None),
+    "wisps": ("fit", wisps, 25.0, 0.7, 1.0, None),
+    "cumulus_s3": ("check", lambda: vdb_helpers.cumulus(seed=3), 50.0, 1.2, 1.0, None),
+    "tower_object": (
+        "check",
+        lambda: vdb_helpers.cumulus(128, 176, seed=21, puffs=60, erosion=9.0, octaves=FINE),
+        5.0,
+        0.3,
+        4.0,
+        "OBJECT",
+    ),
+    "tower_world": (
+        "check",
+        lambda: vdb_helpers.cumulus(128, 176, seed=21, puffs=60, erosion=9.0, octaves=FINE),
+        5.0,
+        0.3,
+        4.0,
+        "WORLD",
+    ),
+}
+
+BLEND_SCRIPT = """
+import sys
+sys.path.insert(0, sys.argv[-4])
+import bpy
+from nubis_addon.blender import ensure_registered, scene_io, vdbclouds
+from nubis_addon.core.presets import load_preset
+vdb, blend, space = sys.argv[-3:]
+bpy.ops.wm.read_factory_settings(use_empty=True)
+ensure_registered()
+scene = bpy.context.scene
+scene_io.apply_preset(scene, load_preset("default"))
+obj = vdbclouds.add_files(scene, [vdb])[0]
+obj.location, obj.scale = {base}, ({scale},) * 3
+obj.data.render.space = space
+s = scene.nubis
+s.density_cover, s.cirrus_coverage = 0.0, 0.0
+s.storms.clear()
+scene_io.generate_fields(scene)
+bpy.ops.wm.save_as_mainfile(filepath=blend)
+"""
+
+
+def make(out: Path, name: str) -> list[str]:
+    """The cloud's file (made once) and the `compare` arguments that show it."""
+    _set, dense_of, voxel, turn, scale, space = CLOUDS[name]
+    stem = name.rsplit("_", 1)[0] if space else name
+    vdb = out / f"{stem}.vdb"
+    if not vdb.exists():
+        _write(vdb, dense_of(), voxel, turn, (0.0, 0.0, 0.0) if space else BASE)
+    if not space:
+        return ["--vdb", str(vdb)]
+    blend = out / f"{name}.blend"
+    if not blend.exists():
+        script = out / "make_blend.py"
+        script.write_text(BLEND_SCRIPT.format(base=tuple(BASE), scale=scale))
+        subprocess.run([sys.executable, str(script), str(ROOT), str(vdb), str(blend), space], check=True)
+    return ["--blend", str(blend)]
+
+
+def compare(checkout: Path, out: Path, name: str, source: list[str]) -> dict:
+    run = out / name
+    cmd = [sys.executable, "-m", "nubis_addon", "compare", *source, "--out", str(run), "--mode", "full"]
+    cmd += ["--noise-target", "5", "--width", "160", "--height", "90", "--reuse-reference"]
+    t = time.perf_counter()
+    r = subprocess.run(cmd, cwd=checkout, capture_output=True, text=True)
+    if r.returncode:
+        raise SystemExit(f"{name}: compare failed:\n{r.stderr}")
+    m = json.loads((run / "metrics.json").read_text())
+    m["run_s"] = time.perf_counter() - t
+    return m
+
+
+def main() -> None:
+    p = argparse.ArgumentParser()
+    p.add_argument("out", nargs="?", default=str(Path(tempfile.gettempdir()) / "nubis-vdb-light"))
+    p.add_argument("--only", default="", help="comma-separated cloud names")
+    p.add_argument("--checkout", default=str(ROOT), help="the checkout whose compare runs")
+    args = p.parse_args()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    names = [n for n in args.only.split(",") if n] or list(CLOUDS)
+    rows = {}
+    for name in names:
+        source = make(out, name)
+        m = compare(Path(args.checkout), out, name, source)
+        rows[name] = {
+            "set": CLOUDS[name][0],
+            "voxel_m": CLOUDS[name][2] * CLOUDS[name][4],
+            "luminance_rel_error": m["luminance_rel_error"],
+            "luminance_bias": m["luminance_bias"],
+            "alpha_rmse": m["alpha_rmse"],
+            "silhouette_iou": m["silhouette_iou"],
+            "cycles_samples": m["samples"],
+            "cycles_noise": m["cycles_noise"]["luminance_rel_error"],
+            "reference_reused": m["cycles_reference"]["reused"],
+            "seconds": m["run_s"],
+        }
+        r = rows[name]
+        print(
+            f"{name:13s} {r['set']:5s} {r['voxel_m']:5.0f} m  lum {r['luminance_rel_error'] * 100:5.1f} %  "
+            f"bias {r['luminance_bias'] * 100:+5.1f} %  alpha RMSE {r['alpha_rmse']:.4f}  IoU {r['silhouette_iou']:.3f}"
+            f"  Cycles {r['cycles_samples']} samples, {r['cycles_noise'] * 100:.1f} % noise  {r['seconds']:.0f} s",
+            flush=True,
+        )
+    (out / "light.json").write_text(json.dumps(rows, indent=1))
+
+
+if __name__ == "__main__":
+    main()
