@@ -97,22 +97,31 @@ def pytest_unconfigure(config):
         os._exit(_exit_status[-1])
 
 
-# The longest test files (worker seconds on the 2-core machine, docs/measurements.md#ci), handed out first:
-# each file runs whole in one of the two workers (`--dist loadfile`), and a long file handed out last kept
-# one worker busy alone at the end of the run.
+# The test files that take a worker longest (over 25 s each on the 2-core machine, docs/measurements.md#ci),
+# longest first, handed out in this order (`--no-loadscope-reorder`: xdist would otherwise order the files by
+# their number of tests): each file runs whole in one of the two workers (`--dist loadfile`), and a long file
+# handed out last kept one worker busy alone at the end of the run.
 LONGEST_FIRST = (
     "gpu/test_objects_in_clouds.py",
     "gpu/test_sky.py",
     "cli/test_robustness.py",
-    "gpu/test_parity.py",
     "cli/test_cli.py",
-    "gpu/test_vdb_transforms.py",
     "gpu/test_snapshot.py",
-    "gpu/test_temporal.py",
+    "gpu/test_vdb_transforms.py",
+    "gpu/test_parity.py",
     "gpu/test_full_parity.py",
+    "gpu/test_temporal.py",
     "gpu/test_reference.py",
     "gpu/test_audit.py",
+    "cli/test_bake_vanishing_cli.py",
+    "gpu/test_superstorm.py",
     "cli/test_realtime_cli.py",
+    "gpu/test_bake_cycles.py",
+    "cli/test_vdb_cli.py",
+    "cli/test_distributed_robustness.py",
+    "gpu/test_vdb_levels.py",
+    "gpu/test_vdb_clouds.py",
+    "gpu/test_light_volumes.py",
 )
 
 

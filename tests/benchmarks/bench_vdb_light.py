@@ -7,7 +7,9 @@ Makes each cloud once with OpenVDB's own Python module (Blender's bundle), into 
 folder by default), then runs `compare --mode full --noise-target 5` at 160x90 on each with the default
 preset's sky, sun and camera, reusing the Cycles reference of an earlier run when nothing Cycles sees has
 changed (`--reuse-reference`): a second run with other light factors in the shaders costs only the viewport.
-`--checkout DIR` runs another checkout's `compare` on the same clouds and references (a candidate's shaders).
+`--checkout DIR` runs another checkout's `compare` on the same clouds and references (a candidate's shaders);
+with `--viewport-only` it runs that checkout's `render` at the comparison's size and supersampling instead
+and measures it against the reference an earlier run left (the fit's quick loop: no bake, no march).
 
 The family, fixed before the light factors were fitted (docs/vdb.md#light):
 - fit: `cumulus` (the tests' cauliflower, 50 m voxels), `billowy` (a finer, more eroded one, 25 m), `deck`
@@ -181,11 +183,57 @@ def compare(checkout: Path, out: Path, name: str, source: list[str]) -> dict:
     return m
 
 
+VIEWPORT_SCRIPT = """
+import os
+import sys
+sys.path.insert(0, os.getcwd())
+from types import SimpleNamespace
+import numpy as np
+from nubis_addon.blender import commands, pipeline, snapshot
+from nubis_addon.core import imageio
+from nubis_addon.core.jobs import BakeOptions
+from nubis_addon.render.gpu_context import ensure_gpu_context
+kind, source, out, voxel = sys.argv[-4:]
+args = SimpleNamespace(blend=source if kind == "--blend" else None, preset=None)
+scene = commands.load_scene(args, False)
+if kind == "--vdb":
+    commands._add_vdb_clouds(scene, [source], False)
+ensure_gpu_context()
+# The comparison's clip box (its bake's), which also sets the light volumes' extent.
+options = BakeOptions(float(voxel), camera_only=True, size=(160, 90), thin_cirrus=pipeline.THIN_CIRRUS, vdb=False)
+clip = pipeline.bake_clip_box(snapshot.bake_plan(scene, options, wait=False)[1])
+shot = pipeline.viewport_shot(scene, 640, 360, 0, "full", clip)
+big = pipeline.render_shot(shot, pipeline.COMPARE_PASSES).astype(np.float64)
+imageio.write_image(out, big.reshape(90, 4, 160, 4, 4).mean(axis=(1, 3)).astype(np.float32))
+"""
+
+
+def viewport_only(checkout: Path, out: Path, name: str, source: list[str]) -> dict:
+    """The checkout's viewport as compare draws it (full mode, 4x the size, its passes, box-filtered down),
+    against the Cycles image an earlier comparison left in OUTDIR/NAME."""
+    from nubis_addon.core import imageio, metrics
+
+    exr = out / name / "candidate.exr"
+    script = out / "viewport_only.py"
+    script.write_text(VIEWPORT_SCRIPT)
+    earlier = json.loads((out / name / "metrics.json").read_text())
+    cmd = [sys.executable, str(script), *source, str(exr), str(earlier["voxel_size"])]
+    t = time.perf_counter()
+    r = subprocess.run(cmd, cwd=checkout, capture_output=True, text=True)
+    if r.returncode:
+        raise SystemExit(f"{name}: the viewport failed:\n{r.stderr[-3000:]}")
+    m = metrics.compare(imageio.read_image(exr), imageio.read_image(out / name / "cycles.exr"))
+    m.update(samples=earlier["samples"], cycles_noise=earlier["cycles_noise"], run_s=time.perf_counter() - t)
+    m["cycles_reference"] = {"reused": True}
+    return m
+
+
 def main() -> None:
     p = argparse.ArgumentParser()
     p.add_argument("out", nargs="?", default=str(Path(tempfile.gettempdir()) / "nubis-vdb-light"))
     p.add_argument("--only", default="", help="comma-separated cloud names")
     p.add_argument("--checkout", default=str(ROOT), help="the checkout whose compare runs")
+    p.add_argument("--viewport-only", action="store_true", help="the checkout's render against the reference")
     args = p.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -193,7 +241,7 @@ def main() -> None:
     rows = {}
     for name in names:
         source = make(out, name)
-        m = compare(Path(args.checkout), out, name, source)
+        m = (viewport_only if args.viewport_only else compare)(Path(args.checkout), out, name, source)
         rows[name] = {
             "set": CLOUDS[name][0],
             "voxel_m": CLOUDS[name][2] * CLOUDS[name][4],
