@@ -30,11 +30,9 @@ from . import interrupt
 from .errors import NubisError
 from .jobs import BakeOptions  # noqa: F401 - the options a farm task carries (plain() below)
 
-try:  # optional: only distributed bakes need it
-    import dask
-    import distributed
-except ImportError:  # pragma: no cover - exercised by the message test with the module hidden
-    dask = distributed = None
+# Dask's modules, optional (only distributed bakes need them) and imported by require() on first use: at
+# the top they took 1.3 s of every command's start-up.
+dask = distributed = None
 
 MAX_LOCAL_WORKERS = 64
 # A task that raises runs again, up to this many more times (one whose worker dies runs again up to the
@@ -113,11 +111,19 @@ def timeout() -> float:
 
 
 def require() -> None:
-    if distributed is None:
+    """Dask imported, or a message that says how to install it."""
+    global dask, distributed
+    if distributed is not None:
+        return
+    try:
+        import dask as dask_module
+        import distributed as distributed_module
+    except ImportError:
         raise NubisError(
             "distributed bakes need Dask: install it into Blender's Python with "
             "'python -m pip install dask[distributed]==2026.8.0' (or bake without --distributed)"
-        )
+        ) from None
+    dask, distributed = dask_module, distributed_module
 
 
 def _extension_root() -> str:

@@ -18,7 +18,8 @@ The family, fixed before the light factors were fitted (docs/vdb.md#light):
   detailed tower of 5 m voxels on an object scaled x4, Render > Space Object and World, through a .blend).
 
 Prints one table: cloud, set, world voxel size, active voxels, luminance error, bias, alpha RMSE, silhouette
-IoU, Cycles' samples and noise, and the run's seconds; writes OUTDIR/light.json.
+IoU, Cycles' samples and noise, and the run's seconds; adds them to OUTDIR/light.json
+(light_viewport_only.json with --viewport-only).
 """
 
 from __future__ import annotations
@@ -261,7 +262,9 @@ def main() -> None:
             f"  Cycles {r['cycles_samples']} samples, {r['cycles_noise'] * 100:.1f} % noise  {r['seconds']:.0f} s",
             flush=True,
         )
-    (out / "light.json").write_text(json.dumps(rows, indent=1))
+    report = out / ("light_viewport_only.json" if args.viewport_only else "light.json")
+    earlier = json.loads(report.read_text()) if report.exists() else {}
+    report.write_text(json.dumps({**earlier, **rows}, indent=1))  # a run of some clouds keeps the others
 
 
 if __name__ == "__main__":

@@ -1,6 +1,8 @@
 """Bake sequences (`--frames A-B`, `#` padding), the velocity grid against the motion vectors, and
 distributed bakes on Dask workers (identical grids, a clear message without Dask)."""
 
+import sys
+
 import numpy as np
 import pytest
 
@@ -136,6 +138,7 @@ def test_distributed_without_dask_says_what_to_do(monkeypatch, tmp_path, capsys)
     from nubis_addon.core import distributed
 
     monkeypatch.setattr(distributed, "distributed", None)
+    monkeypatch.setitem(sys.modules, "distributed", None)  # `import distributed` fails, as without Dask
     code = cli.run(["bake", "--distributed", "local:2", "--out", str(tmp_path / "c.vdb")])
     assert code == 1
     err = capsys.readouterr().err
