@@ -15,7 +15,9 @@ The family, fixed before the light factors were fitted (docs/vdb.md#light):
 - fit: `cumulus` (the tests' cauliflower, 50 m voxels), `billowy` (a finer, more eroded one, 25 m), `deck`
   (a broken stratocumulus deck 6.4 km across seen from below, 50 m), `wisps` (thin streaks, 25 m);
 - check, never seen by the fit: `cumulus_s3` (another seed, turned), `tower_object` and `tower_world` (a
-  detailed tower of 5 m voxels on an object scaled x4, Render > Space Object and World, through a .blend).
+  detailed tower of 5 m voxels on an object scaled x4, Render > Space Object and World, through a .blend);
+- moved: `tower_rotated`, `tower_parented` (to an Empty moved afterwards) and `tower_delta` (delta location,
+  rotation and scale), the World-space tower moved as an artist moves a Volume.
 
 Prints one table: cloud, set, world voxel size, active voxels, luminance error, bias, alpha RMSE, silhouette
 IoU, Cycles' samples and noise, and the run's seconds; adds them to OUTDIR/light.json
@@ -131,14 +133,18 @@ CLOUDS = {
         "WORLD",
     ),
 }
+TOWER = CLOUDS["tower_world"][1:]
+# The tower moved as the done-when's transforms move it (the same physical cloud in World space): set
+# "moved", compared as the check clouds are.
+CLOUDS.update({f"tower_{move}": ("moved", *TOWER) for move in ("rotated", "parented", "delta")})
 
 BLEND_SCRIPT = """
 import sys
-sys.path.insert(0, sys.argv[-4])
+sys.path.insert(0, sys.argv[-5])
 import bpy
 from nubis_addon.blender import ensure_registered, scene_io, vdbclouds
 from nubis_addon.core.presets import load_preset
-vdb, blend, space = sys.argv[-3:]
+vdb, blend, space, move = sys.argv[-4:]
 bpy.ops.wm.read_factory_settings(use_empty=True)
 ensure_registered()
 scene = bpy.context.scene
@@ -146,6 +152,18 @@ scene_io.apply_preset(scene, load_preset("default"))
 obj = vdbclouds.add_files(scene, [vdb])[0]
 obj.location, obj.scale = {base}, ({scale},) * 3
 obj.data.render.space = space
+if move == "rotated":
+    obj.rotation_euler = (0.15, -0.1, 0.8)
+elif move == "parented":  # an Empty moved after the parenting carries the cloud to where the others stand
+    empty = bpy.data.objects.new("Carrier", None)
+    scene.collection.objects.link(empty)
+    obj.parent = empty
+    obj.location = (obj.location[0] - 400.0, obj.location[1] + 300.0, obj.location[2] - 200.0)
+    empty.location, empty.rotation_euler = (400.0, -300.0, 200.0), (0.0, 0.0, 0.0)
+elif move == "delta":
+    obj.location = (obj.location[0] - 250.0, obj.location[1], obj.location[2])
+    obj.delta_location, obj.delta_rotation_euler = (250.0, 0.0, 0.0), (0.0, 0.0, 0.6)
+    obj.scale, obj.delta_scale = ({scale} / 1.25,) * 3, (1.25, 1.25, 1.25)
 s = scene.nubis
 s.density_cover, s.cirrus_coverage = 0.0, 0.0
 s.storms.clear()
@@ -167,7 +185,8 @@ def make(out: Path, name: str) -> list[str]:
     if not blend.exists():
         script = out / "make_blend.py"
         script.write_text(BLEND_SCRIPT.format(base=tuple(BASE), scale=scale))
-        subprocess.run([sys.executable, str(script), str(ROOT), str(vdb), str(blend), space], check=True)
+        move = name.rsplit("_", 1)[1] if CLOUDS[name][0] == "moved" else ""
+        subprocess.run([sys.executable, str(script), str(ROOT), str(vdb), str(blend), space, move], check=True)
     return ["--blend", str(blend)]
 
 
