@@ -23,12 +23,14 @@ def _openvdb():
     return bundled.openvdb()
 
 
-def _value_noise(shape, cells: int, rng) -> np.ndarray:
-    """Smooth noise in [0, 1]: a random lattice of `cells` per side, trilinearly interpolated."""
-    lattice = rng.random((cells + 1,) * 3)
-    coords = [np.linspace(0, cells, n, endpoint=False) for n in shape]
+def _value_noise(shape, cells, rng) -> np.ndarray:
+    """Smooth noise in [0, 1]: a random lattice of `cells` per side (or per axis z, y, x: streaks where one
+    axis has few), trilinearly interpolated."""
+    cells = (cells,) * 3 if isinstance(cells, int) else tuple(cells)
+    lattice = rng.random(tuple(c + 1 for c in cells))
+    coords = [np.linspace(0, c, n, endpoint=False) for n, c in zip(shape, cells, strict=True)]
     z, y, x = np.meshgrid(*coords, indexing="ij")
-    i, j, k = (np.minimum(a.astype(int), cells - 1) for a in (z, y, x))
+    i, j, k = (np.minimum(a.astype(int), c - 1) for a, c in zip((z, y, x), cells, strict=True))
     fz, fy, fx = z - i, y - j, x - k
     fz, fy, fx = (f * f * (3 - 2 * f) for f in (fz, fy, fx))
     out = np.zeros(shape)
@@ -76,8 +78,13 @@ def cumulus(
 def write_cumulus(path: Path, base=DEFAULT_VIEW_BASE, voxel: float = 50.0, turn: float = 0.5, vdb=None, **kw) -> Path:
     """The cumulus as a .vdb (grid 'density'), its base centred on `base`, turned by `turn` radians;
     `vdb` the openvdb module (Blender's bundled one by default)."""
+    return write_cloud(path, cumulus(**kw), base, voxel, turn, vdb)
+
+
+def write_cloud(path: Path, dense: np.ndarray, base, voxel: float, turn: float, vdb=None) -> Path:
+    """A cloud's extinction [z, y, x] as a .vdb fog volume (grid 'density'), its base centred on `base`,
+    turned by `turn` radians about the vertical; written beside and then moved into place."""
     vdb = vdb or _openvdb()
-    dense = cumulus(**kw)
     nz, ny, nx = dense.shape
     grid = vdb.FloatGrid()
     grid.copyFromArray(np.ascontiguousarray(dense.transpose(2, 1, 0)), tolerance=1e-5)
@@ -90,7 +97,9 @@ def write_cumulus(path: Path, base=DEFAULT_VIEW_BASE, voxel: float = 50.0, turn:
     grid.transform = vdb.createLinearTransform(
         [[voxel * c, voxel * s, 0, 0], [-voxel * s, voxel * c, 0, 0], [0, 0, voxel, 0], [*origin, 1.0]]
     )
-    vdb.write(str(path), grids=[grid])
+    tmp = Path(path).with_name(f".{Path(path).name}.tmp")
+    vdb.write(str(tmp), grids=[grid])
+    tmp.replace(path)
     return Path(path)
 
 

@@ -46,29 +46,16 @@ BASE = vdb_helpers.DEFAULT_VIEW_BASE
 FINE = ((4, 0.5), (9, 0.25), (18, 0.15), (36, 0.1))  # one more octave than the cumulus: a billowy edge
 
 
-def _noise(shape, cells, rng) -> np.ndarray:
-    """Value noise in [0, 1] with its own cells per axis (z, y, x): streaks where one axis has few."""
-    lattice = rng.random(tuple(c + 1 for c in cells))
-    axes = [np.linspace(0, c, n, endpoint=False) for n, c in zip(shape, cells, strict=True)]
-    z, y, x = np.meshgrid(*axes, indexing="ij")
-    i, j, k = (np.minimum(a.astype(int), c - 1) for a, c in zip((z, y, x), cells, strict=True))
-    fz, fy, fx = ((f * f * (3 - 2 * f)) for f in (z - i, y - j, x - k))
-    out = np.zeros(shape)
-    for dz in (0, 1):
-        for dy in (0, 1):
-            for dx in (0, 1):
-                w = (fz if dz else 1 - fz) * (fy if dy else 1 - fy) * (fx if dx else 1 - fx)
-                out += w * lattice[i + dz, j + dy, k + dx]
-    return out
-
-
 def deck(seed: int = 5, n: int = 128, nz: int = 16, peak: float = 0.02) -> np.ndarray:
     """A broken deck: cells of cover from two octaves, a lumpy top, a flat base, holes where cover is low."""
     rng = np.random.default_rng(seed)
-    cover = 0.6 * _noise((1, n, n), (1, 6, 6), rng)[0] + 0.4 * _noise((1, n, n), (1, 16, 16), rng)[0]
+    cover = (
+        0.6 * vdb_helpers._value_noise((1, n, n), (1, 6, 6), rng)[0]
+        + 0.4 * vdb_helpers._value_noise((1, n, n), (1, 16, 16), rng)[0]
+    )
     z = np.arange(nz, dtype=np.float64)[:, None, None]
     top = nz * (0.3 + 0.7 * cover)[None]
-    lumps = 0.5 + 2.0 * _noise((nz, n, n), (3, 24, 24), rng)
+    lumps = 0.5 + 2.0 * vdb_helpers._value_noise((nz, n, n), (3, 24, 24), rng)
     density = np.clip((top - z) / lumps, 0, 1) * np.clip((z - 1.0) / 1.5, 0, 1)
     density *= np.clip((cover - 0.38) / 0.12, 0, 1)[None]
     return (density * peak).astype(np.float32)
@@ -77,29 +64,14 @@ def deck(seed: int = 5, n: int = 128, nz: int = 16, peak: float = 0.02) -> np.nd
 def wisps(seed: int = 9, n: int = 128, nz: int = 24, peak: float = 0.006) -> np.ndarray:
     """Thin streaks along x: noise with long cells along x, kept in a narrow band, under a soft envelope."""
     rng = np.random.default_rng(seed)
-    streak = _noise((nz, n, n), (4, 20, 3), rng) * 0.7 + _noise((nz, n, n), (8, 40, 6), rng) * 0.3
+    streak = (
+        vdb_helpers._value_noise((nz, n, n), (4, 20, 3), rng) * 0.7
+        + vdb_helpers._value_noise((nz, n, n), (8, 40, 6), rng) * 0.3
+    )
     band = np.clip(1.0 - np.abs(streak - 0.5) / 0.08, 0, 1)
     zz, yy, xx = np.meshgrid(*(np.linspace(-1, 1, s) for s in (nz, n, n)), indexing="ij")
     envelope = np.clip(1.0 - (xx**2 + yy**2 + (zz * 1.2) ** 2), 0, 1)
     return (band * envelope * peak).astype(np.float32)
-
-
-def _write(path: Path, dense: np.ndarray, voxel: float, turn: float, base) -> None:
-    vdb = vdb_helpers._openvdb()
-    nz, ny, nx = dense.shape
-    grid = vdb.FloatGrid()
-    grid.copyFromArray(np.ascontiguousarray(dense.transpose(2, 1, 0)), tolerance=1e-5)
-    grid.name = "density"
-    grid.gridClass = vdb.GridClass.FOG_VOLUME
-    c, s = np.cos(turn), np.sin(turn)
-    half = np.array([nx / 2, ny / 2, 0.0]) * voxel
-    origin = np.array(base, np.float64) - np.array([c * half[0] - s * half[1], s * half[0] + c * half[1], 0.0])
-    grid.transform = vdb.createLinearTransform(
-        [[voxel * c, voxel * s, 0, 0], [-voxel * s, voxel * c, 0, 0], [0, 0, voxel, 0], [*origin, 1.0]]
-    )
-    tmp = path.with_suffix(".tmp.vdb")
-    vdb.write(str(tmp), grids=[grid])
-    tmp.replace(path)
 
 
 # name: (set, dense maker, voxel size in the file, turn, object scale, render space)
@@ -178,7 +150,7 @@ def make(out: Path, name: str) -> list[str]:
     stem = name.rsplit("_", 1)[0] if space else name
     vdb = out / f"{stem}.vdb"
     if not vdb.exists():
-        _write(vdb, dense_of(), voxel, turn, (0.0, 0.0, 0.0) if space else BASE)
+        vdb_helpers.write_cloud(vdb, dense_of(), (0.0, 0.0, 0.0) if space else BASE, voxel, turn)
     if not space:
         return ["--vdb", str(vdb)]
     blend = out / f"{name}.blend"
