@@ -108,6 +108,7 @@ class Job:
 def execute(args, in_blender: bool, log: Path, out: Path) -> str:
     """Run one checked command writing to `out`; Blender's own output goes to `log`."""
     start = time.perf_counter()
+    vdbclouds.forget_notes()
     with console.quiet(log):
         interrupt.track_blender_tempdir()
         scene = load_scene(args, in_blender)

@@ -219,6 +219,14 @@ def read(path: str, grid: str, budget: int | None = None) -> vdbcloud.VdbCloud:
     return cloud
 
 
+def forget_notes() -> None:
+    """A new command says its notes again (clouds left out, coarser levels): they are said once per command,
+    not once per Blender session, so a second command in the same session, or another file's cloud of
+    the same name, is told as the first was."""
+    _noted.clear()
+    _level_noted.clear()
+
+
 def placements(scene, strict: bool = True) -> tuple:
     """Where the marked clouds stand now. `strict` (renders, bakes) raises the first cloud's problem; the
     viewport's draw leaves the cloud out and shows why in the sidebar."""
