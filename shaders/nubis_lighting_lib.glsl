@@ -45,10 +45,11 @@ const int NUBIS_MAX_OCTAVES = 8;
 
 /* An artist's VDB cloud lights its samples with its own octaves and sky light, these factors on the
  * scene's settings, fitted against converged Cycles on two VDB clouds (docs/vdb.md#light) and measured
- * on a family of seven (docs/vdb.md#a-family-of-clouds), where no other setting of them did better: the octaves see 1.41 times the optical depth (Attenuation 0.355 -> 0.5) and keep
- * 1.33 times the energy, at most all of the last octave's (Contribution 0.753 -> 1), and the sky light is
- * 0.885 of the scene's (Ambient 1.30 -> 1.15). A lone, dense cloud's sunlit surface scatters more of the
- * sun back than the procedural layers' fit gives it, and less reaches its shadowed side and base. */
+ * on a family of seven (docs/vdb.md#a-family-of-clouds), where no other setting of them did better: the
+ * octaves see 1.41 times the optical depth (Attenuation 0.355 -> 0.5) and keep 1.33 times the energy, at
+ * most all of the last octave's (Contribution 0.753 -> 1), and the sky light is 0.885 of the scene's
+ * (Ambient 1.30 -> 1.15). A lone, dense cloud's sunlit surface scatters more of the sun back than the
+ * procedural layers' fit gives it, and less reaches its shadowed side and base. */
 const float NUBIS_VDB_MS_ATTENUATION_SCALE = 1.41;
 const float NUBIS_VDB_MS_CONTRIBUTION_SCALE = 1.33;
 const float NUBIS_VDB_AMBIENT_SCALE = 0.885;

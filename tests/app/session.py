@@ -476,8 +476,9 @@ def s_new_cloudscape(step: Step):
     for at in (5, 15, None):  # None: once the view has converged, or at --converge seconds
         if at is None:
             yield from _converge(max(ARGS.converge - (time.monotonic() - t), 1.0))
-        while at is not None and time.monotonic() - t < at:
-            yield 1.0
+        else:
+            while time.monotonic() - t < at:
+                yield 1.0
         at = time.monotonic() - t
         cur = shot(step, f"02_camera_view_t{int(at):02d}", "view")
         if prev:

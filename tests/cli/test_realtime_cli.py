@@ -57,6 +57,9 @@ def test_preview_refuses_bad_ranges_before_any_work(tmp_path):
         assert not list((tmp_path / "x").glob("*")) if (tmp_path / "x").exists() else True
     r = run_cli("preview", "--out", str(tmp_path / "y"), "--quality", "ultra")
     assert r.returncode == 2 and "invalid choice" in r.stderr
+    r = run_cli("benchmark", "--out", str(tmp_path / "z"), "--eevee-samples", "0")
+    assert r.returncode != 0 and r.stderr.startswith("nubis: error:") and "--eevee-samples" in r.stderr, r.stderr
+    assert not (tmp_path / "z").exists()
 
 
 def test_benchmark_prints_a_table_and_writes_its_report(tmp_path):
