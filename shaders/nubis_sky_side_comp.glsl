@@ -28,12 +28,15 @@ void main()
   }
   ivec2 taps[NUBIS_SIDE_TAPS];
   float weights[NUBIS_SIDE_TAPS]; /* the horizontal length each tap stands for, in depth slices; 0 outside */
-  float before[NUBIS_SIDE_TAPS];  /* depth from the top at the slice above, and at this slice */
-  float here[NUBIS_SIDE_TAPS];
+  /* Per direction, the taps' weighted depths from the top at the slice above and at this slice: a slice's
+   * sideways depth is the weighted sum's difference across it (the same sum as the taps' differences). */
+  float before[8];
+  float here[8];
   for (int d = 0; d < 8; d++) {
     ivec2 dir = ivec2(round(vec2(cos(float(d) * 0.7853982), sin(float(d) * 0.7853982))));
     float step_len = length(vec2(dir) * side_scale.xy) / side_scale.z;
     int last = 0;
+    float sum = 0.0;
     for (int s = 0; s < NUBIS_SIDE_STEPS; s++) {
       int i = d * NUBIS_SIDE_STEPS + s;
       taps[i] = column + dir * nubis_side_offset(s);
@@ -41,9 +44,10 @@ void main()
       taps[i] = clamp(taps[i], ivec2(0), size.xy - 1);
       weights[i] = inside ? float(nubis_side_offset(s) - last) * step_len : 0.0;
       last = nubis_side_offset(s);
-      here[i] = texelFetch(sky_depth, ivec3(taps[i], 0), 0).r;
-      before[i] = here[i];
+      sum += texelFetch(sky_depth, ivec3(taps[i], 0), 0).r * weights[i];
     }
+    before[d] = sum;
+    here[d] = sum;
   }
   for (int k = 0; k < size.z; k++) {
     int next_k = min(k + 1, size.z - 1);
@@ -51,14 +55,14 @@ void main()
     float span = float(max(next_k - max(k - 1, 0), 1));
     float inverse_sum = 0.0;
     for (int d = 0; d < 8; d++) {
-      float tau = 0.0;
+      float below = 0.0;
       for (int s = 0; s < NUBIS_SIDE_STEPS; s++) {
         int i = d * NUBIS_SIDE_STEPS + s;
-        float below = texelFetch(sky_depth, ivec3(taps[i], next_k), 0).r;
-        tau += (below - before[i]) / span * weights[i];
-        before[i] = here[i];
-        here[i] = below;
+        below += texelFetch(sky_depth, ivec3(taps[i], next_k), 0).r * weights[i];
       }
+      float tau = (below - before[d]) / span;
+      before[d] = here[d];
+      here[d] = below;
       inverse_sum += 1.0 / (tau + 1.0);
     }
     float above = texelFetch(sky_depth, ivec3(column, k), 0).r;

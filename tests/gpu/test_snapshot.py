@@ -25,11 +25,13 @@ from nubis_addon.core.jobs import BakeOptions
 VOXEL = 300.0  # four tiles of the default cloudscape: steps to disturb between, seconds to bake
 
 
-def _viewport_redraw(scene) -> None:
-    """What the 3D viewport's draw does on every redraw: its own state onto the shared GPU inputs."""
+def _viewport_redraw(scene, light: bool = True) -> None:
+    """What the 3D viewport's draw does on every redraw: its own state onto the shared GPU inputs. A bake
+    reads the fields and the uniforms, never the light volumes: with `light` False the redraw leaves the
+    volumes unfilled (over a second each on the suite's software rasterizer) and uploads the rest."""
     from nubis_addon.blender import runtime, scene_io
 
-    runtime.cloud_gpu(scene.nubis.noise_seed).update(scene_io.state_from_scene(scene))
+    runtime.cloud_gpu(scene.nubis.noise_seed).update(scene_io.state_from_scene(scene), light=light)
 
 
 def _step_all(jobs, disturb, least: int = 4) -> list:
@@ -80,12 +82,12 @@ def test_a_disturbed_bake_writes_the_undisturbed_grid(make_scene, tmp_path):
     jobs = work.bake_jobs(scene, str(tmp_path / "busy.vdb"), VOXEL, tiles_per_step=1)
 
     def disturb(n):
-        _viewport_redraw(scene)
+        _viewport_redraw(scene, light=False)
         if n == 1:
             scene.frame_set(scene.frame_current + 200)
         if n == 3:
             scene.nubis.density_erosion = erosion + 0.4
-        _viewport_redraw(scene)
+        _viewport_redraw(scene, light=False)
 
     [busy] = _step_all(jobs, disturb)
     _same_grid(calm.path, busy.path)
@@ -123,14 +125,14 @@ def test_a_disturbed_sequence_bake_writes_the_undisturbed_grids(make_scene, tmp_
 
     def disturb(n):
         scene.frame_set(scene.frame_current + 37)
-        _viewport_redraw(scene)
+        _viewport_redraw(scene, light=False)
         if n == 2:
             scene.nubis.density_erosion = erosion + 0.4
             scene.nubis.layers[0].opacity *= 0.5
             from nubis_addon.blender import scene_io
 
             scene_io.generate_fields(scene)  # the layer edit's composite, as the debounced timer makes it
-            _viewport_redraw(scene)
+            _viewport_redraw(scene, light=False)
 
     results = _step_all(jobs, disturb)
     assert [r.frame for r in results] == frames
@@ -174,7 +176,7 @@ def _act_orbit(blender, scene, tmp_path):
 def _act_play(blender, scene, tmp_path):
     for _ in range(5):
         scene.frame_set(scene.frame_current + 1)
-        _viewport_redraw(scene)
+        _viewport_redraw(scene, light=False)
 
 
 def _act_edit_layer(blender, scene, tmp_path):
@@ -261,7 +263,7 @@ def test_what_the_artist_does_during_a_bake_leaves_its_result_alone(blender, mak
         if n == 2:
             ACTIONS[action](blender, blender.context.scene, tmp_path)
             if blender.context.scene.camera is not None and action != "delete the cloudscape":
-                _viewport_redraw(blender.context.scene)
+                _viewport_redraw(blender.context.scene, light=False)
 
     [busy] = _step_all(jobs, disturb)
     _same_grid(calm_bake, busy.path)
