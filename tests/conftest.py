@@ -97,7 +97,7 @@ def pytest_unconfigure(config):
         os._exit(_exit_status[-1])
 
 
-# The test files that take a worker longest (over 25 s each on the 2-core machine, docs/measurements.md#ci),
+# The test files that take a worker longest (over 24 s each on the 2-core machine, docs/measurements.md#ci),
 # longest first, handed out in this order (`--no-loadscope-reorder`: xdist would otherwise order the files by
 # their number of tests): each file runs whole in one of the two workers (`--dist loadfile`), and a long file
 # handed out last kept one worker busy alone at the end of the run.
@@ -105,21 +105,20 @@ LONGEST_FIRST = (
     "gpu/test_objects_in_clouds.py",
     "gpu/test_sky.py",
     "cli/test_robustness.py",
-    "cli/test_cli.py",
-    "gpu/test_snapshot.py",
-    "gpu/test_vdb_transforms.py",
-    "gpu/test_parity.py",
     "gpu/test_full_parity.py",
-    "gpu/test_temporal.py",
+    "gpu/test_parity.py",
+    "gpu/test_vdb_transforms.py",
     "gpu/test_reference.py",
+    "cli/test_cli.py",
     "gpu/test_audit.py",
+    "gpu/test_temporal.py",
+    "cli/test_distributed_robustness.py",
     "cli/test_bake_vanishing_cli.py",
+    "gpu/test_vdb_levels.py",
+    "gpu/test_bake_cycles.py",
     "gpu/test_superstorm.py",
     "cli/test_realtime_cli.py",
-    "gpu/test_bake_cycles.py",
     "cli/test_vdb_cli.py",
-    "cli/test_distributed_robustness.py",
-    "gpu/test_vdb_levels.py",
     "gpu/test_vdb_clouds.py",
     "gpu/test_light_volumes.py",
 )

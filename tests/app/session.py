@@ -570,10 +570,10 @@ def s_sidebar(step: Step):
         scroll(+15)
         yield from settle()
         end = shot(None, name + "_end", "sidebar")
-        if mae(top, end) > 0.001:  # the panel is taller than the sidebar: keep its end too
+        if mae(top, end) > 0.001:  # the panel is taller than the sidebar: keep its end too, and scroll back
             step.rec["shots"].append(os.path.relpath(end, OUT))
-        scroll(-30)
-        yield from settle()
+            scroll(-30)
+            yield from settle()
         yield from click(heads[label])  # closed again
         yield from settle()
         errors = console_errors()
@@ -975,7 +975,8 @@ def s_vdb_cloud(step: Step):
         step.note(f"object.volume_import (File > Import > OpenVDB) -> {bpy.ops.object.volume_import(filepath=path)}")
     obj = bpy.context.view_layer.objects.active
     step.check(obj is not None and obj.type == "VOLUME", f"imported {getattr(obj, 'name', None)} as a Volume")
-    yield max(ARGS.converge / 2, 8.0)
+    yield 3.0
+    yield from _converge()  # the sky without its procedural clouds, converged: the pictures' reference
     without = shot(step, "07_vdb_imported", "view")
     obj.data.nubis_cloud.enabled = True
     yield 3.0
