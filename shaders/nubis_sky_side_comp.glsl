@@ -6,8 +6,8 @@
  * direction's depth plus one, which the open sides dominate: a point in a tower's wall sees the sky
  * through the wall, where the column above it holds the whole tower. The plus one (a mean free path)
  * keeps the value smooth across a cloud's edge, where a bare depth falls to zero. One invocation
- * walks a column down its slices and keeps each step's last two depths, so every step costs one fetch
- * per slice. */
+ * walks a column down its slices and keeps each direction's weighted sums of its taps' depths at the
+ * last two slices, so every tap costs one fetch per slice (docs/measurements.md#light-volume-fills). */
 const int NUBIS_SIDE_STEPS = 9;
 const int NUBIS_SIDE_TAPS = 8 * NUBIS_SIDE_STEPS;
 
