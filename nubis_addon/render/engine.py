@@ -222,6 +222,7 @@ class CloudGPU:
         self._no_volume = None
         self.volume_fills = 0  # how often the volumes were filled (tests, the benchmark)
         self.field_revision = 0  # bumped by each in-place patch of the field textures (patch_field)
+        self._field_uploads = 0  # bumped by each upload of other pixels: with the patches, what the volumes hold
         self.light_held_until = 0.0  # time.monotonic() before which filled volumes are not refilled
         self.vdb = vdbclouds.VdbTextures()
 
@@ -238,11 +239,16 @@ class CloudGPU:
     def update(self, state: CloudState, light: bool = True) -> None:
         """Upload what the shaders read for `state`; `light` False skips the light volumes (the bake reads
         densities only), which keep their last contents and are refilled by the next lit update."""
-        # Fields are replaced, never edited in place, by everything that changes them: holding the
-        # arrays and comparing identity is exact, and costs nothing per redraw.
+        # Fields are replaced, never edited in place, by everything that changes them but a brush (which
+        # patches the textures too, patch_field): holding the arrays and comparing identity is exact, and
+        # costs nothing per redraw. Other arrays of the same pixels (each state read from the scene has its
+        # own) keep the textures and the light volumes filled from them: a frame's several states then
+        # fill the volumes once, not once each (docs/measurements.md#light-volume-fills).
         arrays = (state.field_a, state.field_b, state.field_c)
         if len(self._field_arrays) != 3 or any(a is not b for a, b in zip(arrays, self._field_arrays, strict=True)):
-            self.field_a, self.field_b, self.field_c = (field_texture(a) for a in arrays)
+            if not self._same_pixels(arrays):
+                self.field_a, self.field_b, self.field_c = (field_texture(a) for a in arrays)
+                self._field_uploads += 1
             self._field_arrays = arrays
         env = state.sky_env
         sky_key = id(env) if env is not None else tuple(state.ambient)
@@ -267,6 +273,17 @@ class CloudGPU:
         held = time.monotonic() < self.light_held_until and all(v is not None for v in self.volumes.values())
         if light and not held:
             self._update_volumes(state)
+
+    def _same_pixels(self, arrays: tuple) -> bool:
+        """Whether `arrays` hold exactly the pixels of the arrays the field textures were made from (a
+        comparison of 12 MB at the default resolution: milliseconds, where a refill of the volumes takes
+        a second on a software rasterizer)."""
+        held = self._field_arrays
+        return (
+            len(held) == 3
+            and self.field_a is not None
+            and all(a.shape == b.shape and np.array_equal(a, b) for a, b in zip(arrays, held, strict=True))
+        )
 
     def hold_light(self, seconds: float) -> None:
         """Keep the light volumes as they are for `seconds` (a brush drag: the clouds under the brush change
@@ -307,7 +324,7 @@ class CloudGPU:
         )
         density_switches = {k: self.switches[k] for k in ("NUBIS_STORMS", "NUBIS_CIRRUS", "NUBIS_VDB")}
         key = (
-            tuple(id(a) for a in self._field_arrays),
+            self._field_uploads,
             self.field_revision,
             self.vdb.key,
             uniforms.pack(still).tobytes(),

@@ -66,15 +66,22 @@ def test_volumes_see_the_whole_deck_that_the_long_tap_misses(make_scene):
     assert abs(volumes["luminance_bias"]) < 0.13, volumes
 
 
+_READBACK: list = []  # the readback shader, made once and never freed (see _sky_volume)
+
+
 def _sky_volume(clouds) -> np.ndarray:
     """The sky volume read back: (slices, rows, columns, 2), the depth from the top and the sideways depth.
     Each slice is drawn into an offscreen by a fragment shader (texelFetch): Blender 4.5 reads only a 3D
-    texture's first slice back."""
-    import gpu
-    from gpu_extras.batch import batch_for_shader
+    texture's first slice back. The shader is kept for the process: Blender remembers the last shader bound
+    by its address, and a freed one whose address a new shader then takes leaves the freed program in
+    use (the next cloud render drew this shader's output)."""
+    if not _READBACK:
+        _READBACK.append(_readback_shader())
+    return _read_slices(_READBACK[0], clouds.volumes["sky_volume"])
 
-    from nubis_addon.core import lightvolume
-    from nubis_addon.render.engine import read_pixels
+
+def _readback_shader():
+    import gpu
 
     info = gpu.types.GPUShaderCreateInfo()
     info.vertex_in(0, "VEC2", "pos")
@@ -83,7 +90,16 @@ def _sky_volume(clouds) -> np.ndarray:
     info.fragment_out(0, "VEC4", "color")
     info.vertex_source("void main() { gl_Position = vec4(pos, 0.0, 1.0); }")
     info.fragment_source("void main() { color = texelFetch(volume, ivec3(ivec2(gl_FragCoord.xy), slice), 0); }")
-    shader = gpu.shader.create_from_info(info)
+    return gpu.shader.create_from_info(info)
+
+
+def _read_slices(shader, volume) -> np.ndarray:
+    import gpu
+    from gpu_extras.batch import batch_for_shader
+
+    from nubis_addon.core import lightvolume
+    from nubis_addon.render.engine import read_pixels
+
     batch = batch_for_shader(shader, "TRIS", {"pos": [(-1.0, -1.0), (3.0, -1.0), (-1.0, 3.0)]})
     w, h, depth = lightvolume.SIZE
     slices = []
@@ -94,7 +110,7 @@ def _sky_volume(clouds) -> np.ndarray:
             for k in range(depth):
                 fb.clear(color=(0.0, 0.0, 0.0, 0.0))
                 shader.bind()
-                shader.uniform_sampler("volume", clouds.volumes["sky_volume"])
+                shader.uniform_sampler("volume", volume)
                 shader.uniform_int("slice", k)
                 batch.draw(shader)
                 slices.append(np.asarray(read_pixels(fb, w, h))[..., :2])
