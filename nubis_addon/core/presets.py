@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from . import limits, paint, schema
+from . import cloudlayers, limits, paint, schema
 from .errors import NubisError
 from .fsutil import not_a_file
 from .state import MAX_STORMS
@@ -40,6 +40,8 @@ class Preset:
     # A preset written before Coverage was a fraction of the sky sets only the multiplier on the field;
     # applying it sets the fraction that multiplier covers on its own field (core/coverage.py).
     legacy_coverage: float | None = None
+    # A layered sky's further layers ([[cloud_layers]], core/cloudlayers.py); the first is the preset's own.
+    cloud_layers: list[cloudlayers.CloudLayer] = field(default_factory=list)
 
 
 def preset_dir() -> Path:
@@ -107,6 +109,8 @@ def parse_preset(data: dict[str, Any], path: Path | None = None) -> Preset:
         if sec == "storms":
             storms = _parse_storms(table, where)
             continue
+        if sec == "cloud_layers":
+            continue  # read once the first layer's settings are known: a further layer starts as a copy
         if not isinstance(table, dict):
             raise NubisError(f"{where}: '{sec}' must be a table like [{sec}], not {toml_value(table)}")
         if sec not in SECTIONS:
@@ -128,10 +132,74 @@ def parse_preset(data: dict[str, Any], path: Path | None = None) -> Preset:
             raise NubisError(f"{where}: {rule.message}")
     _check_span(extra["camera"]["location"], f"{where}: camera.location")
     _check_masks(layers, where)
+    further = _parse_cloud_layers(data.get("cloud_layers", []), params, where)
     meta = extra.pop("preset")
     density = data.get("density", {})
     legacy = params["density_coverage"] if "coverage" in density and "cover" not in density else None
-    return Preset(meta["name"], path, params, extra, layers, meta["description"], storms, legacy)
+    return Preset(meta["name"], path, params, extra, layers, meta["description"], storms, legacy, further)
+
+
+# The sections a [[cloud_layers]] table holds: those of a layer's own settings, and [field] for its stack.
+_CLOUD_LAYER_PLACES = {(s.section, s.name): s for s in schema.CLOUD_LAYER_SETTINGS}
+CLOUD_LAYER_SECTIONS = ("field", *dict.fromkeys(s.section for s in schema.CLOUD_LAYER_SETTINGS))
+
+
+def _parse_cloud_layers(value: Any, first: dict[str, Any], where: str) -> list[cloudlayers.CloudLayer]:
+    """The further layers of a layered sky: each starts as a copy of the first layer's own settings, and
+    its tables change what differs. The whole stack is then checked (core/cloudlayers.py: check_stack)."""
+    if not isinstance(value, list):
+        raise NubisError(f"{where}: cloud_layers must be written as [[cloud_layers]] tables")
+    most = cloudlayers.MAX_CLOUD_LAYERS - 1
+    if len(value) > most:
+        raise NubisError(
+            f"{where}: a sky holds at most {cloudlayers.MAX_CLOUD_LAYERS} cloud layers, the preset's own and "
+            f"{most} [[cloud_layers]], not {len(value) + 1}: remove {len(value) - most} of the [[cloud_layers]]"
+        )
+    out = []
+    for i, raw in enumerate(value):
+        here = f"{where}: cloud_layers[{i}]"
+        if not isinstance(raw, dict):
+            raise NubisError(f"{here} must be a table, not {toml_value(raw)}")
+        out.append(_parse_cloud_layer(raw, first, here, i))
+    ranges = [("the preset's own layer", first["layer_bottom"], first["layer_top"])]
+    ranges += [(c.name, c.params["layer_bottom"], c.params["layer_top"]) for c in out]
+    cloudlayers.check_stack(ranges, where)
+    return out
+
+
+def _parse_cloud_layer(raw: dict[str, Any], first: dict[str, Any], here: str, i: int) -> cloudlayers.CloudLayer:
+    own = cloudlayers.own_params(first)
+    name, enabled, field_layers = f"Layer {i + 2}", True, []
+    for sec, table in raw.items():
+        if sec == "name":
+            if not isinstance(table, str) or not table.strip():
+                raise NubisError(f"{here}.name must be a name in quotes, not {toml_value(table)}")
+            name = table.strip()
+            continue
+        if sec == "enabled":
+            if not isinstance(table, bool):
+                raise NubisError(f"{here}.enabled must be true or false, not {toml_value(table)}")
+            enabled = table
+            continue
+        if sec not in CLOUD_LAYER_SECTIONS or not isinstance(table, dict):
+            raise NubisError(
+                f"{here}: unknown entry '{sec}'; a cloud layer holds name, enabled and the tables "
+                f"{', '.join(f'[cloud_layers.{s}]' for s in CLOUD_LAYER_SECTIONS)}"
+            )
+        for key, val in table.items():
+            if sec == "field" and key == "layers":
+                field_layers = _parse_layers(val, f"{here}")
+                _check_masks(field_layers, here)
+            elif (sec, key) in _CLOUD_LAYER_PLACES:
+                setting = _CLOUD_LAYER_PLACES[(sec, key)]
+                own[setting.key] = check_value(setting, val, f"{here}.{sec}.{key}")
+            elif (sec, key) in _SCENE_BY_PLACE:
+                raise NubisError(
+                    f"{here}.{sec}.{key} is the sky's, shared by every layer: set it in the preset's own [{sec}]"
+                )
+            else:
+                raise NubisError(f"{here}: unknown setting {sec}.{key}: remove it or check the spelling")
+    return cloudlayers.CloudLayer(name, own, field_layers, enabled)
 
 
 def _parse_storms(value: Any, where: str) -> list[dict[str, Any]]:

@@ -1655,6 +1655,31 @@ EXTRA_SECTIONS: dict[str, dict[str, Setting]] = {}
 for _s in EXTRA:
     EXTRA_SECTIONS.setdefault(_s.section, {})[_s.name] = _s
 LAYER_BY_NAME: dict[str, Setting] = {s.name: s for s in LAYER}
+# The settings each cloud layer holds its own value of (core/cloudlayers.py): its altitudes, noise
+# periods, density, wind and weather rules. Every other scene setting is the sky's, shared by its layers.
+CLOUD_LAYER_KEYS: tuple[str, ...] = (
+    "layer_bottom",
+    "layer_top",
+    "noise_lf_period",
+    "noise_hf_period",
+    "noise_curl_period",
+    "noise_curl_strength",
+    "density_sigma",
+    "density_cover",
+    "density_coverage",
+    "density_erosion",
+    "density_multiply_coverage",
+    "wind_direction",
+    "wind_speed",
+    "wind_top_offset",
+    "wind_upward_bias",
+    "wind_detail_speed",
+    "rule_rain",
+    "rule_horizon",
+    "rule_cumulonimbus_top",
+    "rule_horizon_start",
+)
+CLOUD_LAYER_SETTINGS: tuple[Setting, ...] = tuple(BY_KEY[k] for k in CLOUD_LAYER_KEYS)
 STORM_BY_NAME: dict[str, Setting] = {s.name: s for s in STORM}
 QUALITY_COLUMNS: dict[str, str] = {s.quality: s.key for s in SCENE if s.quality}
 

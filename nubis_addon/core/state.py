@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from . import schema
+from . import cloudlayers, schema
 from .bricks import DEFAULT_GPU_LIMIT
 from .schema import defaults
 
@@ -74,18 +74,29 @@ class CloudState:
     # Artists' OpenVDB clouds drawn with the sky (core/vdbcloud.py Placement), at most vdbcloud.MAX_CLOUDS.
     vdb_clouds: tuple = ()
     vdb_gpu_budget: int = DEFAULT_GPU_LIMIT  # bytes the VDB clouds may take on the GPU (the preference)
+    # A layered sky (core/cloudlayers.py): the further layers drawn with the first, in the artist's order,
+    # and whether the first (these params and field_a, field_b) is drawn (switched off or another soloed).
+    cloud_layers: tuple[cloudlayers.LayerField, ...] = ()
+    first_layer_drawn: bool = True
 
     def has_cirrus(self) -> bool:
         return self.field_c is not None and self.params["cirrus_coverage"] > 0 and float(self.field_c[..., 0].max()) > 0
 
+    def drawn_layers(self) -> list[cloudlayers.LayerField]:
+        """The cloud layers drawn, the first (this state's own settings and field) first when it is."""
+        first = []
+        if self.first_layer_drawn and self.field_a is not None and self.field_b is not None:
+            first = [cloudlayers.LayerField("", self.params, self.field_a, self.field_b)]
+        return first + list(self.cloud_layers)
+
     def shell(self) -> tuple[float, float]:
-        """Lowest and highest altitude a cloud can occupy, from the min/max height channels (GDC22)."""
-        bottom, top = self.params["layer_bottom"], self.params["layer_top"]
-        if self.field_b is not None:
-            thickness = top - bottom
-            lo = float(np.min(self.field_b[..., 1]))
-            hi = float(np.max(self.field_b[..., 2]))
-            bottom, top = bottom + min(lo, 0.0) * thickness, bottom + max(hi, 1.0) * thickness
+        """Lowest and highest altitude a cloud can occupy: every drawn layer's base to top, widened by the
+        min/max height channels (GDC22), and the VDB clouds' boxes."""
+        extents = cloudlayers.disjoint_extents(self.drawn_layers())
+        if extents:
+            bottom, top = min(lo for lo, _hi in extents), max(hi for _lo, hi in extents)
+        else:
+            bottom, top = self.params["layer_bottom"], self.params["layer_top"]
         for placed in self.vdb_clouds:
             # The VDB clouds' boxes too (heights as altitudes: a cloud within tens of kilometres of the
             # origin stands within metres of the planet's curve).

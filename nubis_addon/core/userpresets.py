@@ -37,12 +37,7 @@ def dump_preset(preset: presets.Preset) -> str:
         out.append(f"\n[{section}]\n")
         out.extend(_line(s.name, preset.params[s.key]) for s in settings)
         if section == "field":
-            for layer in preset.layers:
-                out.append("\n[[field.layers]]\n")
-                out.extend(_table(layer, schema.LAYER))
-                if layer.get("dabs"):  # a paint layer's strokes, one dab a line
-                    rows = ",\n".join("  " + toml_literal(row) for row in layer["dabs"])
-                    out.append(f"dabs = [\n{rows},\n]\n")
+            out.extend(_field_layers(preset.layers, "field.layers"))
     for storm in preset.storms:
         out.append("\n[[storms]]\n")
         out.extend(_table(storm, schema.STORM))
@@ -52,7 +47,38 @@ def dump_preset(preset: presets.Preset) -> str:
         values = preset.extra.get(section, {})
         out.append(f"\n[{section}]\n")
         out.extend(_line(name, values[name]) for name in table if name in values)
+    out.extend(_cloud_layers(preset))
     return "".join(out)
+
+
+def _field_layers(layers: list[dict[str, Any]], header: str) -> list[str]:
+    out = []
+    for layer in layers:
+        out.append(f"\n[[{header}]]\n")
+        out.extend(_table(layer, schema.LAYER))
+        if layer.get("dabs"):  # a paint layer's strokes, one dab a line
+            rows = ",\n".join("  " + toml_literal(row) for row in layer["dabs"])
+            out.append(f"dabs = [\n{rows},\n]\n")
+    return out
+
+
+def _cloud_layers(preset: presets.Preset) -> list[str]:
+    """The further layers of a layered sky, last in the file: a [[cloud_layers]] table's sub-tables belong to
+    the table above them, so nothing else may follow."""
+    sections: dict[str, list[schema.Setting]] = {}
+    for s in schema.CLOUD_LAYER_SETTINGS:
+        if s.in_preset:
+            sections.setdefault(s.section, []).append(s)
+    out = []
+    for cloud in preset.cloud_layers:
+        out.append("\n[[cloud_layers]]\n")
+        out.append(_line("name", cloud.name))
+        out.append(_line("enabled", cloud.enabled))
+        for section, settings in sections.items():
+            out.append(f"\n[cloud_layers.{section}]\n")
+            out.extend(_line(s.name, cloud.params[s.key]) for s in settings)
+        out.extend(_field_layers(cloud.field_layers, "cloud_layers.field.layers"))
+    return out
 
 
 def _table(values: dict[str, Any], settings: tuple[schema.Setting, ...]) -> list[str]:
