@@ -1,7 +1,8 @@
 /* The cloud density: the one function the viewport, the headless render and the VDB bake all call.
  * Requires: nubis_common_lib.glsl, the NubisParams block `P`, and the samplers
- * field_a (coverage, precipitation, top type, bottom type), field_b (storm coverage, min height,
- * max height, density multiplier), field_c (cirrus coverage, cirrus type), the noise volumes with their
+ * field_a (coverage, precipitation, top type, bottom type) and field_b (storm coverage, min height,
+ * max height, density multiplier), array textures with one slice per cloud layer (docs/layers.md),
+ * field_c (cirrus coverage, cirrus type), the noise volumes with their
  * mip levels as separate textures (noise_lf, noise_lf_mip1, noise_lf_mip2, noise_hf, noise_hf_mip1: Python
  * uploads no mip chain), noise_curl, and noise_cirrus, whose mip chain is packed into one atlas. */
 
@@ -61,6 +62,75 @@ const float NUBIS_TURN_HASH_SCALE = 24634.6345;
 /* A grazing ray's slant through a thin layer is capped at 1 / this cosine (docs/sources.md#cirrus-lighting). */
 const float NUBIS_MIN_SLANT_COS = 0.05;
 
+/* One cloud layer of a layered sky (docs/layers.md; render/uniforms.py packs its rows): its slice of the
+ * field textures and its own settings. Layers share no altitude, so a point of the sky is in one layer
+ * at most (nubis_layer_at). */
+struct NubisLayer {
+  int slice;
+  float bottom;            /* base altitude (the layer setting, before the min/max height channels) */
+  float top;               /* top altitude */
+  float extent_top;        /* the highest its clouds reach: the storm anvil's band hangs under it */
+  vec4 noise;              /* base shape period, detail period, curl period, curl strength */
+  float sigma_scale;       /* its density sigma over P.density_sigma, which the light model multiplies by */
+  float erosion;
+  float coverage;          /* the multiplier on its coverage channel */
+  float multiply_coverage; /* 0 or 1 */
+  vec2 wind_dir;
+  float wind_distance;     /* wind speed x time */
+  float top_offset;
+  float upward_bias;
+  float detail_speed;
+};
+
+NubisLayer nubis_layer(int i)
+{
+  NubisLayer L;
+  L.slice = i;
+  vec4 heights = P.cloud_layer_heights[i];
+  L.bottom = heights.x;
+  L.top = heights.y;
+  L.extent_top = heights.w;
+  L.noise = P.cloud_layer_noise[i];
+  vec4 density = P.cloud_layer_density[i];
+  L.sigma_scale = density.x;
+  L.erosion = density.y;
+  L.coverage = density.z;
+  L.multiply_coverage = density.w;
+  vec4 wind = P.cloud_layer_wind[i];
+  L.wind_dir = wind.xy;
+  L.wind_distance = wind.z;
+  L.top_offset = wind.w;
+  vec4 wind2 = P.cloud_layer_wind2[i];
+  L.upward_bias = wind2.x;
+  L.detail_speed = wind2.y;
+  return L;
+}
+
+/* The layer whose clouds can reach this altitude, or -1 (between layers, above or under them all).
+ * Unrolled: no loop iterations against the platform's loop limit (core/march.py). */
+bool nubis_in_layer(int i, float altitude)
+{
+  vec4 heights = P.cloud_layer_heights[i];
+  return int(P.cloud_layer_count) > i && altitude >= heights.z && altitude <= heights.w;
+}
+
+int nubis_layer_at(float altitude)
+{
+  if (nubis_in_layer(0, altitude)) {
+    return 0;
+  }
+  if (nubis_in_layer(1, altitude)) {
+    return 1;
+  }
+  if (nubis_in_layer(2, altitude)) {
+    return 2;
+  }
+  if (nubis_in_layer(3, altitude)) {
+    return 3;
+  }
+  return -1;
+}
+
 struct NubisFieldSample {
   vec4 a;
   vec4 b;
@@ -84,12 +154,12 @@ float nubis_inside(vec2 xy, vec2 uv)
   return in_field * in_radius;
 }
 
-NubisFieldSample nubis_sample_field(vec2 xy)
+NubisFieldSample nubis_sample_field(vec2 xy, int slice)
 {
   NubisFieldSample f;
   vec2 uv = (xy - vec2(P.field_origin_x, P.field_origin_y)) * P.field_inv_size + 0.5;
-  f.a = textureLod(field_a, clamp(uv, 0.0, 1.0), 0.0);
-  f.b = textureLod(field_b, clamp(uv, 0.0, 1.0), 0.0);
+  f.a = textureLod(field_a, vec3(clamp(uv, 0.0, 1.0), float(slice)), 0.0);
+  f.b = textureLod(field_b, vec3(clamp(uv, 0.0, 1.0), float(slice)), 0.0);
   f.inside = nubis_inside(xy, uv);
   return f;
 }
@@ -112,11 +182,11 @@ float nubis_vertical_profile(float h, float top_type, float bottom_type)
 
 /* Height fraction in the column's own layer: GPU Pro 7's height fraction on the spherical shell, between
  * the min and max height of GDC22's field (docs/sources.md#spherical-height-fraction). */
-float nubis_height_fraction(float altitude, vec4 field_b_sample)
+float nubis_height_fraction(float altitude, vec4 field_b_sample, NubisLayer L)
 {
-  float thickness = P.layer_top - P.layer_bottom;
-  float lo = P.layer_bottom + field_b_sample.g * thickness;
-  float hi = P.layer_bottom + field_b_sample.b * thickness;
+  float thickness = L.top - L.bottom;
+  float lo = L.bottom + field_b_sample.g * thickness;
+  float hi = L.bottom + field_b_sample.b * thickness;
   return (altitude - lo) / max(hi - lo, 1.0);
 }
 
@@ -190,12 +260,12 @@ vec2 nubis_vortex(vec2 xy, out vec2 second, out float weight, out float unturned
 }
 
 /* Detail fBm at a (wind-moved) position, with the curl twist at the base. */
-float nubis_detail_fbm(vec3 p_hf, float h, int level)
+float nubis_detail_fbm(vec3 p_hf, float h, int level, vec4 periods)
 {
-  vec2 curl_uv = nubis_tile_uv(p_hf.xy / P.noise_curl_period, vec2(NUBIS_CURL_SIZE));
+  vec2 curl_uv = nubis_tile_uv(p_hf.xy / periods.z, vec2(NUBIS_CURL_SIZE));
   vec2 curl = textureLod(noise_curl, curl_uv, 0.0).xy * 2.0 - 1.0;
-  p_hf.xy += curl * (1.0 - h) * P.noise_curl_strength;
-  vec3 uvw = p_hf / P.noise_hf_period;
+  p_hf.xy += curl * (1.0 - h) * periods.w;
+  vec3 uvw = p_hf / periods.y;
   NUBIS_COUNT_3D(1);
   /* Branches, not a conditional expression: compilers may evaluate both sides of ?: and fetch twice. */
   vec3 hf;
@@ -237,16 +307,17 @@ NubisDensity nubis_field_density(vec3 p, bool cheap, float lod)
    * result"). The benchmark's naive march (NUBIS_NAIVE) takes the full sample at every step instead;
    * the values are the same. */
   float altitude = nubis_altitude(p, P.layer_planet_radius);
-#if !NUBIS_NAIVE
-  if (altitude < P.shell_bottom || altitude > P.shell_top) {
+  /* Outside every layer there is no cloud (the naive march too: it has no layer to read). */
+  int layer = nubis_layer_at(altitude);
+  if (layer < 0) {
     return d;
   }
-#endif
-  NubisFieldSample f = nubis_sample_field(p.xy);
-  float h = nubis_height_fraction(altitude, f.b);
+  NubisLayer L = nubis_layer(layer);
+  NubisFieldSample f = nubis_sample_field(p.xy, L.slice);
+  float h = nubis_height_fraction(altitude, f.b, L);
   d.h = clamp01(h);
   d.precipitation = f.a.g;
-  float coverage = clamp01(f.a.r * P.density_coverage) * f.inside;
+  float coverage = clamp01(f.a.r * L.coverage) * f.inside;
   float profile = (h > 0.0 && h < 1.0) ? nubis_vertical_profile(h, f.a.b, f.a.a) : 0.0;
   /* GDC22: where storm coverage is non-zero, the flipped vertical profile joins the normal one to
    * spread the top into an anvil (docs/sources.md#anvil). We place the flipped lookup in a band under the
@@ -258,14 +329,15 @@ NubisDensity nubis_field_density(vec3 p, bool cheap, float lod)
   float anvil = 0.0;
   float anvil_coverage = 0.0;
 #if NUBIS_STORMS
-  float band = NUBIS_ANVIL_BAND * (P.shell_top - P.layer_bottom);
-  float anvil_h = (altitude - (P.shell_top - band)) / band;
+  float band = NUBIS_ANVIL_BAND * (L.extent_top - L.bottom);
+  float anvil_h = (altitude - (L.extent_top - band)) / band;
   if (P.storm_count > 0.0 && anvil_h > 0.0 && anvil_h < 1.0) {
     /* The anvil "flattens out and spreads in the wind direction" (GDC22): its storm coverage is read
      * upwind, further the higher the sample, so the top streams downwind of the column. */
-    vec2 upwind = p.xy - vec2(P.wind_dir_x, P.wind_dir_y) * (P.storm_anvil_shift * anvil_h);
+    vec2 upwind = p.xy - L.wind_dir * (P.storm_anvil_shift * anvil_h);
     vec2 upwind_uv = (upwind - vec2(P.field_origin_x, P.field_origin_y)) * P.field_inv_size + 0.5;
-    float anvil_storm = clamp01(textureLod(field_b, clamp(upwind_uv, 0.0, 1.0), 0.0).r) * f.inside;
+    float anvil_storm = clamp01(textureLod(field_b, vec3(clamp(upwind_uv, 0.0, 1.0), float(L.slice)), 0.0).r) *
+                        f.inside;
     anvil = nubis_vertical_profile(1.0 - anvil_h, NUBIS_ANVIL_TYPE, 0.0) * anvil_storm;
     anvil_coverage = max(coverage, NUBIS_ANVIL_COVERAGE * anvil_storm);
   }
@@ -280,14 +352,14 @@ NubisDensity nubis_field_density(vec3 p, bool cheap, float lod)
    * own speed. We subtract the offsets (GDC22) and put the upward bias on z, so features move downwind
    * and rise (docs/sources.md#wind-direction-and-sign); the coverage/type field itself never moves
    * (GDC22). */
-  vec3 wind_dir = vec3(vec2(P.wind_dir_x, P.wind_dir_y), 0.0);
-  vec3 drift = (wind_dir + vec3(0.0, 0.0, P.wind_upward_bias)) * P.wind_distance;
+  vec3 wind_dir = vec3(L.wind_dir, 0.0);
+  vec3 drift = (wind_dir + vec3(0.0, 0.0, L.upward_bias)) * L.wind_distance;
   /* The anvil also leans downwind (GDC22: noises rotated and skewed for a wind-swept look), from the
    * column's own height and storm coverage, which are smooth where the anvil takes over. */
-  vec3 skewed = p - h * wind_dir * (P.wind_top_offset + storm * h * NUBIS_ANVIL_LEAN * P.wind_top_offset);
+  vec3 skewed = p - h * wind_dir * (L.top_offset + storm * h * NUBIS_ANVIL_LEAN * L.top_offset);
   vec3 p_lf = skewed - drift;
 
-  vec3 lf_uvw = p_lf / P.noise_lf_period;
+  vec3 lf_uvw = p_lf / L.noise.x;
   NUBIS_COUNT_3D(1);
   vec4 lf;
   if (lod < 0.5) {
@@ -303,9 +375,9 @@ NubisDensity nubis_field_density(vec3 p, bool cheap, float lod)
   /* GPU Pro 7: the Worley fBm dilates the Perlin-Worley base shape (docs/sources.md#perlin-worley). */
   float shape = remap(lf.r, -(1.0 - lf_fbm), 1.0, 0.0, 1.0);
   /* GDC22's 1 - coverage, so clouds inflate as coverage rises; GPU Pro 7's "smaller clouds are
-   * lighter" multiply is the option in P.density_multiply_coverage (docs/sources.md#coverage-erosion). */
+   * lighter" multiply is the option in the layer's multiply_coverage (docs/sources.md#coverage-erosion). */
   float with_coverage = clamp01(remap(shape * profile, 1.0 - coverage, 1.0, 0.0, 1.0));
-  with_coverage *= mix(1.0, coverage, P.density_multiply_coverage);
+  with_coverage *= mix(1.0, coverage, L.multiply_coverage);
   /* The height the detail noise is shaped by: where the anvil is the larger shape its detail turns
    * to billows (not the wisps of a cloud base), in proportion, so nothing jumps. */
   float detail_h = h;
@@ -313,14 +385,16 @@ NubisDensity nubis_field_density(vec3 p, bool cheap, float lod)
   float anvil_density = clamp01(remap(shape * anvil, 1.0 - anvil_coverage, 1.0, 0.0, 1.0));
   /* Only where the anvil's profile reaches past the column's, as GDC22's max of the two profiles,
    * faded in over a short range of profile instead of switched. */
-  anvil_density *= mix(1.0, anvil_coverage, P.density_multiply_coverage) *
+  anvil_density *= mix(1.0, anvil_coverage, L.multiply_coverage) *
                    smoothstep(-NUBIS_ANVIL_TAKEOVER, NUBIS_ANVIL_TAKEOVER, anvil - profile);
   if (anvil_density > 0.0) {
     detail_h = mix(h, max(h, NUBIS_ANVIL_DETAIL_HEIGHT), anvil_density / (anvil_density + with_coverage));
     with_coverage = max(with_coverage, anvil_density);
   }
 #endif
-  float multiplier = max(f.b.a, 0.0);
+  /* The layer's own sigma travels in the density, so every optical depth (light model, bake) that
+   * multiplies by P.density_sigma gets it (docs/layers.md). */
+  float multiplier = max(f.b.a, 0.0) * L.sigma_scale;
   d.coarse = with_coverage * multiplier;
   /* GPU Pro 7: a wispy base eroded by the detail, billows carved above it; a rising bottom type keeps
    * the wisps higher up the cloud, for ragged undersides (GDC22; docs/sources.md#wispy-and-billowy-detail). */
@@ -334,40 +408,42 @@ NubisDensity nubis_field_density(vec3 p, bool cheap, float lod)
      * average it removes what the full sample removes (uneroded, the light's cheap samples read 3 %
      * darker than full ones; docs/viewport.md#light-model). */
     float mean_modifier = mix(NUBIS_HF_FBM_MEAN, 1.0 - NUBIS_HF_FBM_MEAN, billow);
-    d.fine = clamp01(remap(with_coverage, mean_modifier * P.density_erosion, 1.0, 0.0, 1.0)) * multiplier;
+    d.fine = clamp01(remap(with_coverage, mean_modifier * L.erosion, 1.0, 0.0, 1.0)) * multiplier;
     return d;
   }
 
   /* GPU Pro 7: animated curl noise twists the detail at the base, fading to none at the top
    * (docs/sources.md#curl-noise). Inside a superstorm the detail turns with the vortex; two rings
    * overlap -> two samples (GDC22). */
-  vec3 p_hf = skewed - drift * P.wind_detail_speed;
+  vec3 p_hf = skewed - drift * L.detail_speed;
   /* The rings are decided by where the sample is, not by where the wind has carried its noise, so
    * nothing outside a storm's radius ever turns. */
   vec2 second;
   float ring_weight, unturned;
   vec2 turned = nubis_vortex(p.xy, second, ring_weight, unturned);
   int hf_level = int(lod + 0.5);
-  float hf_fbm = nubis_detail_fbm(vec3(p_hf.xy + (turned - p.xy), p_hf.z), detail_h, hf_level);
+  float hf_fbm = nubis_detail_fbm(vec3(p_hf.xy + (turned - p.xy), p_hf.z), detail_h, hf_level, L.noise);
   if (ring_weight > 0.0) {
-    hf_fbm = mix(hf_fbm, nubis_detail_fbm(vec3(p_hf.xy + (second - p.xy), p_hf.z), detail_h, hf_level), ring_weight);
+    hf_fbm = mix(hf_fbm,
+                 nubis_detail_fbm(vec3(p_hf.xy + (second - p.xy), p_hf.z), detail_h, hf_level, L.noise),
+                 ring_weight);
   }
 #if NUBIS_STORMS
   if (unturned > 0.0) {
     if (P.storm_jittered_rings < 0.5) {
-      hf_fbm = mix(hf_fbm, nubis_detail_fbm(p_hf, detail_h, hf_level), unturned);
+      hf_fbm = mix(hf_fbm, nubis_detail_fbm(p_hf, detail_h, hf_level, L.noise), unturned);
     }
     else if (fract(sin(dot(p.xy, NUBIS_TURN_HASH_DIR)) * NUBIS_TURN_HASH_SCALE) < unturned) {
       /* PS4 quality: one sample, the turned or the unturned detail by a hashed choice. */
-      hf_fbm = nubis_detail_fbm(p_hf, detail_h, hf_level);
+      hf_fbm = nubis_detail_fbm(p_hf, detail_h, hf_level, L.noise);
     }
   }
 #endif
   /* GPU Pro 7: the stored (inverted) Worley fBm erodes the base into wisps, and flipped back it carves
    * billows above the lowest 10 % (`billow`, above). */
   float hf_modifier = mix(hf_fbm, 1.0 - hf_fbm, billow);
-  /* GPU Pro 7: erosion strength 0.2 (P.density_erosion); the remap never raises a value, so fine <= coarse. */
-  float eroded = clamp01(remap(with_coverage, hf_modifier * P.density_erosion, 1.0, 0.0, 1.0));
+  /* GPU Pro 7: erosion strength 0.2 (the layer's erosion); the remap never raises a value, so fine <= coarse. */
+  float eroded = clamp01(remap(with_coverage, hf_modifier * L.erosion, 1.0, 0.0, 1.0));
   d.fine = eroded * multiplier;
   return d;
 }

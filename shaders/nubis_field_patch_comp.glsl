@@ -7,5 +7,10 @@ void main()
   if (texel.x >= patch_size.x || texel.y >= patch_size.y) {
     return;
   }
+#if NUBIS_PATCH_LAYERED
+  /* The cloud layers' fields are one array texture, a slice a layer (docs/layers.md). */
+  imageStore(field_out, ivec3(patch_offset + texel, patch_layer), texelFetch(patch_texels, texel, 0));
+#else
   imageStore(field_out, patch_offset + texel, texelFetch(patch_texels, texel, 0));
+#endif
 }

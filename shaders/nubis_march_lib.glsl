@@ -283,33 +283,29 @@ vec4 nubis_faded_part(vec3 dir, vec3 radiance, float transmittance, float depth_
   return vec4(radiance, alpha);
 }
 
-NubisParts nubis_march_parts(vec3 origin, vec3 dir, vec2 pixel, float split)
+/* The segment [t0, t1] of a ray within the spherical shell between altitudes lo and hi (GPU Pro 7,
+ * GDC22), cut at the draw radius; false when the ray has none. Rays that meet the ground before the
+ * shell see none of it (docs/sources.md#pixel-culling). */
+bool nubis_shell_segment(vec3 origin, vec3 dir, float lo, float hi, out float t0, out float t1)
 {
-  NubisParts parts;
-  parts.near = vec4(0.0);
-  parts.far = vec4(0.0);
-  parts.flash_near = vec4(0.0);
-  parts.flash_far = vec4(0.0);
-  parts.cloud_depth = 0.0;
   float R = P.layer_planet_radius;
-  /* GPU Pro 7, GDC22: the segment between the shell's spheres; rays that meet the ground see no clouds
-   * (docs/sources.md#pixel-culling). */
+  t0 = 0.0;
+  t1 = 0.0;
   vec2 ground = nubis_ray_sphere(origin, dir, R, 0.0);
-  vec2 inner = nubis_ray_sphere(origin, dir, R, P.shell_bottom);
-  vec2 outer = nubis_ray_sphere(origin, dir, R, P.shell_top);
+  vec2 inner = nubis_ray_sphere(origin, dir, R, lo);
+  vec2 outer = nubis_ray_sphere(origin, dir, R, hi);
   if (outer.x > outer.y || outer.y <= 0.0) {
-    return parts;
+    return false;
   }
   float altitude = nubis_altitude(origin, R);
-  float t0, t1;
-  if (altitude < P.shell_bottom) {
+  if (altitude < lo) {
     if (ground.x <= ground.y && ground.y > 0.0 && altitude >= 0.0) {
-      return parts;
+      return false;
     }
     t0 = inner.y;
     t1 = outer.y;
   }
-  else if (altitude <= P.shell_top) {
+  else if (altitude <= hi) {
     t0 = 0.0;
     t1 = (inner.x <= inner.y && inner.x > 0.0) ? inner.x : outer.y;
   }
@@ -327,28 +323,64 @@ NubisParts nubis_march_parts(vec3 origin, vec3 dir, vec2 pixel, float split)
     float c = dot(oxy, oxy) - P.layer_draw_radius * P.layer_draw_radius;
     float disc = b * b - a * c;
     if (disc < 0.0) {
-      return parts;
+      return false;
     }
     t1 = min(t1, (-b + sqrt(disc)) / a);
   }
-  if (t1 <= t0) {
+  return t1 > t0;
+}
+
+/* The parts of a ray the view march takes, nearest first, in `segments` (t0, t1, the span's thickness):
+ * each cloud layer's on its own, so the air between layers costs no steps (docs/layers.md). With VDB
+ * clouds, which may stand anywhere, one segment through the whole shell. Returns how many. */
+int nubis_march_segments(vec3 origin, vec3 dir, out vec3 segments[NUBIS_MAX_LAYERS])
+{
+  int count = 0;
+  float t0, t1;
+  for (int k = 0; k < NUBIS_MAX_LAYERS; k++) {
+    segments[k] = vec3(0.0);
+  }
+#if NUBIS_VDB
+  if (nubis_shell_segment(origin, dir, P.shell_bottom, P.shell_top, t0, t1)) {
+    segments[0] = vec3(t0, t1, P.shell_top - P.shell_bottom);
+    count = 1;
+  }
+#else
+  for (int i = 0; i < NUBIS_MAX_LAYERS; i++) {
+    if (i >= int(P.cloud_layer_count)) {
+      break;
+    }
+    vec4 heights = P.cloud_layer_heights[i];
+    if (!nubis_shell_segment(origin, dir, heights.z, heights.w, t0, t1)) {
+      continue;
+    }
+    /* Insertion by the segment's start: layers share no altitude, so their segments do not overlap. */
+    int at = count;
+    while (at > 0 && segments[at - 1].x > t0) {
+      segments[at] = segments[at - 1];
+      at--;
+    }
+    segments[at] = vec3(t0, t1, heights.w - heights.z);
+    count++;
+  }
+#endif
+  return count;
+}
+
+NubisParts nubis_march_parts(vec3 origin, vec3 dir, vec2 pixel, float split)
+{
+  NubisParts parts;
+  parts.near = vec4(0.0);
+  parts.far = vec4(0.0);
+  parts.flash_near = vec4(0.0);
+  parts.flash_far = vec4(0.0);
+  parts.cloud_depth = 0.0;
+  vec3 segments[NUBIS_MAX_LAYERS];
+  int segment_count = nubis_march_segments(origin, dir, segments);
+  if (segment_count == 0) {
     return parts;
   }
 
-  /* GPU Pro 7, S15: 64 steps looking up, up to 128 towards the horizon (P.march.xy), by the segment's
-   * length (docs/sources.md#view-steps). */
-  float seg = t1 - t0;
-  float thickness = P.shell_top - P.shell_bottom;
-  float k = clamp01((seg - thickness) / max(P.layer_draw_radius - thickness, 1.0));
-  int steps = int(mix(P.march_steps_min, P.march_steps_max, k));
-  /* Within the platform's loop limit (core/march.py, max_steps, in P.max_view_steps;
-   * docs/platform-notes.md#shader-loop-limit): longer steps, never a ray cut short. */
-  steps = min(steps, int(P.max_view_steps));
-  float dt = seg / float(steps);
-#if NUBIS_VDB
-  NubisSteps plan = nubis_vdb_steps(origin, dir, t0, t1, steps, dt);
-  steps = plan.na + plan.nv + plan.nb;
-#endif
   /* Per-pixel start offset, hiding step banding as fine grain; each accumulation pass (options.z)
    * shifts it by the golden ratio so N passes cover the step evenly. */
   float jitter = P.jitter > 0.5 ? fract(nubis_pixel_hash(pixel) + NUBIS_GOLDEN_RATIO_FRACT * P.jitter_pass) : 0.5;
@@ -364,83 +396,104 @@ NubisParts nubis_march_parts(vec3 origin, vec3 dir, vec2 pixel, float split)
   float depth_sum[2] = float[2](0.0, 0.0);
   vec4 flashes[2] = vec4[2](vec4(0.0), vec4(0.0));
   float transmittance = 1.0;
-  int i = 0;                    /* the next step to sample */
-  int uncovered = 0;            /* the first step that no empty cheap sample has cleared */
-  bool fine = NUBIS_NAIVE != 0; /* taking fine samples (true) or searching with cheap ones */
-  int empty_fine = 0;
-  for (int iteration = 0; iteration < NUBIS_MAX_ITERATIONS; iteration++) {
-    if (i >= steps) {
+  for (int segment = 0; segment < NUBIS_MAX_LAYERS; segment++) {
+    if (segment >= segment_count || transmittance < NUBIS_OPAQUE_TRANSMITTANCE) {
       break;
     }
+    float t0 = segments[segment].x;
+    float t1 = segments[segment].y;
+    /* GPU Pro 7, S15: 64 steps looking up, up to 128 towards the horizon (P.march.xy), by the segment's
+     * length against its layer's thickness (docs/sources.md#view-steps). */
+    float seg = t1 - t0;
+    float thickness = segments[segment].z;
+    float k = clamp01((seg - thickness) / max(P.layer_draw_radius - thickness, 1.0));
+    int steps = int(mix(P.march_steps_min, P.march_steps_max, k));
+    /* Within the platform's loop limit (core/march.py, max_steps, in P.max_view_steps, shared by the
+     * ray's segments; docs/platform-notes.md#shader-loop-limit): longer steps, never a ray cut short. */
+    steps = min(steps, int(P.max_view_steps) / segment_count);
+    float dt = seg / float(steps);
 #if NUBIS_VDB
-    float step_dt;
-    float t = nubis_step_t(plan, i, jitter, step_dt);
+    NubisSteps plan = nubis_vdb_steps(origin, dir, t0, t1, steps, dt);
+    steps = plan.na + plan.nv + plan.nb;
+#endif
+    int i = 0;                    /* the next step to sample */
+    int uncovered = 0;            /* the first step that no empty cheap sample has cleared */
+    bool fine = NUBIS_NAIVE != 0; /* taking fine samples (true) or searching with cheap ones */
+    int empty_fine = 0;
+    for (int iteration = 0; iteration < NUBIS_MAX_ITERATIONS; iteration++) {
+      if (i >= steps) {
+        break;
+      }
+#if NUBIS_VDB
+      float step_dt;
+      float t = nubis_step_t(plan, i, jitter, step_dt);
 #else
-    float step_dt = dt;
-    float t = t0 + (float(i) + jitter) * dt;
+      float step_dt = dt;
+      float t = t0 + (float(i) + jitter) * dt;
 #endif
-    vec3 p = origin + dir * t;
-    float lod = nubis_view_lod(t, dither);
+      vec3 p = origin + dir * t;
+      float lod = nubis_view_lod(t, dither);
 #if NUBIS_FETCH_STATS
-    nubis_view_samples++;
+      nubis_view_samples++;
 #endif
 #if !NUBIS_NAIVE
-    if (!fine) {
-      NubisDensity c = nubis_density(p, true, lod);
-      if (c.coarse <= 0.0) {
-        uncovered = i + 1;
-        i += NUBIS_COARSE_STRIDE;
+      if (!fine) {
+        NubisDensity c = nubis_density(p, true, lod);
+        if (c.coarse <= 0.0) {
+          uncovered = i + 1;
+          i += NUBIS_COARSE_STRIDE;
+          continue;
+        }
+        fine = true;
+        empty_fine = 0;
+        i = max(i - NUBIS_COARSE_STRIDE + 1, uncovered);
         continue;
       }
-      fine = true;
+#endif
+      NubisDensity d = nubis_density(p, false, lod);
+      i++;
+      /* GPU Pro 7: no light march where there is no cloud. */
+      if (d.fine <= 0.0) {
+#if !NUBIS_NAIVE
+        empty_fine++;
+        if (empty_fine >= NUBIS_EMPTY_FINE_SAMPLES) {
+          fine = false;
+          uncovered = i;
+        }
+#endif
+        continue;
+      }
       empty_fine = 0;
-      i = max(i - NUBIS_COARSE_STRIDE + 1, uncovered);
-      continue;
-    }
-#endif
-    NubisDensity d = nubis_density(p, false, lod);
-    i++;
-    /* GPU Pro 7: no light march where there is no cloud. */
-    if (d.fine <= 0.0) {
-#if !NUBIS_NAIVE
-      empty_fine++;
-      if (empty_fine >= NUBIS_EMPTY_FINE_SAMPLES) {
-        fine = false;
-        uncovered = i;
-      }
-#endif
-      continue;
-    }
-    empty_fine = 0;
-    float absorb = nubis_extinction_factor(p, d.precipitation);
-    float sigma = d.fine * P.density_sigma * absorb;
-    vec3 s = nubis_in_scattering(p, dir, d, ray, 1.0 - transmittance, absorb, lod, pixel);
+      float absorb = nubis_extinction_factor(p, d.precipitation);
+      float sigma = d.fine * P.density_sigma * absorb;
+      vec3 s = nubis_in_scattering(p, dir, d, ray, 1.0 - transmittance, absorb, lod, pixel);
 #if NUBIS_STORMS
-    vec4 flash_energy = nubis_flash_energy(p, d.fine);
+      vec4 flash_energy = nubis_flash_energy(p, d.fine);
 #endif
-    /* The step covers t -+ dt/2: the share of it in front of `split` goes to the near part. */
-    float near_share = clamp((split - (t - 0.5 * step_dt)) / step_dt, 0.0, 1.0);
-    for (int k = 0; k < 2; k++) {
-      float length_k = step_dt * (k == 0 ? near_share : 1.0 - near_share);
-      if (length_k <= 0.0) {
-        continue;
-      }
-      float step_t = exp(-sigma * length_k);
-      /* Energy-conserving step (Hillaire 2016): the exact integral of constant in-scattering over
-       * the step, instead of a Riemann sum that brightens with larger steps; the albedo is 1 but
-       * where rain or a storm absorbs. */
-      float weight = part_t[k] * ((1.0 - step_t) / absorb);
-      radiance[k] += s * weight;
+      /* The step covers t -+ dt/2: the share of it in front of `split` goes to the near part. */
+      float near_share = clamp((split - (t - 0.5 * step_dt)) / step_dt, 0.0, 1.0);
+      for (int k = 0; k < 2; k++) {
+        float length_k = step_dt * (k == 0 ? near_share : 1.0 - near_share);
+        if (length_k <= 0.0) {
+          continue;
+        }
+        float step_t = exp(-sigma * length_k);
+        /* Energy-conserving step (Hillaire 2016): the exact integral of constant in-scattering over
+         * the step, instead of a Riemann sum that brightens with larger steps; the albedo is 1 but
+         * where rain or a storm absorbs. */
+        float weight = part_t[k] * ((1.0 - step_t) / absorb);
+        radiance[k] += s * weight;
 #if NUBIS_STORMS
-      flashes[k] += flash_energy * weight;
+        flashes[k] += flash_energy * weight;
 #endif
-      depth_sum[k] += t * part_t[k] * (1.0 - step_t);
-      part_t[k] *= step_t;
-    }
-    transmittance = part_t[0] * part_t[1];
-    /* S15: stop once the ray is practically opaque. */
-    if (transmittance < NUBIS_OPAQUE_TRANSMITTANCE) {
-      break;
+        depth_sum[k] += t * part_t[k] * (1.0 - step_t);
+        part_t[k] *= step_t;
+      }
+      transmittance = part_t[0] * part_t[1];
+      /* S15: stop once the ray is practically opaque. */
+      if (transmittance < NUBIS_OPAQUE_TRANSMITTANCE) {
+        break;
+      }
     }
   }
   float alpha = 1.0 - transmittance;

@@ -44,11 +44,27 @@ def update_callback(trigger: str, key: str = ""):
     return update
 
 
+def cloud_layer_callback(trigger: str, key: str = ""):
+    """The `update=` function of a further cloud layer's own setting: its limits kept on the layer itself,
+    then what the trigger asks of the scene."""
+
+    def update(layer, context) -> None:
+        scene = getattr(context, "scene", None)
+        if scene is None or scene_io.in_batch_edit():
+            return
+        if key:
+            enforce_limits(layer, key)
+        changed(scene, trigger)
+
+    update.__name__ = f"nubis_cloud_layer_update_{trigger}"
+    return update
+
+
 def enforce_limits(settings, key: str) -> None:
     """Keep the schema's cross-field limits (a layer top above its bottom, ...): dragging one setting past
     the other carries the other along, as the preset loader would otherwise refuse the file."""
     for rule in schema.CROSS_LIMITS:
-        if key not in (rule.low, rule.high):
+        if key not in (rule.low, rule.high) or not hasattr(settings, rule.low):
             continue
         low, high = getattr(settings, rule.low), getattr(settings, rule.high)
         if high - low >= rule.gap:

@@ -58,16 +58,18 @@ def _float_kw(s: schema.Setting) -> dict:
     return kw
 
 
-def _common(s: schema.Setting) -> tuple[dict, dict]:
-    """A setting's name and tooltip, and its update callback (none when a change triggers nothing)."""
+def _common(s: schema.Setting, owner: str = "scene") -> tuple[dict, dict]:
+    """A setting's name and tooltip, and its update callback (none when a change triggers nothing);
+    `owner` "cloud_layer" for a further cloud layer's own copy of a scene setting."""
     key = s.key if s.group == "scene" else ""
-    update = {"update": events.update_callback(s.trigger, key)} if s.trigger != "none" else {}
+    callback = events.cloud_layer_callback if owner == "cloud_layer" else events.update_callback
+    update = {"update": callback(s.trigger, key)} if s.trigger != "none" else {}
     return {"name": s.label, "description": s.description}, update
 
 
-def prop_for(s: schema.Setting):
-    """The bpy property of one setting."""
-    common, update = _common(s)
+def prop_for(s: schema.Setting, owner: str = "scene"):
+    """The bpy property of one setting (of the scene, or of a further cloud layer: `owner`)."""
+    common, update = _common(s, owner)
     if s.kind == "float":
         return FloatProperty(**common, **update, **_float_kw(s))
     if s.kind == "int":
@@ -172,10 +174,47 @@ NubisStorm = type(
 )
 
 
+def _cloud_layer_annotations() -> dict:
+    """A further cloud layer (core/cloudlayers.py): its own copy of the settings a layer holds, under the
+    scene's keys, so the sidebar draws it with the panels' own code; its field stack and images."""
+    redraw = events.update_callback("redraw")
+    ann = {s.key: prop_for(s, "cloud_layer") for s in schema.CLOUD_LAYER_SETTINGS}
+    ann["name"] = StringProperty(name="Name", description="The cloud layer's name", default="Layer")
+    ann["enabled"] = BoolProperty(name="Enabled", description="Draw this cloud layer", default=True, update=redraw)
+    ann["solo"] = BoolProperty(
+        name="Solo", description="Draw only the soloed cloud layers while any is soloed", update=redraw
+    )
+    ann["layers"] = CollectionProperty(type=NubisFieldLayer)
+    ann["active_layer"] = IntProperty(name="Active Field Layer", min=0)
+    for which, label in (("field_a", "Field A"), ("field_b", "Field B")):
+        ann[which] = PointerProperty(name=label, description=f"This cloud layer's {label}", type=bpy.types.Image)
+    return ann
+
+
+NubisCloudLayer = type(
+    "NubisCloudLayer",
+    (bpy.types.PropertyGroup,),
+    {"__annotations__": _cloud_layer_annotations(), "__doc__": "A further cloud layer of a layered sky"},
+)
+
+
 def _scene_annotations() -> dict:
     ann = _annotations(schema.SCENE)
     ann["layers"] = CollectionProperty(type=NubisFieldLayer)
     ann["storms"] = CollectionProperty(type=NubisStorm)
+    redraw = events.update_callback("redraw")
+    # A layered sky (docs/layers.md): the first layer is these settings; the further ones follow.
+    ann["cloud_layers"] = CollectionProperty(type=NubisCloudLayer)
+    ann["active_cloud_layer"] = IntProperty(
+        name="Active Cloud Layer", description="The cloud layer the panels below act on (0: the first)", min=0
+    )
+    ann["first_layer_name"] = StringProperty(name="Name", description="The first cloud layer's name", default="Layer 1")
+    ann["first_layer_enabled"] = BoolProperty(
+        name="Enabled", description="Draw the first cloud layer", default=True, update=redraw
+    )
+    ann["first_layer_solo"] = BoolProperty(
+        name="Solo", description="Draw only the soloed cloud layers while any is soloed", update=redraw
+    )
     return ann
 
 
@@ -185,7 +224,7 @@ NubisSceneSettings = type(
     {"__annotations__": _scene_annotations(), "__doc__": "Nubis cloudscape settings of a scene"},
 )
 
-CLASSES = (NubisPaintDab, NubisFieldLayer, NubisStorm, NubisSceneSettings)
+CLASSES = (NubisPaintDab, NubisFieldLayer, NubisStorm, NubisCloudLayer, NubisSceneSettings)
 
 
 register, unregister = ui.property_group_registration(CLASSES, bpy.types.Scene, "nubis", NubisSceneSettings)

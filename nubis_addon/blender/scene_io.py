@@ -13,7 +13,7 @@ import bpy
 import numpy as np
 from mathutils import Euler, Matrix, Vector
 
-from ..core import bundled, camera, coverage, limits, paint, schema, userpresets
+from ..core import bundled, camera, cloudlayers, coverage, limits, paint, schema, userpresets
 from ..core import fields as fieldgen
 from ..core import sky as skymath
 from ..core import storms as stormgen
@@ -115,11 +115,12 @@ def field_generation() -> int:
     return _field_generation[0]
 
 
-def write_field_image(settings, which: str, data: np.ndarray):
-    """Store a field array in its image, creating or resizing it. The image is packed into the .blend
-    when the file is saved (blender/events.py), not on every composite: a slider drag re-composites
-    many times a second."""
-    attr, name = FIELD_IMAGES[which]
+def write_field_image(settings, which: str, data: np.ndarray, name: str = ""):
+    """Store a field array in its image, creating or resizing it (named `name`, or as FIELD_IMAGES says).
+    The image is packed into the .blend when the file is saved (blender/events.py), not on every
+    composite: a slider drag re-composites many times a second."""
+    attr, default_name = FIELD_IMAGES[which]
+    name = name or default_name
     h, w = data.shape[:2]
     img = getattr(settings, attr)
     if img is None or tuple(img.size) != (w, h) or not img.is_float:
@@ -135,9 +136,11 @@ def write_field_image(settings, which: str, data: np.ndarray):
 
 
 def pack_fields(settings) -> None:
-    """Pack the field images whose pixels changed since they were last packed, so they survive save and reload."""
-    for attr, _name in FIELD_IMAGES.values():
-        img = getattr(settings, attr)
+    """Pack the field images whose pixels changed since they were last packed, so they survive save and
+    reload: the first cloud layer's and the cirrus, and each further layer's."""
+    images = [getattr(settings, attr) for attr, _name in FIELD_IMAGES.values()]
+    images += [getattr(c, attr) for c in settings.cloud_layers for attr in ("field_a", "field_b")]
+    for img in images:
         if img is not None and (img.packed_file is None or img.is_dirty):
             img.pack()
 
@@ -156,6 +159,7 @@ class SceneState:
     pre_paint: tuple | None = None  # (the paintable planes before the paint, the slider's multiplier)
     raster_keys: dict = field(default_factory=dict)  # a paint layer's pointer -> its key in core/paint.py
     vortex: dict = field(default_factory=dict)  # an animated storm's vortex times, by F-curve (_vortex_time)
+    layer_coverage: dict = field(default_factory=dict)  # a further cloud layer's coverage multiplier, by name
 
 
 _scenes: dict[int, SceneState] = {}
@@ -345,7 +349,97 @@ def generate_fields(scene, progress=None) -> None:
         state.pre_paint = None
     for which, data in result.items():
         write_field_image(settings, which, data)
+    for cloud in settings.cloud_layers:
+        composite_cloud_layer(scene, cloud)
     state.stale = False
+
+
+# ---- a layered sky: the further cloud layers (core/cloudlayers.py, docs/layers.md) ---------------------
+
+
+def cloud_layer_params(settings, cloud) -> dict:
+    """A further cloud layer's full settings: the sky's, with the layer's own on top."""
+    own = {s.key: _from_blender(s, getattr(cloud, s.key)) for s in schema.CLOUD_LAYER_SETTINGS}
+    return cloudlayers.layer_params(params_from_scene(settings), own)
+
+
+def composite_cloud_layer(scene, cloud) -> None:
+    """Composite a further layer's stack into its own field images, with its weather rules, its coverage
+    multiplier and its strokes, as generate_fields does the first layer's. The superstorms are the first
+    layer's: their stencils and lights act there (docs/layers.md)."""
+    params = cloud_layer_params(scene.nubis, cloud)
+    result = fieldgen.composite([layer_to_dict(layer) for layer in cloud.layers], params, image_arrays(cloud))
+    if cloud.rule_rain:
+        fieldgen.apply_rain_rule(result, cloud.rule_cumulonimbus_top)
+    if cloud.rule_horizon:
+        fieldgen.apply_horizon_rule(result, params, _camera_xy(scene), cloud.rule_horizon_start)
+    painted = paint_layers(cloud, params)
+    m = coverage.multiplier_for(cloud.density_cover, coverage.histogram(result["a"][..., 0]))
+    if any(p.channel == "coverage" for p in painted):
+        m = max(m, paint.MULTIPLIER_FLOOR)
+    scene_state(scene).layer_coverage[cloud.name] = m
+    try:
+        with batch_edit():
+            cloud.density_coverage = m
+    except (AttributeError, RuntimeError):
+        pass  # a composite made while Blender draws cannot write settings; renders read layer_coverage
+    if painted:
+        paint.apply(result, paint.pre_planes(result), painted, m)
+    for which in ("a", "b"):
+        write_field_image(cloud, which, result[which], f"{FIELD_IMAGES[which][1]} ({cloud.name})")
+
+
+def drawn_cloud_layers(scene) -> tuple[tuple[cloudlayers.LayerField, ...], bool]:
+    """The further layers drawn (enabled, and soloed while any layer is) with their fields, and whether
+    the first layer is drawn. A stack the sky cannot draw (layers sharing altitudes) is refused here."""
+    settings = scene.nubis
+    soloing = settings.first_layer_solo or any(c.solo for c in settings.cloud_layers)
+
+    def drawn(enabled: bool, solo: bool) -> bool:
+        return enabled and (solo or not soloing)
+
+    first = drawn(settings.first_layer_enabled, settings.first_layer_solo)
+    ranges = [(settings.first_layer_name, settings.layer_bottom, settings.layer_top)] if first else []
+    out = []
+    res = settings.field_resolution
+    known = _known_state(scene).layer_coverage
+    for cloud in settings.cloud_layers:
+        if not drawn(cloud.enabled, cloud.solo):
+            continue
+        params = cloud_layer_params(settings, cloud)
+        params["density_coverage"] = known.get(cloud.name, cloud.density_coverage)
+        a, b = (read_field_image(getattr(cloud, f"field_{w}"), w, res) for w in ("a", "b"))
+        out.append(cloudlayers.LayerField(cloud.name, params, a, b))
+        ranges.append((cloud.name, cloud.layer_bottom, cloud.layer_top))
+    cloudlayers.check_stack(ranges, "the scene's cloud layers")
+    return tuple(out), first
+
+
+def add_cloud_layer(settings, data: cloudlayers.CloudLayer, preset_path: Path | None = None):
+    """A further cloud layer made from its preset data (not composited: generate_fields does that)."""
+    cloud = settings.cloud_layers.add()
+    cloud.name, cloud.enabled = data.name, data.enabled
+    for s in schema.CLOUD_LAYER_SETTINGS:
+        value = data.params[s.key]
+        setattr(cloud, s.key, value.upper() if s.kind == "enum" else value)
+    for layer in data.field_layers:
+        layer = dict(layer)
+        if layer["kind"] == "image":
+            layer["image"] = _load_layer_image(layer["image"], preset_path)
+        layer_from_dict(cloud.layers.add(), layer)
+    return cloud
+
+
+def cloud_layers_of(settings) -> list[cloudlayers.CloudLayer]:
+    """The further layers as preset data (what Save Preset writes), floats tidied as the rest."""
+    tidy = userpresets.tidy_float32
+    out = []
+    for cloud in settings.cloud_layers:
+        own = {s.key: _from_blender(s, getattr(cloud, s.key)) for s in schema.CLOUD_LAYER_SETTINGS}
+        own = {k: tidy(v) if isinstance(v, float) else v for k, v in own.items()}
+        stack = [_layer_table(layer) for layer in cloud.layers]
+        out.append(cloudlayers.CloudLayer(cloud.name, own, stack, cloud.enabled))
+    return out
 
 
 # ---- superstorms ------------------------------------------------------------------------------------
@@ -538,6 +632,11 @@ def apply_preset(scene, preset: Preset, progress=None, keep: Keep = Keep()) -> N
             if data["kind"] == "image":
                 data["image"] = _load_layer_image(data["image"], preset.path)
             layer_from_dict(settings.layers.add(), data)
+        settings.cloud_layers.clear()
+        for data in preset.cloud_layers:
+            add_cloud_layer(settings, data, preset.path)
+        settings.active_cloud_layer = 0
+        settings.first_layer_enabled, settings.first_layer_solo = True, False
         settings.sun = own_sun or _setup_sun(scene, preset.extra["sun"])
         if not keep.camera or scene.camera is None:
             _setup_camera(scene, preset.extra["camera"])
@@ -581,15 +680,7 @@ def preset_from_scene(scene, name: str, description: str = "") -> Preset:
     for s in schema.PRESET_SCENE:
         value = _from_blender(s, getattr(settings, s.key))
         params[s.key] = tidy(value) if s.kind in ("float", "vector", "color") else value
-    layers = []
-    for layer in settings.layers:
-        data = {k: tidy(v) for k, v in layer_to_dict(layer).items()}
-        if layer.kind == "PAINT" and len(layer.dabs):
-            data["dabs"] = [
-                [tidy(float(v)) if kind is float else int(v) for (_name, kind), v in zip(_DAB_TYPES, row, strict=True)]
-                for row in paint_dabs(layer)
-            ]
-        layers.append(data)
+    layers = [_layer_table(layer) for layer in settings.layers]
     storms = []
     for storm in list(settings.storms)[:MAX_STORMS]:
         data = {k: tidy(v) for k, v in table_to_dict(storm, schema.STORM).items()}
@@ -641,7 +732,19 @@ def preset_from_scene(scene, name: str, description: str = "") -> Preset:
     for table in extra.values():
         for key, value in table.items():
             table[key] = tidy(value)
-    return Preset(name, None, params, extra, layers, description, storms)
+    return Preset(name, None, params, extra, layers, description, storms, cloud_layers=cloud_layers_of(settings))
+
+
+def _layer_table(layer) -> dict:
+    """A field layer as its preset table, a paint layer's strokes included, floats tidied."""
+    tidy = userpresets.tidy_float32
+    data = {k: tidy(v) for k, v in layer_to_dict(layer).items()}
+    if layer.kind == "PAINT" and len(layer.dabs):
+        data["dabs"] = [
+            [tidy(float(v)) if kind is float else int(v) for (_name, kind), v in zip(_DAB_TYPES, row, strict=True)]
+            for row in paint_dabs(layer)
+        ]
+    return data
 
 
 def _load_layer_image(ref: str, preset_path: Path | None) -> str:
@@ -781,6 +884,7 @@ def state_from_scene(scene, camera_location=None, fields: tuple | None = None, w
         fields = read_fields(settings)  # first: a composite owed also sets the coverage multiplier
     params = params_from_scene(settings)
     params["density_coverage"] = coverage_multiplier(scene)
+    further, first_drawn = drawn_cloud_layers(scene)
     sun = find_sun(scene)
     if sun is not None:
         direction = tuple(evaluated_matrix(sun).to_3x3() @ Vector((0.0, 0.0, 1.0)))
@@ -808,6 +912,8 @@ def state_from_scene(scene, camera_location=None, fields: tuple | None = None, w
         storms=storm_lights(settings, scene, time),
         vdb_clouds=vdbclouds.placements(scene, strict=wait),
         vdb_gpu_budget=vdbclouds.gpu_budget(),
+        cloud_layers=further,
+        first_layer_drawn=first_drawn,
     )
 
 

@@ -18,11 +18,11 @@ from ..core.schema import defaults
 from ..core.state import CloudState
 from . import fieldpatch, uniforms, vdbclouds
 from .sources import CLOUD_LIBS, assemble, read_shader
-from .textures import NoiseTextures, field_texture, sky_texture
+from .textures import NoiseTextures, field_stack_texture, field_texture, sky_texture
 
 CLOUD_SAMPLERS = (
-    ("FLOAT_2D", "field_a"),
-    ("FLOAT_2D", "field_b"),
+    ("FLOAT_2D_ARRAY", "field_a"),
+    ("FLOAT_2D_ARRAY", "field_b"),
     ("FLOAT_2D", "field_c"),
     ("FLOAT_3D", "noise_lf"),
     ("FLOAT_3D", "noise_lf_mip1"),
@@ -239,17 +239,7 @@ class CloudGPU:
     def update(self, state: CloudState, light: bool = True) -> None:
         """Upload what the shaders read for `state`; `light` False skips the light volumes (the bake reads
         densities only), which keep their last contents and are refilled by the next lit update."""
-        # Fields are replaced, never edited in place, by everything that changes them but a brush (which
-        # patches the textures too, patch_field): holding the arrays and comparing identity is exact, and
-        # costs nothing per redraw. Other arrays of the same pixels (each state read from the scene has its
-        # own) keep the textures and the light volumes filled from them: a frame's several states then
-        # fill the volumes once, not once each (docs/measurements.md#light-volume-fills).
-        arrays = (state.field_a, state.field_b, state.field_c)
-        if len(self._field_arrays) != 3 or any(a is not b for a, b in zip(arrays, self._field_arrays, strict=True)):
-            if not self._same_pixels(arrays):
-                self.field_a, self.field_b, self.field_c = (field_texture(a) for a in arrays)
-                self._field_uploads += 1
-            self._field_arrays = arrays
+        self._upload_fields(state)
         env = state.sky_env
         sky_key = id(env) if env is not None else tuple(state.ambient)
         if self.sky_env is None or sky_key != self._sky_key or (env is not None and env is not self._sky_array):
@@ -274,13 +264,34 @@ class CloudGPU:
         if light and not held:
             self._update_volumes(state)
 
+    def _upload_fields(self, state: CloudState) -> None:
+        """The field textures: the drawn cloud layers' A and B images as two array textures (a slice a
+        layer, docs/layers.md) and the cirrus image."""
+        # Fields are replaced, never edited in place, by everything that changes them but a brush (which
+        # patches the textures too, patch_field): holding the arrays and comparing identity is exact, and
+        # costs nothing per redraw. Other arrays of the same pixels (each state read from the scene has its
+        # own) keep the textures and the light volumes filled from them: a frame's several states then
+        # fill the volumes once, not once each (docs/measurements.md#light-volume-fills).
+        layers = state.drawn_layers()
+        arrays = (*(f.field_a for f in layers), *(f.field_b for f in layers), state.field_c)
+        held = self._field_arrays
+        if len(arrays) == len(held) and all(a is b for a, b in zip(arrays, held, strict=True)):
+            return
+        if not self._same_pixels(arrays):
+            n = len(layers)
+            self.field_a = field_stack_texture(list(arrays[:n]))
+            self.field_b = field_stack_texture(list(arrays[n : 2 * n]))
+            self.field_c = field_texture(arrays[-1])
+            self._field_uploads += 1
+        self._field_arrays = arrays
+
     def _same_pixels(self, arrays: tuple) -> bool:
         """Whether `arrays` hold exactly the pixels of the arrays the field textures were made from (a
         comparison of 12 MB at the default resolution: milliseconds, where a refill of the volumes takes
         a second on a software rasterizer)."""
         held = self._field_arrays
         return (
-            len(held) == 3
+            len(held) == len(arrays)
             and self.field_a is not None
             and all(a.shape == b.shape and np.array_equal(a, b) for a, b in zip(arrays, held, strict=True))
         )
@@ -291,13 +302,20 @@ class CloudGPU:
         self.light_held_until = time.monotonic() + seconds
 
     def patch_field(self, arrays: tuple, which: int, rect: tuple[int, int, int, int]) -> bool:
-        """A brush changed `rect` of field image `which` (0 A, 1 B, 2 cirrus) in the arrays this object
-        uploaded, in place: write that rectangle into the texture (render/fieldpatch.py). Returns False, doing
-        nothing, when these are not the arrays uploaded (the next update uploads them whole)."""
-        if len(self._field_arrays) != 3 or any(a is not b for a, b in zip(arrays, self._field_arrays, strict=True)):
+        """A brush changed `rect` of field image `which` (0 A, 1 B, 2 cirrus) of one cloud layer's arrays
+        (A, B, cirrus), in place: write that rectangle into the texture's slice those arrays were uploaded
+        to (render/fieldpatch.py). Returns False, doing nothing, when they are not among the arrays uploaded
+        (the next update uploads them whole)."""
+        held = self._field_arrays
+        at = next((k for k, a in enumerate(held) if a is arrays[which]), None)
+        if at is None:
             return False
-        texture = (self.field_a, self.field_b, self.field_c)[which]
-        fieldpatch.patch(texture, self._field_arrays[which], rect)
+        layers = (len(held) - 1) // 2
+        if at == len(held) - 1:
+            fieldpatch.patch(self.field_c, held[at], rect)
+        else:
+            texture = self.field_a if at < layers else self.field_b
+            fieldpatch.patch(texture, held[at], rect, layer=at % layers)
         self.field_revision += 1
         return True
 

@@ -107,6 +107,18 @@ def field_texture(field: np.ndarray) -> gpu.types.GPUTexture:
     return texture_from_array(np.nan_to_num(field.astype(np.float32), nan=0.0, posinf=0.0, neginf=0.0), "RGBA32F")
 
 
+def field_stack_texture(fields: list[np.ndarray]) -> gpu.types.GPUTexture:
+    """The cloud layers' data-field images (each (H, W, 4) float, bottom row first, all one size) as one 2D
+    array texture, a slice per layer (docs/layers.md): one sampler for up to four layers. No layer: one
+    empty slice, so the sampler is always bound."""
+    if not fields:
+        fields = [np.zeros((1, 1, 4), np.float32)]
+    stack = np.stack([np.nan_to_num(f.astype(np.float32), nan=0.0, posinf=0.0, neginf=0.0) for f in fields])
+    n, h, w = stack.shape[:3]
+    buf = gpu.types.Buffer("FLOAT", stack.size, np.ascontiguousarray(stack).ravel())
+    return gpu.types.GPUTexture((w, h), layers=n, format="RGBA32F", data=buf)
+
+
 def sky_texture(env: np.ndarray) -> gpu.types.GPUTexture:
     """An equirectangular environment (H, W, 3) float, bottom row first (core/sky.py), as a float texture."""
     return texture_from_array(np.nan_to_num(np.asarray(env, np.float32)[..., :3], nan=0.0, posinf=0.0), "RGBA32F")

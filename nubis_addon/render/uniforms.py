@@ -15,7 +15,7 @@ from functools import cache
 
 import numpy as np
 
-from ..core import lightvolume, march, schema, storms, vdbcloud
+from ..core import cloudlayers, lightvolume, march, schema, storms, vdbcloud
 from ..core.errors import NubisError
 from ..core.state import MAX_STORMS, CloudState, wind_vector
 
@@ -100,6 +100,7 @@ _FLOATS: tuple[tuple[str, str, Callable[[CloudState], float]], ...] = (
     ("max_view_steps", "most view steps within the shader loop limit", lambda st: float(state_max_steps(st))),
     ("vdb_count", "VDB clouds drawn (<= NUBIS_MAX_VDB)", lambda st: float(len(st.vdb_clouds))),
     ("vdb_step", "the view march's step through the VDB clouds (metres)", lambda st: _vdb_step(st)),
+    ("cloud_layer_count", "cloud layers drawn (<= NUBIS_MAX_LAYERS)", lambda st: float(len(st.drawn_layers()))),
 )
 
 
@@ -187,6 +188,7 @@ def struct_members() -> tuple[tuple[str, str, int], ...]:
     floats = [(s.key, "float", 0) for s in schema.gpu_settings()] + [(n, "float", 0) for n, _d, _f in _FLOATS]
     floats += [(f"_pad{i}", "float", 0) for i in range(-len(floats) % 4)]
     arrays = [(name, "vec4", n) for name, n, _doc, _fn in _ARRAYS]
+    arrays += [(name, "vec4", cloudlayers.MAX_CLOUD_LAYERS) for name, _doc in _LAYER_ARRAYS]
     return tuple(vec4 + floats + arrays)
 
 
@@ -196,17 +198,19 @@ def struct_source() -> str:
     docs = {s.key: f"{s.label} ({s.unit.lower()})" if s.unit != "NONE" else s.label for s in schema.gpu_settings()}
     docs.update({n: d for n, d, _f in _VEC4 + _FLOATS})
     docs.update({n: d for n, _c, d, _f in _ARRAYS})
+    docs.update(dict(_LAYER_ARRAYS))
     lines = ["/* Generated from core/schema.py by render/uniforms.py: one member per setting, by its key. */"]
     lines.append(f"#define NUBIS_MAX_STORMS {MAX_STORMS}")
     lines.append(f"#define NUBIS_MAX_LIGHT_TAPS {march.MAX_LIGHT_TAPS}")
     lines.append(f"#define NUBIS_MAX_VDB {vdbcloud.MAX_CLOUDS}")
+    lines.append(f"#define NUBIS_MAX_LAYERS {cloudlayers.MAX_CLOUD_LAYERS}")
 
     def size_name(name: str) -> str:
-        return (
-            "NUBIS_MAX_VDB"
-            if name.startswith("vdb_")
-            else {"light_taps": "NUBIS_MAX_LIGHT_TAPS"}.get(name, "NUBIS_MAX_STORMS")
-        )
+        if name.startswith("vdb_"):
+            return "NUBIS_MAX_VDB"
+        if name.startswith("cloud_layer_"):
+            return "NUBIS_MAX_LAYERS"
+        return {"light_taps": "NUBIS_MAX_LIGHT_TAPS"}.get(name, "NUBIS_MAX_STORMS")
 
     lines.append("struct NubisParams {")
     for name, typ, n in struct_members():
@@ -222,6 +226,7 @@ def member_values(state: CloudState) -> dict:
     out.update({name: fn(state) for name, _doc, fn in _VEC4})
     out.update({name: float(fn(state)) for name, _doc, fn in _FLOATS})
     out.update({name: fn(state) for name, _n, _doc, fn in _ARRAYS})
+    out.update(layer_rows(state))
     return out
 
 
@@ -253,6 +258,39 @@ def state_max_steps(state: CloudState) -> int:
     """The view steps this state's march may take within the shader loop limit (core/march.py)."""
     p = state.params
     return march.max_steps(p["march_light_samples"], len(state.storms), state.light_mode, len(state.vdb_clouds))
+
+
+def layer_rows(state: CloudState) -> dict[str, list[tuple]]:
+    """The drawn cloud layers' rows of the block (core/cloudlayers.py; NubisLayer in
+    shaders/nubis_density_lib.glsl), made once per pack: each layer's extent reads its whole field."""
+    layers = state.drawn_layers()
+    extents = cloudlayers.disjoint_extents(layers)
+    sigma = state.params["density_sigma"]
+    rows: dict[str, list[tuple]] = {name: [] for name, _doc in _LAYER_ARRAYS}
+    for layer, (lo, hi) in zip(layers, extents, strict=True):
+        p = layer.params
+        wind = wind_vector(p["wind_direction"])
+        rows["cloud_layer_heights"].append((p["layer_bottom"], p["layer_top"], lo, hi))
+        rows["cloud_layer_noise"].append(
+            (p["noise_lf_period"], p["noise_hf_period"], p["noise_curl_period"], p["noise_curl_strength"])
+        )
+        multiply = float(p["density_multiply_coverage"])
+        rows["cloud_layer_density"].append(
+            (p["density_sigma"] / sigma, p["density_erosion"], p["density_coverage"], multiply)
+        )
+        rows["cloud_layer_wind"].append((*wind, p["wind_speed"] * state.time, p["wind_top_offset"]))
+        rows["cloud_layer_wind2"].append((p["wind_upward_bias"], p["wind_detail_speed"], 0.0, 0.0))
+    return rows
+
+
+# The cloud layers' arrays of vec4 (one row a drawn layer, NUBIS_MAX_LAYERS rows): name, what a row holds.
+_LAYER_ARRAYS: tuple[tuple[str, str], ...] = (
+    ("cloud_layer_heights", "a cloud layer's base, top, and the lowest and highest altitudes its clouds reach"),
+    ("cloud_layer_noise", "its base shape period, detail period, curl period, curl strength"),
+    ("cloud_layer_density", "its sigma / density_sigma, erosion, coverage multiplier, multiply coverage (0/1)"),
+    ("cloud_layer_wind", "its wind direction x, y, distance travelled (speed x time), cloud-top offset"),
+    ("cloud_layer_wind2", "its upward bias, detail speed, -, -"),
+)
 
 
 def _vortex_time(state: CloudState, storm) -> float:
