@@ -156,7 +156,7 @@ class NUBIS_OT_layer_add(NeedsCloudscape, NubisOperator, bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     def run(self, context):
-        s = context.scene.nubis
+        s = ui.active_cloud_layer(context.scene)
         if len(s.layers) >= MAX_LAYERS:
             raise NubisError(f"a scene holds at most {MAX_LAYERS} field layers: merge or remove one first")
         layer = s.layers.add()
@@ -181,7 +181,7 @@ class NUBIS_OT_layer_remove(NeedsCloudscape, NubisOperator, bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     def run(self, context):
-        s = context.scene.nubis
+        s = ui.active_cloud_layer(context.scene)
         _active_layer(s, "remove")
         s.layers.remove(s.active_layer)
         s.active_layer = max(0, min(s.active_layer, len(s.layers) - 1))
@@ -199,7 +199,7 @@ class NUBIS_OT_layer_move(NeedsCloudscape, NubisOperator, bpy.types.Operator):
     direction: EnumProperty(items=(("UP", "Up", ""), ("DOWN", "Down", "")))
 
     def run(self, context):
-        s = context.scene.nubis
+        s = ui.active_cloud_layer(context.scene)
         target = s.active_layer + (-1 if self.direction == "UP" else 1)
         if 0 <= target < len(s.layers):
             s.layers.move(s.active_layer, target)
@@ -216,7 +216,7 @@ class NUBIS_OT_layer_duplicate(NeedsCloudscape, NubisOperator, bpy.types.Operato
     bl_options = {"REGISTER", "UNDO"}
 
     def run(self, context):
-        s = context.scene.nubis
+        s = ui.active_cloud_layer(context.scene)
         data = scene_io.layer_to_dict(_active_layer(s, "duplicate"))
         data["name"] += " copy"
         with scene_io.batch_edit():

@@ -11,13 +11,17 @@ from ..core.errors import NubisError
 from . import paint, pipeline, presetlist, runtime, status, ui, viewport
 
 
-def draw_settings(layout, owner, settings) -> None:
-    """The schema's settings of one panel, in its order, as Blender's property-split columns."""
+def draw_settings(layout, owner, settings, layer_owner=None) -> None:
+    """The schema's settings of one panel, in its order, as Blender's property-split columns; a cloud
+    layer's own settings (schema.CLOUD_LAYER_KEYS) from `layer_owner` when given (ui.active_cloud_layer)."""
     layout.use_property_split = True
     layout.use_property_decorate = True
     col = layout.column()
     for s in settings:
-        col.prop(owner, s.key)
+        col.prop(layer_owner if layer_owner is not None and s.key in _LAYER_KEYS else owner, s.key)
+
+
+_LAYER_KEYS = frozenset(schema.CLOUD_LAYER_KEYS)
 
 
 def panel_settings(panel: str, group=schema.SCENE) -> tuple[schema.Setting, ...]:
@@ -94,7 +98,7 @@ class NubisPanel(ui.SidebarPanel):
         self.draw_before(context)
         shown = tuple(s for s in panel_settings(self.panel) if s.key != "enabled")
         if shown:
-            draw_settings(self.layout, context.scene.nubis, shown)
+            draw_settings(self.layout, context.scene.nubis, shown, ui.active_cloud_layer(context.scene))
         self.draw_after(context)
 
     def draw_before(self, context) -> None:
@@ -151,11 +155,50 @@ def _list_with_buttons(layout, template: tuple, rows: int, item: str):
     return col
 
 
+def _cloud_layer_row(row, owner, first: bool) -> None:
+    """One cloud layer's enable box, name, altitudes and solo toggle."""
+    prefix = "first_layer_" if first else ""
+    row.prop(owner, f"{prefix}enabled", text="")
+    row.prop(owner, f"{prefix}name", text="", emboss=False)
+    sub = row.row()
+    sub.active = getattr(owner, f"{prefix}enabled")
+    sub.label(text=f"{owner.layer_bottom / 1000:.1f}-{owner.layer_top / 1000:.1f} km")
+    solo = getattr(owner, f"{prefix}solo")
+    row.prop(owner, f"{prefix}solo", text="", icon="SOLO_ON" if solo else "SOLO_OFF", emboss=False)
+
+
+class NUBIS_UL_cloud_layers(bpy.types.UIList):
+    """A layered sky's further layers (docs/layers.md): enable, name, altitudes, solo."""
+
+    def draw_item(self, _context, layout, _data, item, _icon, _active_data, _active_prop, _index=0):
+        _cloud_layer_row(layout.row(align=True), item, first=False)
+
+
+class NUBIS_PT_cloud_layers(ui.SidebarPanel, bpy.types.Panel):
+    """The sky's cloud layers: the panels below act on the one chosen here."""
+
+    bl_label = "Cloud Layers"
+
+    def draw(self, context):
+        layout = self.layout
+        s = context.scene.nubis
+        # The first layer is the scene's own settings: its row stands above the list of further layers.
+        box = layout.box().row(align=True)
+        chosen = not 0 <= s.active_further_layer < len(s.cloud_layers)
+        box.operator("nubis.cloud_layer_first", text="", icon="RADIOBUT_ON" if chosen else "RADIOBUT_OFF")
+        _cloud_layer_row(box, s, first=True)
+        col = _list_with_buttons(
+            layout, ("NUBIS_UL_cloud_layers", "", s, "cloud_layers", s, "active_further_layer"), 2, "cloud_layer"
+        )
+        col.operator("nubis.cloud_layer_move", icon="TRIA_UP", text="").direction = "UP"
+        col.operator("nubis.cloud_layer_move", icon="TRIA_DOWN", text="").direction = "DOWN"
+
+
 class _FieldDrawing:
     def draw_after(self, context):
         layout = self.layout
         layout.use_property_split = False
-        s = context.scene.nubis
+        s = ui.active_cloud_layer(context.scene)
         col = _list_with_buttons(layout, ("NUBIS_UL_layers", "", s, "layers", s, "active_layer"), 4, "layer")
         col.operator("nubis.layer_duplicate", icon="DUPLICATE", text="")
         col.operator("nubis.layer_move", icon="TRIA_UP", text="").direction = "UP"
@@ -279,7 +322,14 @@ def _panel(panel: str) -> type:
 
 # Sub-panels in the schema's order (the order an artist works in).
 PANEL_CLASSES = {p: _panel(p) for p in schema.PANEL_IDS}
-CLASSES = (NUBIS_UL_layers, NUBIS_MT_presets, NUBIS_PT_main, *PANEL_CLASSES.values())
+CLASSES = (
+    NUBIS_UL_layers,
+    NUBIS_UL_cloud_layers,
+    NUBIS_MT_presets,
+    NUBIS_PT_main,
+    NUBIS_PT_cloud_layers,
+    *PANEL_CLASSES.values(),
+)
 
 
 register, unregister = bpy.utils.register_classes_factory(CLASSES)

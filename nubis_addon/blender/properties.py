@@ -205,8 +205,9 @@ def _scene_annotations() -> dict:
     redraw = events.update_callback("redraw")
     # A layered sky (docs/layers.md): the first layer is these settings; the further ones follow.
     ann["cloud_layers"] = CollectionProperty(type=NubisCloudLayer)
-    ann["active_cloud_layer"] = IntProperty(
-        name="Active Cloud Layer", description="The cloud layer the panels below act on (0: the first)", min=0
+    # The further layer the per-layer panels act on; -1: the first layer (ui.active_cloud_layer).
+    ann["active_further_layer"] = IntProperty(
+        name="Active Cloud Layer", description="The cloud layer the panels below act on", min=-1, default=-1
     )
     ann["first_layer_name"] = StringProperty(name="Name", description="The first cloud layer's name", default="Layer 1")
     ann["first_layer_enabled"] = BoolProperty(

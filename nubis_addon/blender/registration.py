@@ -14,6 +14,7 @@ from . import (
     runtime,
     scene_render,
     sky,
+    skylayers,
     vdbclouds,
     viewport,
     work,
@@ -28,6 +29,7 @@ def register() -> None:
     properties.register()
     events.register()
     operators.register()
+    skylayers.register()
     panels.register()
     vdbclouds.register()  # its sidebar panel is a child of the main one
     paint.register()  # likewise
@@ -50,6 +52,7 @@ def unregister() -> None:
     paint.unregister()
     vdbclouds.unregister()
     panels.unregister()
+    skylayers.unregister()
     operators.unregister()
     events.unregister()
     properties.unregister()

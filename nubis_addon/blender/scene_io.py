@@ -635,7 +635,7 @@ def apply_preset(scene, preset: Preset, progress=None, keep: Keep = Keep()) -> N
         settings.cloud_layers.clear()
         for data in preset.cloud_layers:
             add_cloud_layer(settings, data, preset.path)
-        settings.active_cloud_layer = 0
+        settings.active_further_layer = -1
         settings.first_layer_enabled, settings.first_layer_solo = True, False
         settings.sun = own_sun or _setup_sun(scene, preset.extra["sun"])
         if not keep.camera or scene.camera is None:

@@ -13,6 +13,15 @@ def has_cloudscape(scene) -> bool:
     return settings is not None and getattr(settings, "field_a", None) is not None
 
 
+def active_cloud_layer(scene):
+    """What the sidebar's per-layer panels act on (docs/layers.md): the scene's own settings for the first
+    cloud layer, or the further layer chosen in the Cloud Layers list. Both hold the layer's settings under
+    the same keys (core/schema.py: CLOUD_LAYER_KEYS), its field stack (`layers`) and `active_layer`."""
+    settings = scene.nubis
+    index = settings.active_further_layer
+    return settings.cloud_layers[index] if 0 <= index < len(settings.cloud_layers) else settings
+
+
 def redraw_views(area_types: tuple[str, ...] = ("VIEW_3D",)) -> None:
     """Ask every area of these types (the 3D views by default) of every window to redraw."""
     wm = getattr(bpy.context, "window_manager", None)

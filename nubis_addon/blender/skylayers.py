@@ -1,0 +1,108 @@
+"""A layered sky in the sidebar (docs/layers.md): the Cloud Layers list's operators. The first layer is
+the cloudscape's own settings; Add makes a further layer at free altitudes above the others, with a copy
+of the chosen layer's settings and field stack; Remove and the arrows act on the further layers."""
+
+from __future__ import annotations
+
+import bpy
+from bpy.props import EnumProperty
+
+from ..core import cloudlayers
+from ..core.errors import NubisError
+from . import scene_io, ui
+from .operators import NubisOperator
+
+
+def _ranges(settings) -> list[tuple[float, float]]:
+    first = [(settings.layer_bottom, settings.layer_top)]
+    return first + [(c.layer_bottom, c.layer_top) for c in settings.cloud_layers]
+
+
+def _further(settings, doing: str) -> int:
+    """The chosen further layer's index, or the sentence that says why there is none to `doing`."""
+    index = settings.active_further_layer
+    if not settings.cloud_layers:
+        raise NubisError(f"there is no further cloud layer to {doing}: add one with + first")
+    if not 0 <= index < len(settings.cloud_layers):
+        raise NubisError(f"the first cloud layer is the cloudscape's own and cannot {doing}: choose a further one")
+    return index
+
+
+class NUBIS_OT_cloud_layer_add(ui.NeedsCloudscape, NubisOperator, bpy.types.Operator):
+    """Add a cloud layer above the others, a copy of the chosen layer's settings and field"""
+
+    bl_idname = "nubis.cloud_layer_add"
+    bl_label = "Add Cloud Layer"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def run(self, context):
+        scene = context.scene
+        s = scene.nubis
+        count = len(s.cloud_layers) + 1
+        if count >= cloudlayers.MAX_CLOUD_LAYERS:
+            raise NubisError(
+                f"a sky holds at most {cloudlayers.MAX_CLOUD_LAYERS} cloud layers: remove one before adding another"
+            )
+        source = ui.active_cloud_layer(scene)
+        base = scene_io.cloud_layer_params(s, source) if source is not s else scene_io.params_from_scene(s)
+        own = cloudlayers.new_layer_params(base, _ranges(s))
+        stack = [scene_io.layer_to_dict(layer) for layer in source.layers]
+        data = cloudlayers.CloudLayer(f"Layer {count + 1}", own, stack)
+        with scene_io.batch_edit():
+            cloud = scene_io.add_cloud_layer(s, data)
+            for copy, original in zip(cloud.layers, source.layers, strict=True):
+                scene_io.copy_dabs(original, copy)
+        s.active_further_layer = len(s.cloud_layers) - 1
+        scene_io.generate_fields(scene)
+        return f"added cloud layer '{cloud.name}' at {cloud.layer_bottom:.0f}-{cloud.layer_top:.0f} m"
+
+
+class NUBIS_OT_cloud_layer_remove(ui.NeedsCloudscape, NubisOperator, bpy.types.Operator):
+    """Remove the chosen cloud layer (the first is the cloudscape's own: switch it off instead)"""
+
+    bl_idname = "nubis.cloud_layer_remove"
+    bl_label = "Remove Cloud Layer"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def run(self, context):
+        s = context.scene.nubis
+        index = _further(s, "be removed")
+        s.cloud_layers.remove(index)
+        s.active_further_layer = min(index, len(s.cloud_layers) - 1)
+        return None
+
+
+class NUBIS_OT_cloud_layer_move(ui.NeedsCloudscape, NubisOperator, bpy.types.Operator):
+    """Move the chosen cloud layer up or down the list (the first stays first)"""
+
+    bl_idname = "nubis.cloud_layer_move"
+    bl_label = "Move Cloud Layer"
+    bl_options = {"REGISTER", "UNDO"}
+
+    direction: EnumProperty(items=(("UP", "Up", ""), ("DOWN", "Down", "")))
+
+    def run(self, context):
+        s = context.scene.nubis
+        index = _further(s, "move")
+        target = index + (-1 if self.direction == "UP" else 1)
+        if 0 <= target < len(s.cloud_layers):
+            s.cloud_layers.move(index, target)
+            s.active_further_layer = target
+        return None
+
+
+class NUBIS_OT_cloud_layer_first(ui.NeedsCloudscape, NubisOperator, bpy.types.Operator):
+    """Let the panels below act on the first cloud layer (the cloudscape's own settings)"""
+
+    bl_idname = "nubis.cloud_layer_first"
+    bl_label = "Choose the First Cloud Layer"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def run(self, context):
+        context.scene.nubis.active_further_layer = -1
+        return None
+
+
+CLASSES = (NUBIS_OT_cloud_layer_add, NUBIS_OT_cloud_layer_remove, NUBIS_OT_cloud_layer_move, NUBIS_OT_cloud_layer_first)
+
+register, unregister = bpy.utils.register_classes_factory(CLASSES)
