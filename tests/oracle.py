@@ -160,15 +160,18 @@ def _vectors(state: CloudState) -> dict[str, tuple]:
     def group(*names):
         return tuple(m[n] for n in names)
 
+    # The first cloud layer's rows (render/uniforms.py, layer_rows): the oracle draws one layer.
+    heights, noise = m["cloud_layer_heights"][0], m["cloud_layer_noise"][0]
+    dens, wind, wind2 = m["cloud_layer_density"][0], m["cloud_layer_wind"][0], m["cloud_layer_wind2"][0]
     return {
-        "layer": group("layer_planet_radius", "layer_bottom", "layer_top", "layer_draw_radius"),
+        "layer": (m["layer_planet_radius"], heights[0], heights[1], m["layer_draw_radius"]),
         "shell": group("shell_bottom", "shell_top"),
         "field": group("field_origin_x", "field_origin_y", "field_size", "field_inv_size"),
         "draw": group("draw_center_x", "draw_center_y", "draw_fade"),
-        "noise": group("noise_lf_period", "noise_hf_period", "noise_curl_period", "noise_curl_strength"),
-        "wind": group("wind_dir_x", "wind_dir_y", "wind_distance", "wind_detail_speed"),
-        "wind2": group("wind_top_offset", "wind_upward_bias", "time"),
-        "density": group("density_sigma", "density_coverage", "density_erosion", "density_multiply_coverage"),
+        "noise": tuple(noise),
+        "wind": (wind[0], wind[1], wind[2], wind2[1]),
+        "wind2": (wind[3], wind2[0], m["time"]),
+        "density": (m["density_sigma"], dens[2], dens[1], dens[3]),
         "clip_box": m["clip_box"],
     }
 

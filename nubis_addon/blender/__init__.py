@@ -4,7 +4,7 @@ after it.
 - commands: the command line's commands (cli.py parses, these run); workers: what a Dask worker process
   runs for a farm bake (it registers the extension, so it sits above registration);
 - registration: registers what follows (and ensure_registered for the command line and farm workers);
-- panels, operators: the sidebar and what its buttons do;
+- panels, skylayers, operators: the sidebar, its Cloud Layers list's buttons, and what the other buttons do;
 - paint: the Paint Sky tool, its operator and panel; properties: the property groups, generated from
   core/schema.py; preview: the viewport's draw headless, and the benchmark; scene_render: F12 and Render
   Animation with the clouds in EEVEE and Cycles, and the panorama; work: the bake or render that runs in

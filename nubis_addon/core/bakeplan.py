@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import cloudlayers
 from .camera import pixel_footprint
 from .errors import NubisError
 from .state import CloudState, wind_vector
@@ -294,65 +295,106 @@ def _z_at(altitude: float, r: float, planet: float) -> float:
     return math.sqrt(max((planet + altitude) ** 2 - r * r, 0.0)) - planet
 
 
+@dataclass(frozen=True)
+class _LayerBounds:
+    """What bounds one drawn cloud layer's clouds, read from its field (plan_tiles)."""
+
+    cover: np.ndarray  # coverage x its multiplier, clipped
+    coverage: np.ndarray  # where the density can be non-zero
+    top_type: np.ndarray
+    bottom_type: np.ndarray
+    col_lo: np.ndarray  # each column's own bottom and top altitudes (min and max height)
+    col_hi: np.ndarray
+    storm: np.ndarray | None  # storm coverage, where the sky has storms
+    dense: np.ndarray  # where the density multiplier (field B alpha) is non-zero
+    extent: tuple[float, float]  # the altitudes its clouds can reach (cloudlayers.disjoint_extents)
+    bottom: float
+    from_wind: float  # how far upwind its anvil reads its storm coverage
+
+
+def _layer_bounds(state: CloudState) -> list[_LayerBounds]:
+    layers = state.drawn_layers()
+    out = []
+    for layer, extent in zip(layers, cloudlayers.disjoint_extents(layers), strict=True):
+        p, fa, fb = layer.params, layer.field_a, layer.field_b
+        bottom, thick = p["layer_bottom"], p["layer_top"] - p["layer_bottom"]
+        cover = np.clip(fa[..., 0] * p["density_coverage"], 0.0, 1.0)
+        out.append(
+            _LayerBounds(
+                cover=cover,
+                coverage=(cover > 0) & (fb[..., 3] > 0),
+                top_type=np.clip(fa[..., 2], 0.0, 1.0),
+                bottom_type=np.clip(fa[..., 3], 0.0, 1.0),
+                col_lo=bottom + fb[..., 1] * thick,
+                col_hi=bottom + fb[..., 2] * thick,
+                storm=(fb[..., 0] > 0) & (fb[..., 3] > 0) if state.storms else None,
+                dense=fb[..., 3] > 0,
+                extent=extent,
+                bottom=bottom,
+                from_wind=float(np.hypot(*wind_vector(p["wind_direction"]))) * state.params["storm_anvil_shift"],
+            )
+        )
+    return out
+
+
+def _layer_altitudes(b: _LayerBounds, window, storm_window) -> list[tuple[float, float]]:
+    """The altitudes one layer's clouds can take over a tile's field texels (`window`; the anvil reads
+    `storm_window`, the texels upwind): the column bounds, and the anvil's band under the layer's top."""
+    out = []
+    if b.coverage[window].any():
+        lo, hi = _column_bounds(
+            float(b.cover[window].max()),
+            float(b.top_type[window].max()),
+            float(b.bottom_type[window].min()),
+            (float(b.col_lo[window].min()), float(b.col_lo[window].max())),
+            (float(b.col_hi[window].min()), float(b.col_hi[window].max())),
+        )
+        lo, hi = max(lo, b.extent[0]), min(hi, b.extent[1])
+        if hi > lo:
+            out.append((lo, hi))
+    if b.storm is not None and b.storm[storm_window].any() and b.dense[window].any():
+        band = 0.22 * (b.extent[1] - b.bottom)
+        out.append((b.extent[1] - band, b.extent[1]))
+    return out
+
+
 def plan_tiles(state: CloudState, plan: BakePlan, tile: int = TILE) -> list[Tile]:
     """Cut the box into tiles and find, for each, the slices that can hold cloud: conservative bounds
-    read straight from the data field, so no cloud is ever skipped. The density is zero wherever the
-    bilinear coverage (field A red) or the density multiplier (field B alpha) is zero, and below or
-    above the column's own min and max heights (field B green, blue; the vertical profile is zero
-    outside them, GPU Pro 7); a superstorm's anvil spreads its storm coverage (field B red) downwind
-    under the shell's top (GDC22); the cirrus slab lies around its altitude where field C red is
+    read straight from each drawn cloud layer's field, so no cloud is ever skipped. The density is zero
+    wherever the bilinear coverage (field A red) or the density multiplier (field B alpha) is zero, and
+    below or above the column's own min and max heights (field B green, blue; the vertical profile is
+    zero outside them, GPU Pro 7); a superstorm's anvil spreads its storm coverage (field B red) downwind
+    under the layer's top (GDC22); the cirrus slab lies around its altitude where field C red is
     non-zero. Tiles beyond the draw radius, outside the field or outside a clip box are empty."""
     p = state.params
     v = plan.voxel_size
     ox, oy, oz = plan.origin
     nx, ny, nz = plan.dims
     planet = p["layer_planet_radius"]
-    bottom, top = p["layer_bottom"], p["layer_top"]
-    thick = top - bottom
-    shell_lo, shell_hi = state.shell()
     fx, fy, fs = p["field_origin_x"], p["field_origin_y"], p["field_size"]
-    fa, fb, fc = state.field_a, state.field_b, state.field_c
-    if fa is None or fb is None:  # no field to bound the clouds by: every slice of every tile
+    if state.field_a is None or state.field_b is None:  # no field to bound the clouds by: every slice
         return [
             Tile(i0, j0, min(tile, nx - i0), min(tile, ny - j0), ((0, nz),))
             for j0 in range(0, ny, tile)
             for i0 in range(0, nx, tile)
         ]
-    res_y, res_x = fa.shape[:2]
-    cover = np.clip(fa[..., 0] * p["density_coverage"], 0.0, 1.0)
-    coverage = (cover > 0) & (fb[..., 3] > 0)
-    top_type, bottom_type = np.clip(fa[..., 2], 0.0, 1.0), np.clip(fa[..., 3], 0.0, 1.0)
-    storm = (fb[..., 0] > 0) & (fb[..., 3] > 0) if state.storms else None
+    res_y, res_x = state.field_a.shape[:2]
+    layers = _layer_bounds(state)
     cirrus = None
     if plan.cirrus_slab and p["density_sigma"] > 0 and p["cirrus_opacity"] > 0:
-        cirrus = fc[..., 0] * p["cirrus_coverage"] > 0
-    col_lo = bottom + fb[..., 1] * thick
-    col_hi = bottom + fb[..., 2] * thick
-    # The anvil reads its storm coverage upwind, up to the anvil shift along the wind.
-    from_wind = float(np.hypot(*wind_vector(p["wind_direction"]))) * p["storm_anvil_shift"]
-    band = 0.22 * (shell_hi - bottom)
+        cirrus = state.field_c[..., 0] * p["cirrus_coverage"] > 0
     radius = p["layer_draw_radius"]
     dcx, dcy = state.draw_center
     clip = state.clip_box
     margin_z = v + 4.0  # a voxel, and the shader's float32 altitude near a 6371 km sphere
-    # The artists' VDB clouds (core/vdbcloud.py): their world boxes, with the half voxel a sample reads.
-    vdb_boxes = [placed.world_box for placed in state.vdb_clouds]
     tiles = []
     for j0 in range(0, ny, tile):
         for i0 in range(0, nx, tile):
             tx, ty = min(tile, nx - i0), min(tile, ny - j0)
             xa, xb = ox + i0 * v, ox + (i0 + tx - 1) * v
             ya, yb = oy + j0 * v, oy + (j0 + ty - 1) * v
-            tiles.append(Tile(i0, j0, tx, ty, ()))
-            vdb_spans = []
-            for lo_box, hi_box in vdb_boxes:
-                if xb >= lo_box[0] - v and xa <= hi_box[0] + v and yb >= lo_box[1] - v and ya <= hi_box[1] + v:
-                    k0 = max(math.floor((lo_box[2] - v - oz) / v), 0)
-                    k1 = min(math.ceil((hi_box[2] + v - oz) / v) + 1, nz)
-                    if k1 > k0:
-                        vdb_spans.append((k0, k1))
-            if vdb_spans:
-                tiles[-1] = Tile(i0, j0, tx, ty, _merge(vdb_spans))
+            spans = _vdb_spans(state, (xa, xb, ya, yb), v, oz, nz)
+            tiles.append(Tile(i0, j0, tx, ty, _merge(spans)))
             # Nearest point of the tile to the draw centre: clouds exist only inside the radius.
             near = math.hypot(max(xa - dcx, 0.0, dcx - xb), max(ya - dcy, 0.0, dcy - yb))
             if near >= radius or xb < fx - fs / 2 or xa > fx + fs / 2 or yb < fy - fs / 2 or ya > fy + fs / 2:
@@ -361,32 +403,17 @@ def plan_tiles(state: CloudState, plan: BakePlan, tile: int = TILE) -> list[Tile
                 continue
             rmin = math.hypot(max(xa, 0.0, -xb), max(ya, 0.0, -yb))
             rmax = max(math.hypot(x, y) for x in (xa, xb) for y in (ya, yb))
-            wi = _texel_window(xa, xb, fx, fs, res_x)
-            wj = _texel_window(ya, yb, fy, fs, res_y)
-            window = np.ix_(wj, wi)
+            window = np.ix_(_texel_window(ya, yb, fy, fs, res_y), _texel_window(xa, xb, fx, fs, res_x))
             altitudes = []
-            if coverage[window].any():
-                lo, hi = _column_bounds(
-                    float(cover[window].max()),
-                    float(top_type[window].max()),
-                    float(bottom_type[window].min()),
-                    (float(col_lo[window].min()), float(col_lo[window].max())),
-                    (float(col_hi[window].min()), float(col_hi[window].max())),
+            for b in layers:
+                w = b.from_wind
+                upwind = np.ix_(
+                    _texel_window(ya - w, yb + w, fy, fs, res_y), _texel_window(xa - w, xb + w, fx, fs, res_x)
                 )
-                lo, hi = max(lo, shell_lo), min(hi, shell_hi)
-                if hi > lo:
-                    altitudes.append((lo, hi))
-            if storm is not None:
-                sw = np.ix_(
-                    _texel_window(ya - from_wind, yb + from_wind, fy, fs, res_y),
-                    _texel_window(xa - from_wind, xb + from_wind, fx, fs, res_x),
-                )
-                if storm[sw].any() and fb[window][..., 3].max() > 0:
-                    altitudes.append((shell_hi - band, shell_hi))
+                altitudes += _layer_altitudes(b, window, upwind)
             if cirrus is not None and cirrus[window].any():
                 c = p["cirrus_altitude"]
                 altitudes.append((c - plan.cirrus_slab / 2, c + plan.cirrus_slab / 2))
-            spans = list(vdb_spans)
             for lo, hi in altitudes:
                 k0 = max(math.floor((_z_at(lo, rmax, planet) - margin_z - oz) / v), 0)
                 k1 = min(math.ceil((_z_at(hi, rmin, planet) + margin_z - oz) / v) + 1, nz)
@@ -394,6 +421,20 @@ def plan_tiles(state: CloudState, plan: BakePlan, tile: int = TILE) -> list[Tile
                     spans.append((k0, k1))
             tiles[-1] = Tile(i0, j0, tx, ty, _merge(spans))
     return tiles
+
+
+def _vdb_spans(state: CloudState, rect: tuple[float, float, float, float], v: float, oz: float, nz: int) -> list:
+    """The slices of the artists' VDB clouds' world boxes (core/vdbcloud.py) over a tile's rectangle, with
+    the half voxel a sample reads."""
+    xa, xb, ya, yb = rect
+    spans = []
+    for lo_box, hi_box in (placed.world_box for placed in state.vdb_clouds):
+        if xb >= lo_box[0] - v and xa <= hi_box[0] + v and yb >= lo_box[1] - v and ya <= hi_box[1] + v:
+            k0 = max(math.floor((lo_box[2] - v - oz) / v), 0)
+            k1 = min(math.ceil((hi_box[2] + v - oz) / v) + 1, nz)
+            if k1 > k0:
+                spans.append((k0, k1))
+    return spans
 
 
 def _column_bounds(

@@ -5,6 +5,7 @@ Every error names the file and the field, and says what to do.
 
 from __future__ import annotations
 
+import copy
 import math
 import os
 import re
@@ -132,7 +133,7 @@ def parse_preset(data: dict[str, Any], path: Path | None = None) -> Preset:
             raise NubisError(f"{where}: {rule.message}")
     _check_span(extra["camera"]["location"], f"{where}: camera.location")
     _check_masks(layers, where)
-    further = _parse_cloud_layers(data.get("cloud_layers", []), params, where)
+    further = _parse_cloud_layers(data.get("cloud_layers", []), (params, layers), where)
     meta = extra.pop("preset")
     density = data.get("density", {})
     legacy = params["density_coverage"] if "coverage" in density and "cover" not in density else None
@@ -144,9 +145,11 @@ _CLOUD_LAYER_PLACES = {(s.section, s.name): s for s in schema.CLOUD_LAYER_SETTIN
 CLOUD_LAYER_SECTIONS = ("field", *dict.fromkeys(s.section for s in schema.CLOUD_LAYER_SETTINGS))
 
 
-def _parse_cloud_layers(value: Any, first: dict[str, Any], where: str) -> list[cloudlayers.CloudLayer]:
-    """The further layers of a layered sky: each starts as a copy of the first layer's own settings, and
-    its tables change what differs. The whole stack is then checked (core/cloudlayers.py: check_stack)."""
+def _parse_cloud_layers(value: Any, first_layer: tuple, where: str) -> list[cloudlayers.CloudLayer]:
+    """The further layers of a layered sky: each starts as a copy of the first layer's own settings and
+    field stack (`first_layer`: its settings, its stack), and its tables change what differs. The whole
+    stack is then checked (core/cloudlayers.py: check_stack)."""
+    first, first_stack = first_layer
     if not isinstance(value, list):
         raise NubisError(f"{where}: cloud_layers must be written as [[cloud_layers]] tables")
     most = cloudlayers.MAX_CLOUD_LAYERS - 1
@@ -160,16 +163,17 @@ def _parse_cloud_layers(value: Any, first: dict[str, Any], where: str) -> list[c
         here = f"{where}: cloud_layers[{i}]"
         if not isinstance(raw, dict):
             raise NubisError(f"{here} must be a table, not {toml_value(raw)}")
-        out.append(_parse_cloud_layer(raw, first, here, i))
+        out.append(_parse_cloud_layer(raw, first_layer, here, i))
     ranges = [("the preset's own layer", first["layer_bottom"], first["layer_top"])]
     ranges += [(c.name, c.params["layer_bottom"], c.params["layer_top"]) for c in out]
     cloudlayers.check_stack(ranges, where)
     return out
 
 
-def _parse_cloud_layer(raw: dict[str, Any], first: dict[str, Any], here: str, i: int) -> cloudlayers.CloudLayer:
+def _parse_cloud_layer(raw: dict[str, Any], first_layer: tuple, here: str, i: int) -> cloudlayers.CloudLayer:
+    first, first_stack = first_layer
     own = cloudlayers.own_params(first)
-    name, enabled, field_layers = f"Layer {i + 2}", True, []
+    name, enabled, field_layers = f"Layer {i + 2}", True, copy.deepcopy(first_stack)
     for sec, table in raw.items():
         if sec == "name":
             if not isinstance(table, str) or not table.strip():

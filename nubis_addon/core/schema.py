@@ -253,7 +253,6 @@ SCENE: tuple[Setting, ...] = (
         soft_max=10000.0,
         unit="LENGTH",
         panel="shape",
-        gpu=True,
     ),
     _scene(
         "noise",
@@ -267,7 +266,6 @@ SCENE: tuple[Setting, ...] = (
         soft_max=50000.0,
         unit="LENGTH",
         panel="shape",
-        gpu=True,
     ),
     _scene(
         "noise",
@@ -281,7 +279,6 @@ SCENE: tuple[Setting, ...] = (
         soft_max=2000.0,
         unit="LENGTH",
         panel="shape",
-        gpu=True,
     ),
     # One extinction coefficient, shared by the viewport and the VDB's Cycles material.
     _scene(
@@ -322,7 +319,6 @@ SCENE: tuple[Setting, ...] = (
         min=0.0,
         max=50.0,
         internal="derived from density.cover for the scene's field (core/coverage.py)",
-        gpu=True,
     ),
     _scene(
         "density",
@@ -334,7 +330,6 @@ SCENE: tuple[Setting, ...] = (
         min=0.0,
         max=1.0,
         panel="shape",
-        gpu=True,
     ),
     _scene(
         "density",
@@ -344,7 +339,6 @@ SCENE: tuple[Setting, ...] = (
         "Thin Edges",
         "Make small clouds lighter by multiplying the density by the coverage (GPU Pro 7)",
         panel="shape",
-        gpu=True,
     ),
     # -- wind (GPU Pro 7: 10 m/s, 500 m top offset, 0.1 upward bias)
     _scene(
@@ -386,7 +380,6 @@ SCENE: tuple[Setting, ...] = (
         soft_max=3000.0,
         unit="LENGTH",
         panel="wind",
-        gpu=True,
     ),
     _scene(
         "wind",
@@ -411,7 +404,6 @@ SCENE: tuple[Setting, ...] = (
         max=20.0,
         soft_max=5.0,
         panel="wind",
-        gpu=True,
     ),
     _scene(
         "wind",

@@ -80,7 +80,6 @@ _FLOATS: tuple[tuple[str, str, Callable[[CloudState], float]], ...] = (
     ("draw_fade", "fade width at the draw radius", lambda st: 0.05 * st.params["layer_draw_radius"]),
     ("wind_dir_x", "wind direction, x", _wind(0)),
     ("wind_dir_y", "wind direction, y", _wind(1)),
-    ("wind_distance", "distance the wind has travelled (speed x time)", lambda st: st.params["wind_speed"] * st.time),
     ("time", "simulated seconds", lambda st: st.time),
     ("cirrus_inv_period", "1 / cirrus texture period", lambda st: 1.0 / st.params["cirrus_period"]),
     ("cirrus_offset_x", "cirrus scroll, x (meters)", _cirrus_offset(0)),

@@ -56,6 +56,15 @@ def test_a_further_layer_reads_its_own_tables_and_copies_the_rest_from_the_first
     assert [layer["kind"] for layer in p.layers] == ["constant"]
 
 
+def test_a_further_layer_without_a_stack_of_its_own_copies_the_first_layers():
+    p = presets.preset_from_bytes(
+        TWO + b'\n[[cloud_layers]]\nname = "Same"\n[cloud_layers.layer]\nbottom = 7000.0\ntop = 7600.0\n'
+    )
+    same = p.cloud_layers[1]
+    assert same.field_layers == p.layers and same.field_layers is not p.layers
+    assert same.field_layers[0] is not p.layers[0]
+
+
 def test_every_shipped_preset_without_layers_reads_as_one_layer():
     for name in presets.list_presets():
         p = presets.load_preset(name)

@@ -1,0 +1,170 @@
+"""A layered sky (docs/layers.md) through the GPU path: two layers seen from between them, a higher layer
+shading a lower one, four layers drawn and baked into one VDB, and the layers kept by presets and files."""
+
+import numpy as np
+import pytest
+
+PRESET = "altocumulus_over_stratocumulus"
+
+
+def _alpha_halves(image: np.ndarray) -> tuple[float, float]:
+    """Mean alpha of the image's upper and lower thirds (top row first): the sky above the level horizon
+    and the view below it."""
+    h = image.shape[0]
+    return float(image[: h // 3, :, 3].mean()), float(image[-h // 3 :, :, 3].mean())
+
+
+def _render(scene, width=96, height=54):
+    from nubis_addon.blender import pipeline
+
+    return pipeline.render_viewport(scene, width, height, passes=2)
+
+
+def test_two_layers_seen_from_between_them_fill_the_sky_above_and_the_view_below(make_scene):
+    scene = make_scene(PRESET)
+    assert len(scene.nubis.cloud_layers) == 1
+    both = _render(scene)
+    above, below = _alpha_halves(both)
+    # Measured 2026-12-06 (5.3, llvmpipe): 0.18 above, 0.76 below.
+    assert above > 0.1 and below > 0.3, (above, below)
+    # Each layer alone: the deck only below the horizon, the altocumulus only above it.
+    scene.nubis.first_layer_solo = True
+    deck_above, deck_below = _alpha_halves(_render(scene))
+    scene.nubis.first_layer_solo = False
+    scene.nubis.cloud_layers[0].solo = True
+    alto_above, alto_below = _alpha_halves(_render(scene))
+    assert deck_above < 0.01 and deck_below == pytest.approx(below, abs=0.02), (deck_above, deck_below)
+    assert alto_below < 0.01 and alto_above == pytest.approx(above, abs=0.02), (alto_above, alto_below)
+
+
+def test_a_higher_layer_shades_the_deck_under_it(make_scene):
+    """Seen from between the layers looking down, the deck is darker under the altocumulus than without it:
+    the light volumes and the light march cross both layers."""
+    from nubis_addon.core import metrics
+
+    scene = make_scene(PRESET, camera__rotation=[40.0, 0.0, 15.0])
+    scene.nubis.cloud_layers[0].density_cover = 0.9  # a thick upper layer, so its shadow is plain
+    shaded = _render(scene)
+    scene.nubis.cloud_layers[0].enabled = False
+    open_sky = _render(scene)
+    mask = (shaded[..., 3] > 0.5) & (open_sky[..., 3] > 0.5)
+    assert mask.mean() > 0.3, mask.mean()
+    lum_shaded = metrics.luminance(shaded)[mask].mean()
+    lum_open = metrics.luminance(open_sky)[mask].mean()
+    # Measured 2026-12-06 (5.3, llvmpipe): the deck 55 % as bright under the layer as under an open sky.
+    assert lum_shaded < 0.9 * lum_open, (lum_shaded, lum_open)
+
+
+FOUR = """
+[[cloud_layers]]
+name = "Middle"
+[cloud_layers.layer]
+bottom = 3000.0
+top = 3600.0
+
+[[cloud_layers]]
+name = "High"
+[cloud_layers.layer]
+bottom = 5000.0
+top = 5600.0
+
+[[cloud_layers]]
+name = "Highest"
+[cloud_layers.layer]
+bottom = 7000.0
+top = 7500.0
+"""
+
+
+@pytest.fixture
+def four_layers(make_scene, tmp_path):
+    from nubis_addon.core import presets
+
+    text = (presets.preset_dir() / "stratocumulus.toml").read_text() + FOUR
+    text = text.replace("bottom = 1200.0\ntop = 3700.0", "bottom = 1000.0\ntop = 2000.0", 1)
+    path = tmp_path / "four.toml"
+    path.write_text(text)
+    return make_scene(str(path))
+
+
+def test_four_layers_draw_and_bake_into_one_vdb(four_layers, tmp_path):
+    from nubis_addon.blender import pipeline, scene_io
+    from nubis_addon.core import vdbio
+    from nubis_addon.core.jobs import BakeOptions
+
+    scene = four_layers
+    state = scene_io.state_from_scene(scene)
+    assert len(state.drawn_layers()) == 4
+    assert state.shell()[0] <= 1000.0 and state.shell()[1] >= 7500.0
+    image = _render(scene)
+    assert np.isfinite(image).all() and image[..., 3].max() > 0.5
+    result = pipeline.bake(scene, tmp_path / "four.vdb", BakeOptions(voxel_size=250.0))
+    dense, lo = vdbio.read_grid_array(result.path, "density")
+    z = np.nonzero(dense.max(axis=(1, 2)) > 0)[0]
+    altitudes = result.plan.origin[2] + (z + lo[2]) * 250.0
+    # Every layer's altitudes hold cloud, and the air between them none (curvature lowers the far corners).
+    for bottom, top in ((1000, 2000), (3000, 3600), (5000, 5600), (7000, 7500)):
+        assert np.any((altitudes >= bottom - 250) & (altitudes <= top + 250)), (bottom, top, altitudes)
+    assert not np.any((altitudes > 2500) & (altitudes < 2750)), altitudes
+
+
+_FIFTH = """
+[[cloud_layers]]
+name = "Fifth"
+[cloud_layers.layer]
+bottom = 9000.0
+top = 9500.0
+"""
+
+
+def test_a_fifth_layer_is_refused_in_one_sentence(four_layers):
+    from nubis_addon.core import presets
+    from nubis_addon.core.errors import NubisError
+
+    scene = four_layers
+    scene.nubis.active_further_layer = -1
+    with pytest.raises(RuntimeError, match="a sky holds at most 4 cloud layers: remove one before adding another"):
+        _run_operator("cloud_layer_add")
+    assert len(scene.nubis.cloud_layers) == 3
+    # The same in a preset: one sentence, from the loader.
+    with pytest.raises(NubisError, match="at most 4 cloud layers"):
+        presets.preset_from_bytes(
+            (presets.preset_dir() / "default.toml").read_bytes() + FOUR.encode() + _FIFTH.encode()
+        )
+
+
+def _run_operator(name: str) -> None:
+    import bpy
+
+    getattr(bpy.ops.nubis, name)()
+
+
+def test_a_layer_added_in_the_sidebar_is_saved_and_read_back(make_scene, tmp_path):
+    import bpy
+
+    from nubis_addon.blender import scene_io
+    from nubis_addon.core import presets, userpresets
+
+    scene = make_scene("stratocumulus")
+    _run_operator("cloud_layer_add")
+    cloud = scene.nubis.cloud_layers[0]
+    # Above the first layer, as thick, with a copy of its field stack.
+    assert cloud.layer_bottom > scene.nubis.layer_top
+    assert len(cloud.layers) == len(scene.nubis.layers)
+    assert cloud.field_a is not None and cloud.field_b is not None
+    cloud.name = "Upper"
+    cloud.wind_speed = 31.0
+    preset = scene_io.preset_from_scene(scene, "Saved")
+    again = presets.preset_from_bytes(userpresets.dump_preset(preset).encode())
+    assert [c.name for c in again.cloud_layers] == ["Upper"]
+    assert again.cloud_layers[0].params["wind_speed"] == pytest.approx(31.0)
+    # The .blend keeps the layer and its field images.
+    path = tmp_path / "layered.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    scene = bpy.context.scene
+    assert [c.name for c in scene.nubis.cloud_layers] == ["Upper"]
+    cloud = scene.nubis.cloud_layers[0]
+    assert cloud.field_a is not None and cloud.field_a.packed_file is not None
+    state = scene_io.state_from_scene(scene)
+    assert len(state.drawn_layers()) == 2
