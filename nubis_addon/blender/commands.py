@@ -254,12 +254,20 @@ def _benchmark(job: Job) -> str:
         try:
             if args.vdb:
                 result = _benchmark_vdb(job, options.but(eevee=False))
+            elif job.scene.nubis.cloud_layers:
+                result = _benchmark_layers(job, options.but(eevee=False))
             else:
                 result = preview.benchmark(job.scene, job.out, options)
         except staging.FolderGone as gone:
             raise gone.said("the benchmark ran", "run the benchmark again") from None
     print(preview.table(result))
     size = f"{options.width}x{options.height} ({result['quality']})"
+    if "baseline_label" in result and not args.vdb:
+        return (
+            f"benchmarked {job.label} at {size}: redraw {result['redraw_ms']:.1f} ms, "
+            f"{result['redraw_ms'] / result['baseline_redraw_ms']:.2f}x {result['baseline_label']}'s "
+            f"{result['baseline_redraw_ms']:.1f} ms in {job.seconds():.1f} s -> {job.out}"
+        )
     if args.vdb:
         return (
             f"benchmarked {job.label} with {len(args.vdb)} VDB cloud(s) at {size}: redraw "
@@ -276,24 +284,55 @@ def _benchmark(job: Job) -> str:
 
 def _benchmark_vdb(job: Job, options: BenchmarkOptions) -> dict:
     """`benchmark --vdb`: the preset's own cloudscape on the same view first (its files in out/cloudscape),
-    then with the VDB clouds: one run, one machine. Both run in a private folder inside `out`, and their
-    files move into place together at the end: a failure of either leaves no file of this run, and an
-    earlier run's files as they were (core/staging.py)."""
-    scene, out, args = job.scene, job.out, job.args
+    then with the VDB clouds: one run, one machine."""
+    args = job.args
+
+    def add_clouds() -> None:
+        _add_vdb_clouds(job.scene, args.vdb, args.with_cloudscape)
+
+    return _benchmark_pair(job, options, ("cloudscape", "the cloudscape"), add_clouds)
+
+
+def _benchmark_layers(job: Job, options: BenchmarkOptions) -> dict:
+    """`benchmark` of a layered sky (docs/layers.md): its lowest drawn layer alone on the same view first
+    (its files in out/lowest_layer), then the whole sky: what the further layers cost, in one run."""
+    s = job.scene.nubis
+    layers = [(s.layer_bottom, s, "first_layer_solo", s.first_layer_name)]
+    layers += [(c.layer_bottom, c, "solo", c.name) for c in s.cloud_layers]
+    _bottom, owner, solo, name = min(layers, key=lambda row: row[0])
+    kept = {(id(o), key): getattr(o, key) for _b, o, key, _n in layers for key in (key,)}
+    for _b, o, key, _n in layers:
+        setattr(o, key, o is owner)
+
+    def whole_sky() -> None:
+        for _b, o, key, _n in layers:
+            setattr(o, key, kept[(id(o), key)])
+
+    return _benchmark_pair(job, options, ("lowest_layer", f"the lowest layer alone ('{name}')"), whole_sky)
+
+
+def _benchmark_pair(job: Job, options: BenchmarkOptions, baseline: tuple[str, str], change) -> dict:
+    """Two benchmarks of the same view in one run: the scene as it is (its files in out/<baseline folder>),
+    then after `change()`, the result naming the first as its baseline. Both run in a private folder inside
+    `out`, and their files move into place together at the end: a failure of either leaves no file of this
+    run, and an earlier run's files as they were (core/staging.py)."""
+    scene, out = job.scene, job.out
+    folder, label = baseline
     with staging.private_folder(out) as work:
-        baseline = preview.benchmark(scene, work / "cloudscape", options)
-        _add_vdb_clouds(scene, args.vdb, args.with_cloudscape)
-        result = preview.benchmark(scene, work / "vdb", options, baseline=baseline)
-        made = not (out / "cloudscape").exists()
+        first = preview.benchmark(scene, work / folder, options)
+        first["label"] = label
+        change()
+        result = preview.benchmark(scene, work / "main", options, baseline=first)
+        made = not (out / folder).exists()
         try:
             with staging.output_set() as outputs:
-                for done, final in ((work / "vdb", out), (work / "cloudscape", check_output_dir(out / "cloudscape"))):
+                for done, final in ((work / "main", out), (work / folder, check_output_dir(out / folder))):
                     for path in sorted(p for p in done.iterdir() if p.is_file() and not p.name.startswith(".")):
                         os.replace(path, outputs.stage(final / path.name))
         except BaseException:
             if made:  # the folder this run made for the files that never came
                 with contextlib.suppress(OSError):
-                    (out / "cloudscape").rmdir()
+                    (out / folder).rmdir()
             raise
     return result
 
