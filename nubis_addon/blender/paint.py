@@ -64,7 +64,7 @@ def hit(context, mouse: tuple[float, float]):
         return None
     origin = view3d_utils.region_2d_to_origin_3d(region, rv3d, mouse)
     direction = view3d_utils.region_2d_to_vector_3d(region, rv3d, mouse)
-    z = brush_altitude(context.scene.nubis)
+    z = brush_altitude(ui.active_cloud_layer(context.scene))
     if abs(direction.z) < 1e-9:
         return None
     t = (z - origin.z) / direction.z
@@ -112,11 +112,12 @@ def append_dabs(layer, dabs: np.ndarray) -> None:
     scene_io.add_dabs(layer, dabs)
 
 
-def composite_notice(scene, layer, dabs: np.ndarray, grid: paint.Grid) -> str | None:
-    """Before a stroke's dabs go into `layer`: refuse a composite that would hold too much memory, and the
-    line announcing a long one (core/paint.py: composite_cost), or None."""
+def composite_notice(owner, layer, dabs: np.ndarray, grid: paint.Grid) -> str | None:
+    """Before a stroke's dabs go into `layer` of `owner`'s stack (a cloud layer's: ui.active_cloud_layer):
+    refuse a composite that would hold too much memory, and the line announcing a long one (core/paint.py:
+    composite_cost), or None."""
     todo = []
-    for other in scene.nubis.layers:
+    for other in owner.layers:
         if other.kind != "PAINT" or not other.enabled or (other != layer and not len(other.dabs)):
             continue
         held = scene_io.paint_dabs(other)
@@ -150,15 +151,31 @@ def mode_of_event(event, mode: str) -> str:
 
 class LiveStroke:
     """One drag: dabs are rasterized as they come, the field's rectangle under them re-composited and
-    written into the viewport's field arrays and GPU texture in place."""
+    written into the viewport's field arrays and GPU texture in place. On a further cloud layer (`live`
+    False) the dabs are laid as they come and the layer is composited when the drag ends: painting in
+    place is the first layer's (docs/layers.md)."""
 
-    def __init__(self, scene, layer, radius: float, strength: float, falloff: str, mode: str):
+    def __init__(self, scene, layer, radius: float, strength: float, falloff: str, mode: str, live: bool = True):
         self.scene = scene
-        self.layer_key = scene_io.raster_key(layer)
+        self.live = live
         settings = scene.nubis
+        brush = brush_mode(mode)
+        self.grid = paint.Grid.of(scene_io.params_from_scene(settings))
+        self.spacer = paint.Spacer(radius, brush.sign * strength, falloff.lower(), brush.dab_mode, grid=self.grid)
+        self.layer_name = layer.name
+        self.held = len(layer.dabs)
+        self.dabs: list[np.ndarray] = []
+        self.laid = 0
+        self.hold_light = True  # False refills the shadows at every sample (the benchmark's comparison)
+        if live:
+            self._start_live(layer)
+
+    def _start_live(self, layer) -> None:
+        """The rasters and planes a live drag re-composites its rectangles from."""
+        scene, settings = self.scene, self.scene.nubis
+        self.layer_key = scene_io.raster_key(layer)
         if scene_io.field_stale(scene) or scene_io.pre_paint(scene) is None:
             scene_io.generate_fields(scene)
-        self.grid = paint.Grid.of(scene_io.params_from_scene(settings))
         self.pre, self.multiplier = scene_io.pre_paint(scene)
         self.channel = layer.channel.lower()
         self.image, self.plane = paint.PAINT_CHANNELS[self.channel]
@@ -178,13 +195,6 @@ class LiveStroke:
                 else paint.raster(scene_io.raster_key(other), scene_io.paint_dabs(other), self.grid).values
             )
             self.layers.append(paint.PaintLayer(other.channel.lower(), float(other.opacity), values))
-        brush = brush_mode(mode)
-        self.spacer = paint.Spacer(radius, brush.sign * strength, falloff.lower(), brush.dab_mode, grid=self.grid)
-        self.layer_name = layer.name
-        self.held = len(layer.dabs)
-        self.dabs: list[np.ndarray] = []
-        self.laid = 0
-        self.hold_light = True  # False refills the shadows at every sample (the benchmark's comparison)
 
     def add(self, x: float, y: float, pressure: float, start: bool) -> tuple | None:
         """Dab along the stroke to (x, y); returns the field rectangle changed. The stretch is clipped to the
@@ -197,6 +207,8 @@ class LiveStroke:
         if len(rows):
             self.dabs.append(rows)
             self.laid += len(rows)
+        if not self.live:
+            return None
         rect = None
         for row in rows:
             rect = paint.union(rect, self.raster.add(row))
@@ -222,7 +234,8 @@ class LiveStroke:
         """The stroke's dabs into the layer (the undo step's data); the raster is kept as the layer's."""
         dabs = np.concatenate(self.dabs) if self.dabs else paint.as_dabs([])
         append_dabs(layer, dabs)
-        paint.remember(scene_io.raster_key(layer), scene_io.paint_dabs(layer), self.raster)
+        if self.live:
+            paint.remember(scene_io.raster_key(layer), scene_io.paint_dabs(layer), self.raster)
         return len(dabs)
 
 
@@ -283,8 +296,9 @@ class NUBIS_OT_paint_field(NeedsCloudscape, bpy.types.Operator):
             brush = brush_mode(self.mode)
             strength = brush.sign * self.strength
             dabs = paint.stroke_dabs(points, self.radius, strength, self.falloff.lower(), brush.dab_mode, grid=grid)
-            layer = paint_layer(scene.nubis, self.channel, self.layer)
-            line = composite_notice(scene, layer, dabs, grid)
+            owner = ui.active_cloud_layer(scene)
+            layer = paint_layer(owner, self.channel, self.layer)
+            line = composite_notice(owner, layer, dabs, grid)
             append_dabs(layer, dabs)
             if line:  # the console has it now, from core/paint.py's raster; the Info log gets it here
                 self.report({"INFO"}, line)
@@ -304,9 +318,12 @@ class NUBIS_OT_paint_field(NeedsCloudscape, bpy.types.Operator):
         self.mode = mode
         try:
             self._checked(context)
-            self._layer_name = paint_layer(scene.nubis, self.channel, self.layer).name
-            layer = scene.nubis.layers[self._layer_name]
-            self._live = LiveStroke(scene, layer, self.radius, self.strength, self.falloff, mode)
+            owner = ui.active_cloud_layer(scene)
+            self._owner = scene.nubis.active_further_layer if owner is not scene.nubis else -1
+            self._layer_name = paint_layer(owner, self.channel, self.layer).name
+            layer = owner.layers[self._layer_name]
+            live = owner is scene.nubis
+            self._live = LiveStroke(scene, layer, self.radius, self.strength, self.falloff, mode, live)
             self._first = True
             self._sample(context, event)
         except NubisError as err:
@@ -356,7 +373,9 @@ class NUBIS_OT_paint_field(NeedsCloudscape, bpy.types.Operator):
 
     def _finish(self, context):
         scene = context.scene
-        layer = scene.nubis.layers.get(self._layer_name)
+        s = scene.nubis
+        owner = s.cloud_layers[self._owner] if 0 <= self._owner < len(s.cloud_layers) else s
+        layer = owner.layers.get(self._layer_name)
         if layer is None or not self._live.dabs:
             self._live = None
             if not len(self.stroke):
@@ -427,7 +446,7 @@ class NUBIS_OT_paint_layer_clear(NeedsCloudscape, bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     def execute(self, context):
-        s = context.scene.nubis
+        s = ui.active_cloud_layer(context.scene)
         if not (0 <= s.active_layer < len(s.layers)) or s.layers[s.active_layer].kind != "PAINT":
             self.report({"ERROR"}, "the active layer is not a paint layer: select one in the Data Field's stack")
             return {"CANCELLED"}
@@ -527,7 +546,11 @@ class NUBIS_PT_paint(SidebarPanel, bpy.types.Panel):
                 col.prop(props, key)
             layout.label(text=DRAG_HINT, icon="INFO")
         s = context.scene.nubis
-        painted = [x for x in s.layers if x.kind == "PAINT"]
+        owner = ui.active_cloud_layer(context.scene)
+        if s.cloud_layers:  # a layered sky: strokes go into the layer chosen in the Cloud Layers list
+            name = s.first_layer_name if owner is s else owner.name
+            layout.label(text=f"Paints cloud layer '{name}' (Cloud Layers)", icon="OUTLINER_DATA_VOLUME")
+        painted = [x for x in owner.layers if x.kind == "PAINT"]
         for x in painted:
             layout.label(text=f"{x.name}: {len(x.dabs)} dabs", icon="BRUSH_DATA" if x.enabled else "HIDE_ON")
 

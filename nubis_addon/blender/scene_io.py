@@ -160,6 +160,7 @@ class SceneState:
     raster_keys: dict = field(default_factory=dict)  # a paint layer's pointer -> its key in core/paint.py
     vortex: dict = field(default_factory=dict)  # an animated storm's vortex times, by F-curve (_vortex_time)
     layer_coverage: dict = field(default_factory=dict)  # a further cloud layer's coverage multiplier, by name
+    layer_fields: dict = field(default_factory=dict)  # a further layer's field arrays and what they were read from
 
 
 _scenes: dict[int, SceneState] = {}
@@ -408,11 +409,24 @@ def drawn_cloud_layers(scene) -> tuple[tuple[cloudlayers.LayerField, ...], bool]
             continue
         params = cloud_layer_params(settings, cloud)
         params["density_coverage"] = known.get(cloud.name, cloud.density_coverage)
-        a, b = (read_field_image(getattr(cloud, f"field_{w}"), w, res) for w in ("a", "b"))
+        a, b = _layer_field_arrays(scene, cloud, res)
         out.append(cloudlayers.LayerField(cloud.name, params, a, b))
         ranges.append((cloud.name, cloud.layer_bottom, cloud.layer_top))
     cloudlayers.check_stack(ranges, "the scene's cloud layers")
     return tuple(out), first
+
+
+def _layer_field_arrays(scene, cloud, res: int) -> tuple[np.ndarray, np.ndarray]:
+    """A further layer's field pixels, read again only when Nubis wrote a field image since (every redraw
+    reads the state; the pixels are megabytes)."""
+    images = (cloud.field_a, cloud.field_b)
+    key = (field_generation(), res, *(img.as_pointer() if img is not None else 0 for img in images))
+    cache = scene_state(scene).layer_fields
+    held = cache.get(cloud.name)
+    if held is None or held[0] != key:
+        arrays = tuple(read_field_image(img, w, res) for img, w in zip(images, ("a", "b"), strict=True))
+        held = cache[cloud.name] = (key, *arrays)
+    return held[1], held[2]
 
 
 def add_cloud_layer(settings, data: cloudlayers.CloudLayer, preset_path: Path | None = None):

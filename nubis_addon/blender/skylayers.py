@@ -47,7 +47,11 @@ class NUBIS_OT_cloud_layer_add(ui.NeedsCloudscape, NubisOperator, bpy.types.Oper
         base = scene_io.cloud_layer_params(s, source) if source is not s else scene_io.params_from_scene(s)
         own = cloudlayers.new_layer_params(base, _ranges(s))
         stack = [scene_io.layer_to_dict(layer) for layer in source.layers]
-        data = cloudlayers.CloudLayer(f"Layer {count + 1}", own, stack)
+        taken = {c.name for c in s.cloud_layers} | {s.first_layer_name}
+        number = count + 1
+        while f"Layer {number}" in taken:  # names key each layer's field images and state
+            number += 1
+        data = cloudlayers.CloudLayer(f"Layer {number}", own, stack)
         with scene_io.batch_edit():
             cloud = scene_io.add_cloud_layer(s, data)
             for copy, original in zip(cloud.layers, source.layers, strict=True):

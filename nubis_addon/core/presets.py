@@ -164,6 +164,8 @@ def _parse_cloud_layers(value: Any, first_layer: tuple, where: str) -> list[clou
         if not isinstance(raw, dict):
             raise NubisError(f"{here} must be a table, not {toml_value(raw)}")
         out.append(_parse_cloud_layer(raw, first_layer, here, i))
+        if any(c.name == out[-1].name for c in out[:-1]):
+            raise NubisError(f"{here}.name: another cloud layer is named {toml_value(out[-1].name)}: give each its own")
     ranges = [("the preset's own layer", first["layer_bottom"], first["layer_top"])]
     ranges += [(c.name, c.params["layer_bottom"], c.params["layer_top"]) for c in out]
     cloudlayers.check_stack(ranges, where)

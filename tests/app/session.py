@@ -1137,6 +1137,49 @@ def s_paint(step: Step):
     yield 2.0
 
 
+def s_layers(step: Step):
+    """A layered sky (docs/layers.md): the sidebar's Cloud Layers + adds a second layer above the first;
+    the viewport shows both (against the first alone), F12 shows both (against F12 with the second off),
+    and the saved file keeps it (the reopen phase checks)."""
+    scene = bpy.context.scene
+    s = scene.nubis
+    area = view3d_area()
+    with override(area, "UI"):
+        step.note(f"nubis.cloud_layer_add (the Cloud Layers panel's +) -> {bpy.ops.nubis.cloud_layer_add()}")
+    step.check(len(s.cloud_layers) == 1, f"{len(s.cloud_layers)} further cloud layer(s) after +")
+    if not s.cloud_layers:
+        return
+    cloud = s.cloud_layers[0]
+    step.check(
+        cloud.layer_bottom >= s.layer_top and cloud.field_a is not None,
+        f"'{cloud.name}' at {cloud.layer_bottom:.0f}-{cloud.layer_top:.0f} m, above the first layer, with its field",
+    )
+    heads = headers(["Cloud Layers"])
+    if "Cloud Layers" in heads:  # the sidebar step leaves the sub-panels closed: open this one to show it
+        yield from click(heads["Cloud Layers"])
+        yield from settle()
+    shot(step, "08_layers_sidebar", "sidebar")
+    s.first_layer_solo = True
+    yield 3.0
+    yield from _converge()
+    first = shot(step, "08_layers_first_alone", "view")
+    s.first_layer_solo = False
+    yield 3.0
+    yield from _converge()
+    both = shot(step, "08_layers_both", "view")
+    d = mae(both, first)
+    step.check(d >= VIEW_MIN_MAE / 2, f"the viewport draws the second layer too (MAE {d:.4f} against the first alone)")
+    small_render(scene, eevee())
+    cloud.enabled = False
+    without = render_script(step, "layers_first_only")
+    cloud.enabled = True
+    path = yield from render_ui(step, "layers_f12", "key")
+    share = changed_share(path, without) if path and os.path.exists(path) else 0.0
+    step.check(share >= 0.02, f"F12 shows the second layer: {share * 100:.1f} % of the pixels changed")
+    with open(os.path.join(OUT, "layers.json"), "w") as f:
+        json.dump({"names": [c.name for c in s.cloud_layers]}, f)
+
+
 def s_save(step: Step):
     path = os.path.join(OUT, "scene.blend")
     with override():
@@ -1157,6 +1200,12 @@ def s_reopen(step: Step):
     step.check(_paint_layer_dabs() == painted["dabs"], f"the painted stroke came back: {_paint_layer_dabs()} dabs")
     cover = _cover_at(painted["points"])
     step.check(bool(cover) and min(cover) >= 0.9, f"the cover under the reopened stroke is {cover}")
+    with open(os.path.join(OUT, "layers.json")) as f:
+        names = json.load(f)["names"]
+    kept = [c.name for c in scene.nubis.cloud_layers]
+    step.check(kept == names, f"the cloud layers came back with the file: {kept}")
+    drawn = ext_module("scene_io").state_from_scene(scene).drawn_layers()
+    step.check(len(drawn) == 2, f"{len(drawn)} cloud layers drawn after reopening")
     yield max(ARGS.converge, 10.0)
     yield from view_has_clouds(step, "06_reopened_view")
     small_render(scene, eevee())
@@ -1181,6 +1230,7 @@ MAIN = [
     s_render_clouds,
     s_vdb_cloud,
     s_paint,
+    s_layers,
     s_save,
 ]
 REOPEN = [s_startup, s_reopen]

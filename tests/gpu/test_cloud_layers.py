@@ -3,6 +3,7 @@ shading a lower one, four layers drawn and baked into one VDB, and the layers ke
 
 import numpy as np
 import pytest
+from gpu_helpers import stroke_elements
 
 PRESET = "altocumulus_over_stratocumulus"
 
@@ -168,3 +169,29 @@ def test_a_layer_added_in_the_sidebar_is_saved_and_read_back(make_scene, tmp_pat
     assert cloud.field_a is not None and cloud.field_a.packed_file is not None
     state = scene_io.state_from_scene(scene)
     assert len(state.drawn_layers()) == 2
+
+
+def test_a_stroke_paints_the_cloud_layer_chosen_in_the_list(make_scene):
+    """Painting (docs/layers.md): with a further layer chosen, a script's stroke goes into its own stack and
+    its field, and the first layer's field is left as it was."""
+    import bpy
+
+    from nubis_addon.blender import scene_io
+
+    scene = make_scene(PRESET)
+    s = scene.nubis
+    s.active_further_layer = 0
+    cloud = s.cloud_layers[0]
+    before_first = scene_io.read_fields(s)[0].copy()
+    before = scene_io.state_from_scene(scene).cloud_layers[0].field_a.copy()
+    stroke = stroke_elements([-3000.0, 0.0, 3000.0], z=cloud.layer_bottom)
+    assert bpy.ops.nubis.paint_field(stroke=stroke, channel="COVERAGE", radius=2000.0, strength=1.0) == {"FINISHED"}
+    assert [x.kind for x in cloud.layers][-1] == "PAINT" and len(cloud.layers[-1].dabs) > 0
+    assert not any(x.kind == "PAINT" for x in s.layers)
+    painted = scene_io.state_from_scene(scene).cloud_layers[0]
+    after = painted.field_a
+    res = s.field_resolution
+    # The coverage the shader sees under the stroke (the field times the layer's multiplier): full.
+    centre = after[res // 2 - 2 : res // 2 + 2, res // 2 - 2 : res // 2 + 2, 0] * painted.params["density_coverage"]
+    assert centre.min() >= 0.99 and not np.array_equal(after, before)
+    assert np.array_equal(scene_io.read_fields(s)[0], before_first)

@@ -329,7 +329,7 @@ def test_a_long_composite_is_announced_and_an_absurd_one_refused(blender, make_s
     dabs = paint.stroke_dabs([(0.0, 0.0, 1.0, True), (5000.0, 0.0, 1.0, False)], RADIUS, 1.0, grid=grid)
     monkeypatch.setattr(paint, "NOTICE_S", 0.0)
     assert re.fullmatch(
-        r"compositing 11 dabs takes about \d+ s", blender_paint.composite_notice(scene, layer, dabs, grid)
+        r"compositing 11 dabs takes about \d+ s", blender_paint.composite_notice(scene.nubis, layer, dabs, grid)
     )
     printed = []
     monkeypatch.setattr(console, "current", lambda: type("C", (), {"line": staticmethod(printed.append)})())
