@@ -412,7 +412,8 @@ def drawn_cloud_layers(scene) -> tuple[tuple[cloudlayers.LayerField, ...], bool]
         a, b = _layer_field_arrays(scene, cloud, res)
         out.append(cloudlayers.LayerField(cloud.name, params, a, b))
         ranges.append((cloud.name, cloud.layer_bottom, cloud.layer_top))
-    cloudlayers.check_stack(ranges, "the scene's cloud layers")
+    if out:
+        cloudlayers.check_stack(ranges, "the scene's cloud layers")
     return tuple(out), first
 
 

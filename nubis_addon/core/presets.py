@@ -166,9 +166,10 @@ def _parse_cloud_layers(value: Any, first_layer: tuple, where: str) -> list[clou
         out.append(_parse_cloud_layer(raw, first_layer, here, i))
         if any(c.name == out[-1].name for c in out[:-1]):
             raise NubisError(f"{here}.name: another cloud layer is named {toml_value(out[-1].name)}: give each its own")
-    ranges = [("the preset's own layer", first["layer_bottom"], first["layer_top"])]
-    ranges += [(c.name, c.params["layer_bottom"], c.params["layer_top"]) for c in out]
-    cloudlayers.check_stack(ranges, where)
+    if out:  # one layer keeps the schema's own limits (a sky of one layer may reach 30 km)
+        ranges = [("the preset's own layer", first["layer_bottom"], first["layer_top"])]
+        ranges += [(c.name, c.params["layer_bottom"], c.params["layer_top"]) for c in out]
+        cloudlayers.check_stack(ranges, where)
     return out
 
 
