@@ -119,6 +119,7 @@ LONGEST_FIRST = (
     "gpu/test_superstorm.py",
     "cli/test_realtime_cli.py",
     "cli/test_vdb_cli.py",
+    "gpu/test_layered_sky.py",
     "gpu/test_vdb_clouds.py",
     "gpu/test_light_volumes.py",
 )
