@@ -239,6 +239,17 @@ class LiveStroke:
         return len(dabs)
 
 
+def begin_stroke(scene, channel: str, name: str, brush: tuple) -> tuple[int, str, LiveStroke]:
+    """A drag's start on the cloud layer chosen in the Cloud Layers list: (that layer's index among the
+    further layers, -1 for the first; the paint layer's name; the stroke, live on the first layer only).
+    `brush` is (radius, strength, falloff, mode)."""
+    owner = ui.active_cloud_layer(scene)
+    live = ui.first_layer_chosen(scene)
+    layer = paint_layer(owner, channel, name)
+    stroke = LiveStroke(scene, layer, *brush, live=live)
+    return (-1 if live else scene.nubis.active_further_layer), layer.name, stroke
+
+
 # ---- operators ---------------------------------------------------------------------------------------------
 
 
@@ -318,12 +329,8 @@ class NUBIS_OT_paint_field(NeedsCloudscape, bpy.types.Operator):
         self.mode = mode
         try:
             self._checked(context)
-            owner = ui.active_cloud_layer(scene)
-            self._owner = scene.nubis.active_further_layer if owner is not scene.nubis else -1
-            self._layer_name = paint_layer(owner, self.channel, self.layer).name
-            layer = owner.layers[self._layer_name]
-            live = owner is scene.nubis
-            self._live = LiveStroke(scene, layer, self.radius, self.strength, self.falloff, mode, live)
+            brush = (self.radius, self.strength, self.falloff, mode)
+            self._owner, self._layer_name, self._live = begin_stroke(scene, self.channel, self.layer, brush)
             self._first = True
             self._sample(context, event)
         except NubisError as err:
@@ -548,8 +555,8 @@ class NUBIS_PT_paint(SidebarPanel, bpy.types.Panel):
         s = context.scene.nubis
         owner = ui.active_cloud_layer(context.scene)
         if s.cloud_layers:  # a layered sky: strokes go into the layer chosen in the Cloud Layers list
-            name = s.first_layer_name if owner is s else owner.name
-            layout.label(text=f"Paints cloud layer '{name}' (Cloud Layers)", icon="OUTLINER_DATA_VOLUME")
+            name = s.first_layer_name if ui.first_layer_chosen(context.scene) else owner.name
+            layout.label(text=f"Paints '{name}'", icon="OUTLINER_DATA_VOLUME")
         painted = [x for x in owner.layers if x.kind == "PAINT"]
         for x in painted:
             layout.label(text=f"{x.name}: {len(x.dabs)} dabs", icon="BRUSH_DATA" if x.enabled else "HIDE_ON")

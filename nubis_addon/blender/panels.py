@@ -184,7 +184,7 @@ class NUBIS_PT_cloud_layers(ui.SidebarPanel, bpy.types.Panel):
         s = context.scene.nubis
         # The first layer is the scene's own settings: its row stands above the list of further layers.
         box = layout.box().row(align=True)
-        chosen = not 0 <= s.active_further_layer < len(s.cloud_layers)
+        chosen = ui.first_layer_chosen(context.scene)
         box.operator("nubis.cloud_layer_first", text="", icon="RADIOBUT_ON" if chosen else "RADIOBUT_OFF")
         _cloud_layer_row(box, s, first=True)
         col = _list_with_buttons(

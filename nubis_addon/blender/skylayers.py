@@ -44,7 +44,8 @@ class NUBIS_OT_cloud_layer_add(ui.NeedsCloudscape, NubisOperator, bpy.types.Oper
                 f"a sky holds at most {cloudlayers.MAX_CLOUD_LAYERS} cloud layers: remove one before adding another"
             )
         source = ui.active_cloud_layer(scene)
-        base = scene_io.cloud_layer_params(s, source) if source is not s else scene_io.params_from_scene(s)
+        first = ui.first_layer_chosen(scene)
+        base = scene_io.params_from_scene(s) if first else scene_io.cloud_layer_params(s, source)
         own = cloudlayers.new_layer_params(base, _ranges(s))
         stack = [scene_io.layer_to_dict(layer) for layer in source.layers]
         taken = {c.name for c in s.cloud_layers} | {s.first_layer_name}

@@ -18,8 +18,14 @@ def active_cloud_layer(scene):
     cloud layer, or the further layer chosen in the Cloud Layers list. Both hold the layer's settings under
     the same keys (core/schema.py: CLOUD_LAYER_KEYS), its field stack (`layers`) and `active_layer`."""
     settings = scene.nubis
-    index = settings.active_further_layer
-    return settings.cloud_layers[index] if 0 <= index < len(settings.cloud_layers) else settings
+    return settings if first_layer_chosen(scene) else settings.cloud_layers[settings.active_further_layer]
+
+
+def first_layer_chosen(scene) -> bool:
+    """Whether the sidebar's per-layer panels act on the first cloud layer (not a further one). Asked by
+    index: each `scene.nubis` is a new Python object, so `is` cannot tell."""
+    settings = scene.nubis
+    return not 0 <= settings.active_further_layer < len(settings.cloud_layers)
 
 
 def redraw_views(area_types: tuple[str, ...] = ("VIEW_3D",)) -> None:

@@ -28,6 +28,7 @@ EXPECTED = {
         "render_clouds",
         "vdb_cloud",
         "paint",
+        "layers",
         "save",
     ],
     "reopen": ["startup", "reopen"],

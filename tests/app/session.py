@@ -1159,6 +1159,9 @@ def s_layers(step: Step):
         yield from click(heads["Cloud Layers"])
         yield from settle()
     shot(step, "08_layers_sidebar", "sidebar")
+    with override():  # the camera's view from the ground (the paint step left the top view)
+        if area.spaces.active.region_3d.view_perspective != "CAMERA":
+            bpy.ops.view3d.view_camera()
     s.first_layer_solo = True
     yield 3.0
     yield from _converge()

@@ -96,7 +96,7 @@ def _layer(name: str, bottom: float, top: float) -> str:
         ),
         (_with('\n[[cloud_layers]]\nname = "Sky"\n[cloud_layers.sun]\nstrength = 2.0\n'), "unknown entry 'sun'"),
         (_with('\n[[cloud_layers]]\nname = ""\n'), "cloud_layers[1].name must be a name"),
-        (_with(_layer("Altocumulus", 7000.0, 8000.0)), "another cloud layer is named \"Altocumulus\""),
+        (_with(_layer("Altocumulus", 7000.0, 8000.0)), 'another cloud layer is named "Altocumulus"'),
         (
             _with('\n[[cloud_layers]]\nname = "T"\n[cloud_layers.layer]\nbottom = 7000.0\ntop = 6500.0\n'),
             "at or under its base",

@@ -195,3 +195,16 @@ def test_a_stroke_paints_the_cloud_layer_chosen_in_the_list(make_scene):
     centre = after[res // 2 - 2 : res // 2 + 2, res // 2 - 2 : res // 2 + 2, 0] * painted.params["density_coverage"]
     assert centre.min() >= 0.99 and not np.array_equal(after, before)
     assert np.array_equal(scene_io.read_fields(s)[0], before_first)
+
+
+def test_a_drag_is_live_on_the_first_layer_and_composited_at_its_end_on_a_further_one(make_scene):
+    from nubis_addon.blender import paint as blender_paint
+
+    scene = make_scene(PRESET)
+    brush = (2000.0, 1.0, "SMOOTH", "ADD")
+    owner, name, stroke = blender_paint.begin_stroke(scene, "COVERAGE", "", brush)
+    assert (owner, stroke.live) == (-1, True) and name in scene.nubis.layers
+    scene.nubis.active_further_layer = 0
+    owner, name, stroke = blender_paint.begin_stroke(scene, "COVERAGE", "", brush)
+    assert (owner, stroke.live) == (0, False) and name in scene.nubis.cloud_layers[0].layers
+    assert stroke.add(0.0, 0.0, 1.0, True) is None and stroke.laid > 0
