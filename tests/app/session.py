@@ -1137,9 +1137,6 @@ def s_paint(step: Step):
     yield 2.0
 
 
-LAYERS_SETTLE = 10.0  # seconds the camera view accumulates before each of the layers step's pictures
-
-
 def s_layers(step: Step):
     """A layered sky (docs/layers.md): the sidebar's Cloud Layers + adds a second layer above the first;
     the viewport shows both (against the first alone), F12 shows both (against F12 with the second off),
@@ -1165,13 +1162,13 @@ def s_layers(step: Step):
     with override():  # the camera's view from the ground (the paint step left the top view)
         if area.spaces.active.region_3d.view_perspective != "CAMERA":
             bpy.ops.view3d.view_camera()
-    # Ten seconds of accumulation each, not convergence: the second layer changes the view by ten times
-    # what the grain left does (measured MAE 0.057 converged; the check asks 0.005).
     s.first_layer_solo = True
-    yield LAYERS_SETTLE
+    yield 3.0
+    yield from _converge()
     first = shot(step, "08_layers_first_alone", "view")
     s.first_layer_solo = False
-    yield LAYERS_SETTLE
+    yield 3.0
+    yield from _converge()
     both = shot(step, "08_layers_both", "view")
     d = mae(both, first)
     step.check(d >= VIEW_MIN_MAE / 2, f"the viewport draws the second layer too (MAE {d:.4f} against the first alone)")
