@@ -181,11 +181,12 @@ vec4 nubis_with_cirrus(vec4 clouds, vec3 origin, vec3 dir, vec2 pixel, out float
  * metres per metre of distance, P.pixel_size for orthographic views) in texels of the base-shape noise,
  * plus the quality's base level (GDC22: PS4 reads MIP 1, PS5 MIP 0). The fractional part is dithered
  * per pixel, so neighbouring levels blend as the passes accumulate. */
-/* The level is one late (NUBIS_LOD_BIAS, nubis_density_lib.glsl; docs/sources.md#noise-mip-levels). */
-float nubis_view_lod(float t, float dither)
+/* The level is one late (NUBIS_LOD_BIAS, nubis_density_lib.glsl; docs/sources.md#noise-mip-levels).
+ * `lf_period` is the base-shape period of the cloud layer the sample is in. */
+float nubis_view_lod(float t, float dither, float lf_period)
 {
   float footprint = P.pixel_angle * t + P.pixel_size;
-  float level = log2(max(footprint * float(NUBIS_LF_SIZE - 1) / P.noise_lf_period, 1.0)) - NUBIS_LOD_BIAS + P.march_mip;
+  float level = log2(max(footprint * float(NUBIS_LF_SIZE - 1) / lf_period, 1.0)) - NUBIS_LOD_BIAS + P.march_mip;
   return min(floor(level + dither), NUBIS_COARSEST_LOD);
 }
 
@@ -330,19 +331,20 @@ bool nubis_shell_segment(vec3 origin, vec3 dir, float lo, float hi, out float t0
   return t1 > t0;
 }
 
-/* The parts of a ray the view march takes, nearest first, in `segments` (t0, t1, the span's thickness):
+/* The parts of a ray the view march takes, nearest first, in `segments` (t0, t1, the span's thickness,
+ * its layer's base-shape period for the noise's mip level):
  * each cloud layer's on its own, so the air between layers costs no steps (docs/layers.md). With VDB
  * clouds, which may stand anywhere, one segment through the whole shell. Returns how many. */
-int nubis_march_segments(vec3 origin, vec3 dir, out vec3 segments[NUBIS_MAX_LAYERS])
+int nubis_march_segments(vec3 origin, vec3 dir, out vec4 segments[NUBIS_MAX_LAYERS])
 {
   int count = 0;
   float t0, t1;
   for (int k = 0; k < NUBIS_MAX_LAYERS; k++) {
-    segments[k] = vec3(0.0);
+    segments[k] = vec4(0.0);
   }
 #if NUBIS_VDB
   if (nubis_shell_segment(origin, dir, P.shell_bottom, P.shell_top, t0, t1)) {
-    segments[0] = vec3(t0, t1, P.shell_top - P.shell_bottom);
+    segments[0] = vec4(t0, t1, P.shell_top - P.shell_bottom, P.noise_lf_period);
     count = 1;
   }
 #else
@@ -360,7 +362,7 @@ int nubis_march_segments(vec3 origin, vec3 dir, out vec3 segments[NUBIS_MAX_LAYE
       segments[at] = segments[at - 1];
       at--;
     }
-    segments[at] = vec3(t0, t1, heights.w - heights.z);
+    segments[at] = vec4(t0, t1, heights.w - heights.z, P.cloud_layer_noise[i].x);
     count++;
   }
 #endif
@@ -375,7 +377,7 @@ NubisParts nubis_march_parts(vec3 origin, vec3 dir, vec2 pixel, float split)
   parts.flash_near = vec4(0.0);
   parts.flash_far = vec4(0.0);
   parts.cloud_depth = 0.0;
-  vec3 segments[NUBIS_MAX_LAYERS];
+  vec4 segments[NUBIS_MAX_LAYERS];
   int segment_count = nubis_march_segments(origin, dir, segments);
   if (segment_count == 0) {
     return parts;
@@ -432,7 +434,7 @@ NubisParts nubis_march_parts(vec3 origin, vec3 dir, vec2 pixel, float split)
       float t = t0 + (float(i) + jitter) * dt;
 #endif
       vec3 p = origin + dir * t;
-      float lod = nubis_view_lod(t, dither);
+      float lod = nubis_view_lod(t, dither, segments[segment].w);
 #if NUBIS_FETCH_STATS
       nubis_view_samples++;
 #endif
