@@ -331,21 +331,28 @@ bool nubis_shell_segment(vec3 origin, vec3 dir, float lo, float hi, out float t0
   return t1 > t0;
 }
 
-/* The parts of a ray the view march takes, nearest first, in `segments` (t0, t1, the span's thickness,
- * its layer's base-shape period for the noise's mip level):
+/* The parts of a ray the view march takes, nearest first: each (t0, t1, the span's thickness, its layer's
+ * base-shape period for the noise's mip level), in a struct rather than an `out` array, which not every
+ * backend's shader translation takes:
  * each cloud layer's on its own, so the air between layers costs no steps (docs/layers.md). With VDB
  * clouds, which may stand anywhere, one segment through the whole shell. Returns how many. */
-int nubis_march_segments(vec3 origin, vec3 dir, out vec4 segments[NUBIS_MAX_LAYERS])
+struct NubisSegments {
+  vec4 part[NUBIS_MAX_LAYERS];
+  int count;
+};
+
+NubisSegments nubis_march_segments(vec3 origin, vec3 dir)
 {
-  int count = 0;
+  NubisSegments segments;
+  segments.count = 0;
   float t0, t1;
   for (int k = 0; k < NUBIS_MAX_LAYERS; k++) {
-    segments[k] = vec4(0.0);
+    segments.part[k] = vec4(0.0);
   }
 #if NUBIS_VDB
   if (nubis_shell_segment(origin, dir, P.shell_bottom, P.shell_top, t0, t1)) {
-    segments[0] = vec4(t0, t1, P.shell_top - P.shell_bottom, P.noise_lf_period);
-    count = 1;
+    segments.part[0] = vec4(t0, t1, P.shell_top - P.shell_bottom, P.noise_lf_period);
+    segments.count = 1;
   }
 #else
   for (int i = 0; i < NUBIS_MAX_LAYERS; i++) {
@@ -357,16 +364,16 @@ int nubis_march_segments(vec3 origin, vec3 dir, out vec4 segments[NUBIS_MAX_LAYE
       continue;
     }
     /* Insertion by the segment's start: layers share no altitude, so their segments do not overlap. */
-    int at = count;
-    while (at > 0 && segments[at - 1].x > t0) {
-      segments[at] = segments[at - 1];
+    int at = segments.count;
+    while (at > 0 && segments.part[at - 1].x > t0) {
+      segments.part[at] = segments.part[at - 1];
       at--;
     }
-    segments[at] = vec4(t0, t1, heights.w - heights.z, P.cloud_layer_noise[i].x);
-    count++;
+    segments.part[at] = vec4(t0, t1, heights.w - heights.z, P.cloud_layer_noise[i].x);
+    segments.count++;
   }
 #endif
-  return count;
+  return segments;
 }
 
 NubisParts nubis_march_parts(vec3 origin, vec3 dir, vec2 pixel, float split)
@@ -377,8 +384,8 @@ NubisParts nubis_march_parts(vec3 origin, vec3 dir, vec2 pixel, float split)
   parts.flash_near = vec4(0.0);
   parts.flash_far = vec4(0.0);
   parts.cloud_depth = 0.0;
-  vec4 segments[NUBIS_MAX_LAYERS];
-  int segment_count = nubis_march_segments(origin, dir, segments);
+  NubisSegments segments = nubis_march_segments(origin, dir);
+  int segment_count = segments.count;
   if (segment_count == 0) {
     return parts;
   }
@@ -402,12 +409,12 @@ NubisParts nubis_march_parts(vec3 origin, vec3 dir, vec2 pixel, float split)
     if (segment >= segment_count || transmittance < NUBIS_OPAQUE_TRANSMITTANCE) {
       break;
     }
-    float t0 = segments[segment].x;
-    float t1 = segments[segment].y;
+    float t0 = segments.part[segment].x;
+    float t1 = segments.part[segment].y;
     /* GPU Pro 7, S15: 64 steps looking up, up to 128 towards the horizon (P.march.xy), by the segment's
      * length against its layer's thickness (docs/sources.md#view-steps). */
     float seg = t1 - t0;
-    float thickness = segments[segment].z;
+    float thickness = segments.part[segment].z;
     float k = clamp01((seg - thickness) / max(P.layer_draw_radius - thickness, 1.0));
     int steps = int(mix(P.march_steps_min, P.march_steps_max, k));
     /* Within the platform's loop limit (core/march.py, max_steps, in P.max_view_steps, shared by the
@@ -434,7 +441,7 @@ NubisParts nubis_march_parts(vec3 origin, vec3 dir, vec2 pixel, float split)
       float t = t0 + (float(i) + jitter) * dt;
 #endif
       vec3 p = origin + dir * t;
-      float lod = nubis_view_lod(t, dither, segments[segment].w);
+      float lod = nubis_view_lod(t, dither, segments.part[segment].w);
 #if NUBIS_FETCH_STATS
       nubis_view_samples++;
 #endif
