@@ -297,16 +297,18 @@ def _benchmark_layers(job: Job, options: BenchmarkOptions) -> dict:
     """`benchmark` of a layered sky (docs/layers.md): its lowest drawn layer alone on the same view first
     (its files in out/lowest_layer), then the whole sky: what the further layers cost, in one run."""
     s = job.scene.nubis
-    layers = [(s.layer_bottom, s, "first_layer_solo", s.first_layer_name)]
-    layers += [(c.layer_bottom, c, "solo", c.name) for c in s.cloud_layers]
-    _bottom, owner, solo, name = min(layers, key=lambda row: row[0])
-    kept = {(id(o), key): getattr(o, key) for _b, o, key, _n in layers for key in (key,)}
-    for _b, o, key, _n in layers:
-        setattr(o, key, o is owner)
+    # (the layer's settings, its solo switch, whether it is enabled, its base, its name)
+    rows = [(s, "first_layer_solo", s.first_layer_enabled, s.layer_bottom, s.first_layer_name)]
+    rows += [(c, "solo", c.enabled, c.layer_bottom, c.name) for c in s.cloud_layers]
+    lowest = min((i for i, row in enumerate(rows) if row[2]), key=lambda i: rows[i][3], default=0)
+    name = rows[lowest][4]
+    kept = [getattr(owner, key) for owner, key, *_rest in rows]
+    for i, (owner, key, *_rest) in enumerate(rows):
+        setattr(owner, key, i == lowest)
 
     def whole_sky() -> None:
-        for _b, o, key, _n in layers:
-            setattr(o, key, kept[(id(o), key)])
+        for (owner, key, *_rest), value in zip(rows, kept, strict=True):
+            setattr(owner, key, value)
 
     return _benchmark_pair(job, options, ("lowest_layer", f"the lowest layer alone ('{name}')"), whole_sky)
 
