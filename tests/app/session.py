@@ -497,6 +497,20 @@ def _luminance(png: str):
     return px[..., 0] * 0.2126 + px[..., 1] * 0.7152 + px[..., 2] * 0.0722
 
 
+# Samples per pixel of the views in the steps that compare two states of the scene (a VDB cloud marked or
+# not, a stroke painted or undone, a second layer on or off): converged views at the same sample count share
+# their jitter sequence, so their difference is the change itself, and two samples converge four times sooner
+# than the default eight on llvmpipe. The grain step judges the default; s_save puts it back for the file.
+CHECK_SAMPLES = 2
+
+
+def _check_samples(step: Step) -> None:
+    s = bpy.context.scene.nubis
+    if s.viewport_samples != CHECK_SAMPLES:
+        step.note(f"viewport samples {s.viewport_samples} -> {CHECK_SAMPLES} for this step's comparisons")
+        s.viewport_samples = CHECK_SAMPLES
+
+
 def _converge(timeout: float = 180.0):
     views = list(ext_module("viewport")._views.values())
     t = time.monotonic()
@@ -965,6 +979,7 @@ def s_vdb_cloud(step: Step):
     sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "src", "tests"))
     import vdb_helpers
 
+    _check_samples(step)
     path = os.path.join(OUT, "vdb", "cumulus.vdb")
     os.makedirs(os.path.dirname(path), exist_ok=True)
     vdb_helpers.write_cumulus(path, vdb=_core_module("bundled").openvdb())
@@ -1068,6 +1083,7 @@ def s_paint(step: Step):
     during the drag, Ctrl-Z removes the stroke and Ctrl-Shift-Z brings it back for the saved file."""
     scene = bpy.context.scene
     s = scene.nubis
+    _check_samples(step)
     keep_cover = s.density_cover
     s.density_cover = 0.03  # a nearly clear sky, so the picture shows what the stroke paints
     with override():
@@ -1143,6 +1159,7 @@ def s_layers(step: Step):
     and the saved file keeps it (the reopen phase checks)."""
     scene = bpy.context.scene
     s = scene.nubis
+    _check_samples(step)
     area = view3d_area()
     with override(area, "UI"):
         step.note(f"nubis.cloud_layer_add (the Cloud Layers panel's +) -> {bpy.ops.nubis.cloud_layer_add()}")
@@ -1184,6 +1201,10 @@ def s_layers(step: Step):
 
 
 def s_save(step: Step):
+    s = bpy.context.scene.nubis
+    default = type(s).bl_rna.properties["viewport_samples"].default
+    s.viewport_samples = default  # the file as an artist has it
+    step.check(s.viewport_samples == default, f"the file keeps the default {default} viewport samples")
     path = os.path.join(OUT, "scene.blend")
     with override():
         bpy.ops.wm.save_as_mainfile(filepath=path)

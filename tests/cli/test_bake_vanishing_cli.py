@@ -23,6 +23,8 @@ import pytest
 from conftest import ROOT
 from vdb_helpers import write_cumulus
 
+pytestmark = pytest.mark.process  # the process's contract with the system (pyproject.toml)
+
 
 def _env(tmp_path: Path) -> dict:
     tmpdir = tmp_path / "tmpdir"

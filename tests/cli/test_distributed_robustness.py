@@ -22,6 +22,7 @@ import pytest
 import test_robustness
 from conftest import ROOT, run_cli
 
+pytestmark = pytest.mark.process  # the process's contract with the system (pyproject.toml)
 DASK = Path(sys.executable).with_name("dask")  # the `dask` command of the Python running the tests
 full_disk = test_robustness.full_disk  # a small tmpfs (needs root, as CI runs)
 

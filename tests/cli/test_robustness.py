@@ -64,6 +64,7 @@ def _preset(tmp_path: Path, text: str, name: str = "p.toml") -> Path:
     return path
 
 
+@pytest.mark.process
 @pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143), (signal.SIGHUP, 129)])
 def test_interrupt_ends_with_one_line_its_exit_code_and_no_temp_files(tmp_path, sig, code):
     """Ctrl-C used to print a KeyboardInterrupt traceback and then die with SIGSEGV; SIGTERM while
@@ -89,6 +90,7 @@ def test_interrupt_ends_with_one_line_its_exit_code_and_no_temp_files(tmp_path, 
     assert list(Path(env["TMPDIR"]).iterdir()) == []
 
 
+@pytest.mark.process
 def test_an_interrupt_during_a_large_render_is_acted_on_within_seconds(tmp_path):
     """The render waited for the whole frame at once, holding Python's lock inside Blender's read-back: a
     Ctrl-C came through 537 s later at 4096x4096. Drawn and waited for tile by tile (render/engine.py),
@@ -156,6 +158,7 @@ def test_an_interrupt_during_a_large_render_is_acted_on_within_seconds(tmp_path)
     assert not out.exists() and list(Path(env["TMPDIR"]).iterdir()) == []
 
 
+@pytest.mark.process
 def test_interrupted_compare_keeps_the_earlier_comparison_whole(tmp_path):
     """A failed compare replaced clouds.vdb and kept the other seven files, so metrics.json described
     a bake that was no longer there. The eight files now move into place together."""
@@ -176,6 +179,7 @@ def test_interrupted_compare_keeps_the_earlier_comparison_whole(tmp_path):
     assert list(Path(env["TMPDIR"]).iterdir()) == []
 
 
+@pytest.mark.process
 def test_sigkill_leaves_nothing_readable_and_the_next_run_sweeps_it(tmp_path):
     env = _tmp_env(tmp_path)
     out = tmp_path / "cmp"
@@ -192,6 +196,7 @@ def test_sigkill_leaves_nothing_readable_and_the_next_run_sweeps_it(tmp_path):
     assert [p.name for p in out.iterdir()] == ["after.png"]
 
 
+@pytest.mark.process
 def test_a_successful_or_failed_run_leaves_nothing_in_the_temp_folder(tmp_path):
     """Every run left an empty /tmp/blender_XXXXXX (the exit skips Blender's teardown), and every
     failed run a nubis-log-* folder."""
@@ -204,6 +209,7 @@ def test_a_successful_or_failed_run_leaves_nothing_in_the_temp_folder(tmp_path):
     assert list(Path(env["TMPDIR"]).iterdir()) == []
 
 
+@pytest.mark.process
 def test_an_internal_fault_keeps_exactly_one_log_named_in_its_message(tmp_path, monkeypatch, capsys):
     import tempfile
 
@@ -276,6 +282,7 @@ def test_ranges_are_refused_before_any_work_with_what_to_do(tmp_path, args, mess
     assert list(Path(env["TMPDIR"]).iterdir()) == []
 
 
+@pytest.mark.process
 def test_a_file_name_longer_than_the_file_system_allows_is_refused_before_any_work(tmp_path):
     """Was `nubis: internal error: OSError: [Errno 36] File name too long` with a log."""
     env = _tmp_env(tmp_path)
@@ -422,6 +429,7 @@ def test_a_saved_scene_beyond_reach_is_refused(make_scene):
         pipeline.check_scene(scene)
 
 
+@pytest.mark.process
 def test_sigterm_while_the_bake_is_written_leaves_no_partial_file(tmp_path):
     """SIGTERM while writing left a partial hidden `.x-XXXX.vdb` (mode 0600) beside the output.
 
@@ -447,6 +455,7 @@ def test_sigterm_while_the_bake_is_written_leaves_no_partial_file(tmp_path):
     assert list(Path(env["TMPDIR"]).iterdir()) == []
 
 
+@pytest.mark.process
 def test_output_sets_move_together_or_not_at_all(tmp_path):
     from nubis_addon.core import staging
 
@@ -477,6 +486,7 @@ def test_output_sets_move_together_or_not_at_all(tmp_path):
     assert not stale.exists() and elsewhere.exists()
 
 
+@pytest.mark.process
 def test_a_signal_during_the_writes_keeps_the_earlier_set(tmp_path):
     """The signal arrives while the set is being written (a long C call holding the interpreter): the
     commit that follows keeps the earlier files and the process ends with 143."""
@@ -499,6 +509,7 @@ print("committed")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt"] and (tmp_path / "a.txt").read_text() == "old a"
 
 
+@pytest.mark.process
 def test_control_characters_in_names_are_printed_escaped(tmp_path):
     """A preset name or path holding terminal escape sequences (clear the screen, set the title) is echoed
     with them escaped: the error line must not drive the user's terminal."""
@@ -539,6 +550,7 @@ def _fill(folder):
             os.close(fd)
 
 
+@pytest.mark.process
 @pytest.mark.parametrize("suffix", [".png", ".exr"])
 def test_a_full_disk_never_replaces_a_good_image_with_a_bad_one(full_disk, suffix):
     """`render --out /full/old.png` on a full disk said "rendered" and left an unreadable PNG in place of
@@ -558,6 +570,7 @@ def test_a_full_disk_never_replaces_a_good_image_with_a_bad_one(full_disk, suffi
     assert not [p.name for p in full_disk.iterdir() if p.name.startswith(".nubis")]
 
 
+@pytest.mark.process
 def test_a_full_disk_never_replaces_a_good_vdb_with_a_bad_one(full_disk, tmp_path):
     """`bake --out /full/c.vdb` on a full disk said "baked" and left an unreadable 8192-byte VDB: OpenVDB
     does not report the full disk, so the written file is read back before it replaces the old one."""
@@ -572,6 +585,7 @@ def test_a_full_disk_never_replaces_a_good_vdb_with_a_bad_one(full_disk, tmp_pat
     assert old.read_bytes() == before
 
 
+@pytest.mark.process
 def test_a_full_disk_keeps_a_good_vdb_sequence_whole(full_disk, tmp_path):
     """`bake --frames 1-3` over a good set on a full disk said "baked" and left three 0-byte files."""
     pattern = full_disk / "c_####.vdb"
@@ -586,6 +600,7 @@ def test_a_full_disk_keeps_a_good_vdb_sequence_whole(full_disk, tmp_path):
     assert [f.read_bytes() for f in files] == before
 
 
+@pytest.mark.process
 def test_compare_on_a_full_disk_says_so_and_keeps_the_earlier_set(full_disk, tmp_path):
     """compare kept the old set but blamed the bake ("VDB has no 'density' grid: bake it again"); now it
     names the disk and the file as the user knows it, not its hidden staging copy."""
@@ -607,6 +622,7 @@ def test_compare_on_a_full_disk_says_so_and_keeps_the_earlier_set(full_disk, tmp
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
 
 
+@pytest.mark.process
 def test_a_read_only_noise_cache_is_said_once_on_the_console(tmp_path):
     """The warning went only to the log that is deleted at exit, so every run silently regenerated the
     noise. A read-only file system (a tmpfs mounted read-only; needs root, as the full disk does)."""
@@ -630,6 +646,7 @@ def test_a_read_only_noise_cache_is_said_once_on_the_console(tmp_path):
         subprocess.run(["umount", "-l", str(folder)], check=False)
 
 
+@pytest.mark.process
 def test_a_stdout_that_cannot_be_written_is_an_error_not_a_traceback(tmp_path):
     """`render ... > /dev/full` wrote the image, then died in print() with a Python traceback."""
     import subprocess
@@ -678,6 +695,7 @@ def test_a_preview_the_gpu_cannot_hold_is_one_sentence_with_a_size_to_try(tmp_pa
     assert not list(out.iterdir()) and list(Path(env["TMPDIR"]).iterdir()) == []
 
 
+@pytest.mark.process
 def test_an_output_name_that_is_not_utf8_is_refused_before_any_work(tmp_path, capsys):
     """`--out $'x\\xff.png'` rendered for 20 s, then OpenImageIO (and OpenVDB for a bake) refused the name
     with a multi-line TypeError: an internal error."""
@@ -700,6 +718,7 @@ def test_an_output_name_that_is_not_utf8_is_refused_before_any_work(tmp_path, ca
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.process
 def test_a_closed_stderr_leaves_no_log_and_the_summary_on_stdout(tmp_path):
     """With `2>&-` the run died on its first dup(2), exit 1, and left an empty nubis-*.log behind."""
     env = _tmp_env(tmp_path)
@@ -717,6 +736,7 @@ def test_a_closed_stderr_leaves_no_log_and_the_summary_on_stdout(tmp_path):
     assert out.exists() and list(Path(env["TMPDIR"]).iterdir()) == []
 
 
+@pytest.mark.process
 def test_a_closed_stdout_is_said_as_an_error(capsys):
     from nubis_addon import cli
 
