@@ -121,6 +121,23 @@ def test_layers_import_one_way():
             assert "nubis_addon" not in graph[name], name
 
 
+def test_functions_stay_short_and_take_an_options_object():
+    """No function of the package is longer than 100 lines or takes more than 8 parameters (self and cls
+    not counted; *args and **kwargs count one each): a job's options travel as one object."""
+    too_big = []
+    for name, path in _modules().items():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                continue
+            a = node.args
+            params = [x.arg for x in a.posonlyargs + a.args + a.kwonlyargs if x.arg not in ("self", "cls")]
+            params += [x.arg for x in (a.vararg, a.kwarg) if x is not None]
+            lines = node.end_lineno - node.lineno + 1
+            if lines > 100 or len(params) > 8:
+                too_big.append(f"{name}.{node.name}: {lines} lines, {len(params)} parameters")
+    assert not too_big, too_big
+
+
 def test_core_imports_without_blender():
     """In a fresh interpreter, every core module imports and none pulls in bpy."""
     code = (
