@@ -38,6 +38,47 @@ def test_two_layers_seen_from_between_them_fill_the_sky_above_and_the_view_below
     assert alto_below < 0.01 and alto_above == pytest.approx(above, abs=0.02), (alto_above, alto_below)
 
 
+def test_the_panorama_and_the_preview_show_every_layer(make_scene, tmp_path):
+    """`panorama` (the environment from the camera between the layers) and `preview` (the viewport's draw
+    path replayed) draw both layers: each differs from its output with one layer alone in the half of the
+    view the other layer fills."""
+    from nubis_addon.blender import preview, scene_render
+    from nubis_addon.core import imageio
+    from nubis_addon.core.jobs import PreviewOptions
+
+    scene = make_scene(PRESET)
+
+    def outputs(tag: str) -> tuple[np.ndarray, np.ndarray]:
+        pano = imageio.read_image(scene_render.panorama(scene, tmp_path / f"{tag}.exr", 64))  # zenith row first
+        preview.preview(scene, tmp_path / tag, PreviewOptions(width=64, height=36, frames=(1,), redraws=16))
+        return pano, imageio.read_image(tmp_path / tag / "0001.exr")
+
+    (pano, view) = outputs("both")
+    scene.nubis.first_layer_solo = True
+    (pano_deck, view_deck) = outputs("deck")
+    scene.nubis.first_layer_solo = False
+    scene.nubis.cloud_layers[0].solo = True
+    (pano_alto, view_alto) = outputs("alto")
+    rows = pano.shape[0] // 3
+    lum = pano[..., :3] @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+    lum_deck = pano_deck[..., :3] @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+    lum_alto = pano_alto[..., :3] @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+    above = float(np.abs(lum - lum_deck)[:rows].mean() / lum[:rows].mean())
+    below = float(np.abs(lum - lum_alto)[-rows:].mean() / lum[-rows:].mean())
+    print(f"panorama: the altocumulus changes the sky above by {above:.3f}, the deck the view below by {below:.3f}")
+    assert np.all(np.isfinite(pano)) and above > 0.05 and below > 0.05, (above, below)
+    sky, ground = _alpha_halves(view)
+    deck_sky, deck_ground = _alpha_halves(view_deck)
+    alto_sky, alto_ground = _alpha_halves(view_alto)
+    print(
+        f"preview alpha above/below: both {sky:.3f}/{ground:.3f}, deck {deck_sky:.3f}/{deck_ground:.3f}, "
+        f"altocumulus {alto_sky:.3f}/{alto_ground:.3f}"
+    )
+    assert sky > 0.1 and ground > 0.3, (sky, ground)
+    assert deck_sky < 0.01 and deck_ground == pytest.approx(ground, abs=0.03), (deck_sky, deck_ground)
+    assert alto_ground < 0.01 and alto_sky == pytest.approx(sky, abs=0.03), (alto_sky, alto_ground)
+
+
 def test_a_higher_layer_shades_the_deck_under_it(make_scene):
     """Seen from between the layers looking down, the deck is darker under the altocumulus than without it:
     the light volumes and the light march cross both layers."""
