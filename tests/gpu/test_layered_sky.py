@@ -53,16 +53,16 @@ def test_the_panorama_and_the_preview_show_every_layer(make_scene, tmp_path):
         preview.preview(scene, tmp_path / tag, PreviewOptions(width=64, height=36, frames=(1,), redraws=16))
         return pano, imageio.read_image(tmp_path / tag / "0001.exr")
 
-    (pano, view) = outputs("both")
+    pano, view = outputs("both")
     scene.nubis.first_layer_solo = True
-    (pano_deck, view_deck) = outputs("deck")
+    pano_deck, view_deck = outputs("deck")
     scene.nubis.first_layer_solo = False
     scene.nubis.cloud_layers[0].solo = True
-    (pano_alto, view_alto) = outputs("alto")
+    pano_alto, view_alto = outputs("alto")
     rows = pano.shape[0] // 3
-    lum = pano[..., :3] @ np.array([0.2126, 0.7152, 0.0722], np.float32)
-    lum_deck = pano_deck[..., :3] @ np.array([0.2126, 0.7152, 0.0722], np.float32)
-    lum_alto = pano_alto[..., :3] @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+    lum, lum_deck, lum_alto = (
+        p[..., :3] @ np.array([0.2126, 0.7152, 0.0722], np.float32) for p in (pano, pano_deck, pano_alto)
+    )
     above = float(np.abs(lum - lum_deck)[:rows].mean() / lum[:rows].mean())
     below = float(np.abs(lum - lum_alto)[-rows:].mean() / lum[-rows:].mean())
     print(f"panorama: the altocumulus changes the sky above by {above:.3f}, the deck the view below by {below:.3f}")
