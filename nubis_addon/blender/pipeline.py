@@ -12,6 +12,7 @@ from pathlib import Path
 
 import bpy
 import numpy as np
+from mathutils import Matrix
 
 from ..core import bakeplan, camera, imageio, interrupt, limits, march, metrics, staging, vdbio
 from ..core import sky as skymath
@@ -122,6 +123,16 @@ class ViewportShot:
     noise_seed: int
     width: int
     height: int
+    # Each pass's rays cross their pixels at a pass of their own (camera.subpixel_offset), so passes
+    # integrate the pixels' areas as Cycles' box filter does; off, every pass samples the centres.
+    pixel_area: bool = False
+
+    def pass_inverse(self, index: int):
+        """The inverse view-projection of pass `index`."""
+        if not self.pixel_area:
+            return self.inv_view_proj
+        dx, dy = camera.subpixel_offset(index)
+        return Matrix(camera.shifted_inverse(self.inv_view_proj, dx, dy, self.width, self.height).tolist())
 
 
 def viewport_shot(
@@ -173,7 +184,7 @@ def _render_run(shot: ViewportShot, clouds, passes: int, first_pass: int):
     for k, i in enumerate(range(first_pass, first_pass + passes)):
         shot.state.jitter_pass = i
         clouds.update(shot.state)
-        tiles = engine.render_offscreen_steps(clouds, shot.inv_view_proj, shot.eye, shot.width, shot.height)
+        tiles = engine.render_offscreen_steps(clouds, shot.pass_inverse(i), shot.eye, shot.width, shot.height)
         try:
             while True:
                 try:
@@ -483,6 +494,9 @@ THIN_CIRRUS = True
 # Jittered passes the comparison's viewport accumulates (in two halves): most of the way to converged for
 # half the time of 8 (docs/sources.md#comparison-set-up).
 COMPARE_PASSES = 4
+# With a noise target the viewport adds passes until its own grain is at most this share of the target in
+# the luminance and this much in the alpha, or it has taken the most passes (docs/sources.md#comparison-set-up).
+VIEW_NOISE = {"luminance_share": 0.2, "alpha": 0.004, "most_passes": 32}
 
 
 def _silent(_text: str) -> None:
@@ -509,11 +523,12 @@ class _CompareRun:
 def _compare(run: _CompareRun) -> dict:
     baked = _compare_bake(run)
     clip = bake_clip_box(baked.plan)  # the viewport keeps only the baked clouds (Cycles sees no others)
-    viewport, halves, ss = _compare_viewport(run, clip)
+    viewport, grain, ss, passes = _compare_viewport(run, clip)
     cycles, result = _compare_cycles(run, baked, viewport)
-    result["viewport_noise"] = cycles_reference.noise_of(halves[0], halves[1])
+    result["viewport_noise"] = grain
+    result["viewport_passes"] = passes
     if run.stages == 4:
-        result["cone_march_vs_reference"] = _compare_reference(run, viewport, clip, ss)
+        result["cone_march_vs_reference"] = _compare_reference(run, viewport, clip, ss, passes)
     _describe(run, result, baked, clip, ss)
     _write_comparison(run, viewport, cycles, result)
     return result
@@ -572,18 +587,38 @@ def _supersampling(options: CompareOptions) -> int:
     return max(1, min(4, 1024 // max(options.width, options.height)))
 
 
-def _compare_viewport(run: _CompareRun, clip) -> tuple[np.ndarray, list[np.ndarray], int]:
-    """The viewport converged as its accumulation converges when the view stands still: two halves of
-    COMPARE_PASSES jittered passes, whose difference measures the grain left."""
+def _compare_viewport(run: _CompareRun, clip) -> tuple[np.ndarray, dict, int, int]:
+    """The viewport converged as its accumulation converges when the view stands still, each pass's rays
+    crossing their pixels at places of their own as Cycles' do: two halves of COMPARE_PASSES passes, or
+    with a noise target as many as VIEW_NOISE asks. Returns the image, its grain (the halves'
+    difference), the supersampling and the passes."""
     o = run.options
     ss = _supersampling(o)
     t = time.perf_counter()
-    run.say(2, f"the viewport's march, {o.width * ss}x{o.height * ss} pixels, {COMPARE_PASSES} passes")
-    w, h, half = o.width * ss, o.height * ss, COMPARE_PASSES // 2
-    shot = viewport_shot(run.scene, w, h, 0, o.mode, clip)
-    halves = [downsample(render_shot(shot, half, first), ss) for first in (0, half)]
+    w, h = o.width * ss, o.height * ss
+    shot = dataclasses.replace(viewport_shot(run.scene, w, h, 0, o.mode, clip), pixel_area=True)
+    goal = None
+    if o.noise_target is not None:
+        goal = cycles_reference.NoiseGoal(
+            o.noise_target / 100 * VIEW_NOISE["luminance_share"],
+            VIEW_NOISE["alpha"],
+            VIEW_NOISE["most_passes"],
+            "the viewport's",
+            "passes",
+        )
+    more = "" if goal is None else f", more until its noise is {goal.describe()}"
+    run.say(2, f"the viewport's march, {w}x{h} pixels, {COMPARE_PASSES} passes{more}")
+    done = [0]
+
+    def render(passes: int, _half: int) -> np.ndarray:
+        first, done[0] = done[0], done[0] + passes
+        return downsample(render_shot(shot, passes, first), ss)
+
+    image, noise, passes = cycles_reference.sample_to_target(
+        render, COMPARE_PASSES, goal, lambda text: run.step(f"   {text}")
+    )
     run.timings["viewport_s"] = time.perf_counter() - t
-    return (halves[0] + halves[1]) / 2, halves, ss
+    return image, noise, ss, passes
 
 
 def _compare_cycles(run: _CompareRun, baked: BakeResult, viewport: np.ndarray) -> tuple[np.ndarray, dict]:
@@ -634,16 +669,18 @@ def _cycles_samples(run: _CompareRun, total: int, bounces: int, vdb, split: bool
 
     if not split:
         return render(total, 0), None, total
-    return cycles_reference.sample_to_target(render, total, target, lambda text: run.step(f"   {text}"))
+    goal = None if target is None else cycles_reference.NoiseGoal(target)
+    return cycles_reference.sample_to_target(render, total, goal, lambda text: run.step(f"   {text}"))
 
 
-def _compare_reference(run: _CompareRun, viewport: np.ndarray, clip, ss: int) -> dict:
-    """The real-time cone march against the reference march, everything else equal."""
+def _compare_reference(run: _CompareRun, viewport: np.ndarray, clip, ss: int, passes: int) -> dict:
+    """The real-time cone march against the reference march, everything else equal (the same passes, so
+    the same rays)."""
     o = run.options
     run.say(4, f"the reference light march, {o.width * ss}x{o.height * ss} pixels")
     t = time.perf_counter()
-    shot = viewport_shot(run.scene, o.width * ss, o.height * ss, 1, o.mode, clip)
-    march_ref = render_shot(shot, COMPARE_PASSES)
+    shot = dataclasses.replace(viewport_shot(run.scene, o.width * ss, o.height * ss, 1, o.mode, clip), pixel_area=True)
+    march_ref = render_shot(shot, passes)
     cone = metrics.compare(viewport, downsample(march_ref, ss))
     run.timings["reference_s"] = time.perf_counter() - t
     return {k: cone[k] for k in ("alpha_rmse", "luminance_rel_error", "luminance_bias")}

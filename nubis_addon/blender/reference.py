@@ -15,6 +15,7 @@ import json
 import math
 import re
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import bpy
@@ -37,17 +38,45 @@ def noise_of(a: np.ndarray, b: np.ndarray) -> dict[str, float]:
     return {k: own[k] / 2 for k in ("alpha_rmse", "luminance_rel_error")}
 
 
+@dataclass(frozen=True)
+class NoiseGoal:
+    """When sampling stops: once the noise of the luminance (a fraction) and, when given, of the alpha are
+    at most these, or once `most` samples are spent. `who` and `unit` name the renderer and its samples
+    in what is said."""
+
+    luminance: float
+    alpha: float | None = None
+    most: int = MAX_SAMPLES
+    who: str = "Cycles'"
+    unit: str = "samples"
+
+    def over(self, noise: dict[str, float]) -> float:
+        """How far the noise is over the goal: at most 1 once it is met."""
+        level = noise["luminance_rel_error"] / self.luminance
+        if self.alpha is not None:
+            level = max(level, noise["alpha_rmse"] / self.alpha)
+        return level
+
+    def describe(self, noise: dict[str, float] | None = None) -> str:
+        """The goal's figures, or (with `noise`) the noise's."""
+        lum = self.luminance if noise is None else noise["luminance_rel_error"]
+        text = f"{lum * 100:.3g} %" if noise is None else f"{lum * 100:.1f} %"
+        if self.alpha is not None:
+            text += f" (alpha {self.alpha if noise is None else noise['alpha_rmse']:.2g})"
+        return text
+
+
 def sample_to_target(
     render: Callable[[int, int], np.ndarray],
     samples: int,
-    target: float | None,
+    goal: NoiseGoal | None,
     say: Callable[[str], None],
 ) -> tuple[np.ndarray, dict[str, float], int]:
-    """Cycles' image, its noise and the samples taken. `render(samples, seed_offset)` renders once.
+    """The image, its noise and the samples taken. `render(samples, seed_offset)` renders once.
 
-    Without a target: two halves of `samples` (the noise estimate). With one: rounds of two halves,
-    each sized from the noise just measured, until the noise of the luminance is at most `target`
-    (a fraction) or MAX_SAMPLES are spent, which `say` reports."""
+    Without a goal: two halves of `samples` (the noise estimate). With one: rounds of two halves,
+    each sized from the noise just measured, until the noise meets the goal or its most samples are
+    spent, which `say` reports."""
     per = max(1, samples // 2)
     sums = [None, None]
     taken = 0
@@ -60,15 +89,15 @@ def sample_to_target(
         taken += 2 * per
         a, b = sums[0] / (taken / 2), sums[1] / (taken / 2)
         noise = noise_of(a, b)
-        level = noise["luminance_rel_error"]
-        if target is None or level <= target:
+        if goal is None or goal.over(noise) <= 1.0:
             return (a + b) / 2, noise, taken
-        if taken >= MAX_SAMPLES:
-            say(f"Cycles' noise is still {level * 100:.1f} % after {taken} samples (the most a target may ask)")
+        heard = f"{goal.who} noise is {goal.describe(noise)} after {taken} {goal.unit}"
+        if taken >= goal.most:
+            say(f"{heard} (the most a target may ask)")
             return (a + b) / 2, noise, taken
-        need = min(MAX_SAMPLES, math.ceil(taken * (level / (target * _AIM)) ** 2))
+        need = min(goal.most, math.ceil(taken * (goal.over(noise) / _AIM) ** 2))
         per = max(1, math.ceil((need - taken) / 2))
-        say(f"Cycles' noise {level * 100:.1f} % after {taken} samples: {2 * per} more for {target * 100:g} %")
+        say(f"{heard}: {2 * per} more for {goal.describe()}")
 
 
 # ---- reusing an earlier reference ---------------------------------------------------------------------

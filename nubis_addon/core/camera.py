@@ -53,3 +53,26 @@ def forward_view_projection(inv_view_proj) -> np.ndarray:
     """The view-projection whose inverse builds the rays, for projecting world points back to the
     screen (reprojection needs only x, y and w, which the substitute depth row leaves exact)."""
     return np.linalg.inv(np.array(inv_view_proj, dtype=np.float64).reshape(4, 4))
+
+
+# One over the plastic number and its square: the steps of M. Roberts' R2 sequence
+# (docs/sources.md#numerical-methods), whose points cover a square evenly however many are taken.
+_R2 = (0.7548776662466927, 0.5698402909980532)
+
+
+def subpixel_offset(index: int) -> tuple[float, float]:
+    """Where pass `index`'s rays cross their pixels, in pixels from the centres, each in [-0.5, 0.5):
+    passes of consecutive indices sample the pixels' areas evenly, and two disjoint runs of indices are
+    two independent estimates of the same box-filtered image."""
+    return tuple(float((0.5 + step * index) % 1.0 - 0.5) for step in _R2)
+
+
+def shifted_inverse(inv_view_proj, dx: float, dy: float, width: int, height: int) -> np.ndarray:
+    """The inverse view-projection whose rays leave each pixel (dx, dy) pixels from its centre, for a
+    `width` x `height` image (x right, y up)."""
+    inv = np.array(inv_view_proj, dtype=np.float64).reshape(4, 4)
+    shift = np.identity(4)
+    shift[0, 3] = 2.0 * dx / width
+    shift[1, 3] = 2.0 * dy / height
+    # A ray through NDC point p of the shifted camera is the unshifted camera's ray through p + shift.
+    return inv @ shift

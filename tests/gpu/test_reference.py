@@ -24,7 +24,7 @@ def test_rounds_are_sized_from_the_measured_noise_and_keep_every_sample():
         return image
 
     said = []
-    image, noise, taken = reference.sample_to_target(render, 16, 0.05, said.append)
+    image, noise, taken = reference.sample_to_target(render, 16, reference.NoiseGoal(0.05), said.append)
     assert noise["luminance_rel_error"] <= 0.05
     assert taken == sum(s for s, _ in calls) and taken > 16
     assert [seed for _, seed in calls] == list(range(len(calls))), "every render has its own seed"
@@ -132,3 +132,46 @@ def test_a_memory_bound_comparison_bakes_finer_by_what_the_clouds_fill_and_falls
     m = _compare(blender, tmp_path / "fallback", samples=4, voxel_size=None, edit=tiny, step=said.append)
     assert any("fill more than measured" in s for s in said), said
     assert m["voxel_size"] > seen["wanted"] and m["bake_active_share"] == 1.0
+
+
+def test_a_noise_target_converges_the_viewport_too(first):
+    """With a noise target the comparison's viewport adds passes until its own grain (two halves of
+    passes whose rays cross their pixels at places of their own) is under its goal: a fifth of the target
+    in the luminance and 0.004 in the alpha (blender/pipeline.py VIEW_NOISE)."""
+    from nubis_addon.blender import pipeline
+
+    _out, m = first
+    goal = pipeline.VIEW_NOISE
+    noise, passes = m["viewport_noise"], m["viewport_passes"]
+    met = noise["luminance_rel_error"] <= 0.10 * goal["luminance_share"] and noise["alpha_rmse"] <= goal["alpha"]
+    assert passes >= pipeline.COMPARE_PASSES and (met or passes >= goal["most_passes"]), m
+    assert noise["alpha_rmse"] > 0.0, "the halves sample different places, so their grain is never nil"
+
+
+def test_the_comparisons_viewport_integrates_each_pixels_area(blender):
+    """Passes whose rays cross their pixels at places of their own (ViewportShot.pixel_area) converge on
+    the pixel's box-filtered value, as Cycles' one-pixel box filter does; passes through the centres
+    converge on the centre's value, a different image wherever a cloud's edge crosses a pixel."""
+    import dataclasses
+
+    from nubis_addon.blender import ensure_registered, pipeline, scene_io
+    from nubis_addon.core.presets import load_preset
+
+    blender.ops.wm.read_factory_settings(use_empty=True)
+    ensure_registered()
+    scene = blender.context.scene
+    scene_io.apply_preset(scene, load_preset("default"))
+    w, h, ss = 32, 18, 8
+    centre_shot = pipeline.viewport_shot(scene, w, h)
+    fine = pipeline.viewport_shot(scene, w * ss, h * ss)
+    # The same noise mip levels as the pixels (they follow the footprint): only where the rays go differs.
+    fine.state.pixel_angle, fine.state.pixel_size = centre_shot.state.pixel_angle, centre_shot.state.pixel_size
+    box = pipeline.downsample(pipeline.render_shot(fine, 2), ss)
+    centres = pipeline.render_shot(centre_shot, 16)
+    areas = pipeline.render_shot(dataclasses.replace(centre_shot, pixel_area=True), 16)
+
+    def rmse(a, b):
+        return float(np.sqrt(((a[..., 3] - b[..., 3]) ** 2).mean()))
+
+    assert box[..., 3].std() > 0.1, "the view holds cloud edges"
+    assert rmse(areas, box) < rmse(centres, box) / 3, (rmse(areas, box), rmse(centres, box))
