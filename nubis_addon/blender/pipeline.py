@@ -123,7 +123,7 @@ class ViewportShot:
     noise_seed: int
     width: int
     height: int
-    # Each pass's rays cross their pixels at a pass of their own (camera.subpixel_offset), so passes
+    # Each pass's rays cross their pixels at a place of their own (camera.subpixel_offset), so passes
     # integrate the pixels' areas as Cycles' box filter does; off, every pass samples the centres.
     pixel_area: bool = False
 
@@ -496,7 +496,7 @@ THIN_CIRRUS = True
 COMPARE_PASSES = 4
 # With a noise target the viewport adds passes until its own grain is at most this share of the target in
 # the luminance and this much in the alpha, or it has taken the most passes (docs/sources.md#comparison-set-up).
-VIEW_NOISE = {"luminance_share": 0.2, "alpha": 0.004, "most_passes": 32}
+VIEW_NOISE = {"luminance_share": 0.2, "alpha": 0.002, "most_passes": 32}
 
 
 def _silent(_text: str) -> None:
@@ -606,7 +606,7 @@ def _compare_viewport(run: _CompareRun, clip) -> tuple[np.ndarray, dict, int, in
             "the viewport's",
             "passes",
         )
-    more = "" if goal is None else f", more until its noise is {goal.describe()}"
+    more = "" if goal is None else f", more until its noise is at most {goal.describe()}"
     run.say(2, f"the viewport's march, {w}x{h} pixels, {COMPARE_PASSES} passes{more}")
     done = [0]
 

@@ -137,7 +137,7 @@ def test_a_memory_bound_comparison_bakes_finer_by_what_the_clouds_fill_and_falls
 def test_a_noise_target_converges_the_viewport_too(first):
     """With a noise target the comparison's viewport adds passes until its own grain (two halves of
     passes whose rays cross their pixels at places of their own) is under its goal: a fifth of the target
-    in the luminance and 0.004 in the alpha (blender/pipeline.py VIEW_NOISE)."""
+    in the luminance and 0.002 in the alpha (blender/pipeline.py VIEW_NOISE)."""
     from nubis_addon.blender import pipeline
 
     _out, m = first
