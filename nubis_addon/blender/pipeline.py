@@ -589,16 +589,16 @@ def _supersampling(options: CompareOptions) -> int:
 
 def _compare_viewport(run: _CompareRun, clip) -> tuple[np.ndarray, dict, int, int]:
     """The viewport converged as its accumulation converges when the view stands still, each pass's rays
-    crossing their pixels at places of their own as Cycles' do: two halves of COMPARE_PASSES passes, or
-    with a noise target as many as VIEW_NOISE asks. Returns the image, its grain (the halves'
-    difference), the supersampling and the passes."""
+    crossing their pixels at places of their own as Cycles' do: two halves of the options' viewport passes
+    (COMPARE_PASSES unless given), or with a noise target and none given as many as VIEW_NOISE asks.
+    Returns the image, its grain (the halves' difference), the supersampling and the passes."""
     o = run.options
     ss = _supersampling(o)
     t = time.perf_counter()
     w, h = o.width * ss, o.height * ss
     shot = dataclasses.replace(viewport_shot(run.scene, w, h, 0, o.mode, clip), pixel_area=True)
     goal = None
-    if o.noise_target is not None:
+    if o.noise_target is not None and o.viewport_passes is None:
         goal = cycles_reference.NoiseGoal(
             o.noise_target / 100 * VIEW_NOISE["luminance_share"],
             VIEW_NOISE["alpha"],
@@ -607,16 +607,15 @@ def _compare_viewport(run: _CompareRun, clip) -> tuple[np.ndarray, dict, int, in
             "passes",
         )
     more = "" if goal is None else f", more until its noise is at most {goal.describe()}"
-    run.say(2, f"the viewport's march, {w}x{h} pixels, {COMPARE_PASSES} passes{more}")
+    start = o.viewport_passes or COMPARE_PASSES
+    run.say(2, f"the viewport's march, {w}x{h} pixels, {start} passes{more}")
     done = [0]
 
     def render(passes: int, _half: int) -> np.ndarray:
         first, done[0] = done[0], done[0] + passes
         return downsample(render_shot(shot, passes, first), ss)
 
-    image, noise, passes = cycles_reference.sample_to_target(
-        render, COMPARE_PASSES, goal, lambda text: run.step(f"   {text}")
-    )
+    image, noise, passes = cycles_reference.sample_to_target(render, start, goal, lambda text: run.step(f"   {text}"))
     run.timings["viewport_s"] = time.perf_counter() - t
     return image, noise, ss, passes
 

@@ -58,6 +58,7 @@ class CompareOptions:
     voxel_floor: float = 0.0  # the coarsest the bake may go (a draft's voxel size)
     noise_target: float | None = None  # per cent: add samples until Cycles' noise is under it
     reuse_reference: bool = False  # reuse Cycles' image from an earlier run of the same view
+    viewport_passes: int | None = None  # the viewport's passes (None: 4, or with a noise target its own goal)
 
     def but(self, **changes) -> CompareOptions:
         return dataclasses.replace(self, **changes)
