@@ -19,7 +19,7 @@ from bpy.props import CollectionProperty, EnumProperty, FloatProperty, StringPro
 from bpy_extras import view3d_utils
 from gpu_extras.batch import batch_for_shader
 
-from ..core import paint
+from ..core import fieldstats, paint
 from ..core.errors import NubisError
 from . import events, runtime, scene_io, ui, viewport
 from .ui import NeedsCloudscape, SidebarPanel
@@ -223,6 +223,7 @@ class LiveStroke:
         plane = paint.paint_plane(self.channel, self.pre[self.channel], self.layers, self.multiplier, rect)
         r0, r1, c0, c1 = rect
         arrays[self.which][r0:r1, c0:c1, self.plane] = plane
+        fieldstats.edited(arrays[self.which])
         clouds = runtime.loaded_gpu(self.scene.nubis.noise_seed)
         if clouds is not None:
             clouds.patch_field(arrays, self.which, rect)

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from . import schema
+from . import fieldstats, schema
 from .errors import NubisError
 
 MAX_CLOUD_LAYERS = 4  # the first layer included (the cirrus sheet is not one of them)
@@ -47,8 +47,8 @@ class LayerField:
         """The altitudes its clouds can reach: its base and top, widened by the min/max height channels."""
         bottom, top = self.params["layer_bottom"], self.params["layer_top"]
         thickness = top - bottom
-        lo = float(np.min(self.field_b[..., 1]))
-        hi = float(np.max(self.field_b[..., 2]))
+        lo = fieldstats.channel_min(self.field_b, 1)
+        hi = fieldstats.channel_max(self.field_b, 2)
         return bottom + min(lo, 0.0) * thickness, bottom + max(hi, 1.0) * thickness
 
 

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from . import cloudlayers, schema
+from . import cloudlayers, fieldstats, schema
 from .bricks import DEFAULT_GPU_LIMIT
 from .schema import defaults
 
@@ -80,7 +80,9 @@ class CloudState:
     first_layer_drawn: bool = True
 
     def has_cirrus(self) -> bool:
-        return self.field_c is not None and self.params["cirrus_coverage"] > 0 and float(self.field_c[..., 0].max()) > 0
+        if self.field_c is None or self.params["cirrus_coverage"] <= 0:
+            return False
+        return fieldstats.channel_max(self.field_c, 0) > 0
 
     def drawn_layers(self) -> list[cloudlayers.LayerField]:
         """The cloud layers drawn, the first (this state's own settings and field) first when it is."""
