@@ -20,6 +20,10 @@ const float NUBIS_OPAQUE_TRANSMITTANCE = 0.005;
 /* A ray whose horizontal direction is shorter than this (squared) is vertical: it never leaves the draw
  * radius sideways. */
 const float NUBIS_VERTICAL_RAY = 1e-12;
+/* A layer's segment takes at least this share of the step count, however little of it its clouds reach. */
+const int NUBIS_LEAST_STEP_SHARE = 4;
+/* Metres of margin above the highest altitude a layer's clouds reach (nubis_layer_reach). */
+const float NUBIS_REACH_MARGIN = 1.0;
 /* A split farther than any ray reaches: the whole ray is the near part. */
 const float NUBIS_NO_SPLIT = 3.0e38;
 
@@ -339,12 +343,34 @@ bool nubis_shell_segment(vec3 origin, vec3 dir, float lo, float hi, out float t0
 struct NubisSegments {
   vec4 part[NUBIS_MAX_LAYERS];
   int count;
+  float thickest; /* the thickest drawn layer's thickness, whose steps set the sky's step length */
 };
+
+/* The highest altitude layer i's clouds can reach, for the view march (docs/layers.md#step-length): the
+ * vertical profile is zero above its top ramp's end, which rises with the top type, between each column's
+ * min and max height (nubis_height_fraction); the field's greatest top type, min height and max height
+ * (P.cloud_layer_reach) bound it for every column. Above it every sample is empty. A storm's anvil hangs
+ * under the extent's top: with storms, the extent. */
+float nubis_layer_reach(int i)
+{
+  vec4 heights = P.cloud_layer_heights[i];
+#if NUBIS_STORMS
+  return heights.w;
+#else
+  vec4 r = P.cloud_layer_reach[i];
+  float t = clamp01(r.x);
+  float e = t < 0.5 ? mix(NUBIS_PROFILE_TOP_STRATUS.y, NUBIS_PROFILE_TOP_STRATOCUMULUS.y, t * 2.0) :
+                      mix(NUBIS_PROFILE_TOP_STRATOCUMULUS.y, NUBIS_PROFILE_TOP_CUMULUS.y, t * 2.0 - 1.0);
+  float top = heights.x + (heights.y - heights.x) * max(r.y, mix(r.y, r.z, e)) + NUBIS_REACH_MARGIN;
+  return clamp(top, heights.z + NUBIS_REACH_MARGIN, heights.w);
+#endif
+}
 
 NubisSegments nubis_march_segments(vec3 origin, vec3 dir)
 {
   NubisSegments segments;
   segments.count = 0;
+  segments.thickest = 1.0;
   float t0, t1;
   for (int k = 0; k < NUBIS_MAX_LAYERS; k++) {
     segments.part[k] = vec4(0.0);
@@ -354,13 +380,16 @@ NubisSegments nubis_march_segments(vec3 origin, vec3 dir)
     segments.part[0] = vec4(t0, t1, P.shell_top - P.shell_bottom, P.noise_lf_period);
     segments.count = 1;
   }
+  segments.thickest = P.shell_top - P.shell_bottom;
 #else
   for (int i = 0; i < NUBIS_MAX_LAYERS; i++) {
     if (i >= int(P.cloud_layer_count)) {
       break;
     }
     vec4 heights = P.cloud_layer_heights[i];
-    if (!nubis_shell_segment(origin, dir, heights.z, heights.w, t0, t1)) {
+    segments.thickest = max(segments.thickest, heights.w - heights.z);
+    float reach = nubis_layer_reach(i);
+    if (!nubis_shell_segment(origin, dir, heights.z, reach, t0, t1)) {
       continue;
     }
     /* Insertion by the segment's start: layers share no altitude, so their segments do not overlap. */
@@ -369,7 +398,7 @@ NubisSegments nubis_march_segments(vec3 origin, vec3 dir)
       segments.part[at] = segments.part[at - 1];
       at--;
     }
-    segments.part[at] = vec4(t0, t1, heights.w - heights.z, P.cloud_layer_noise[i].x);
+    segments.part[at] = vec4(t0, t1, reach - heights.z, P.cloud_layer_noise[i].x);
     segments.count++;
   }
 #endif
@@ -417,6 +446,10 @@ NubisParts nubis_march_parts(vec3 origin, vec3 dir, vec2 pixel, float split)
     float thickness = segments.part[segment].z;
     float k = clamp01((seg - thickness) / max(P.layer_draw_radius - thickness, 1.0));
     int steps = int(mix(P.march_steps_min, P.march_steps_max, k));
+    /* One step length for the whole sky, the thickest layer's (docs/layers.md#step-length): a layer takes
+     * steps in proportion to the span of it its clouds can reach, so a thin layer, or one whose clouds
+     * stop halfway up it, costs that much less; never under a quarter of the count. */
+    steps = max(int(ceil(float(steps) * thickness / segments.thickest)), steps / NUBIS_LEAST_STEP_SHARE);
     /* Within the platform's loop limit (core/march.py, max_steps, in P.max_view_steps, shared by the
      * ray's segments; docs/platform-notes.md#shader-loop-limit): longer steps, never a ray cut short. */
     steps = min(steps, int(P.max_view_steps) / segment_count);

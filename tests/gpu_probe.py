@@ -27,6 +27,7 @@ _MODE_GLOW = 4.0
 _MODE_SLAB = 5.0
 _MODE_DIFFUSION = 6.0
 _MODE_SKY_WEIGHTS = 7.0
+_MODE_REACH = 8.0
 NOISE_TEXTURES = {"lf": 0.0, "hf": 1.0, "curl": 2.0}
 
 
@@ -119,6 +120,11 @@ def probe_sky_weights(gpu_inputs: CloudGPU, args: np.ndarray) -> np.ndarray:
     each row (view cosine, vertical optical depth, rate, edge) of `args` (N, 4), and the chance that light
     scattered in it leaves unscattered: (N, 3)."""
     return _run(gpu_inputs, np.asarray(args, dtype=np.float32), (_MODE_SKY_WEIGHTS, 0.0, 0.0, 0.0))[:, :3]
+
+
+def probe_reach(gpu_inputs: CloudGPU) -> np.ndarray:
+    """The altitude at which the view march ends each of the four cloud layers (nubis_layer_reach): (4,)."""
+    return _run(gpu_inputs, np.zeros((1, 4), np.float32), (_MODE_REACH, 0.0, 0.0, 0.0))[0]
 
 
 def _run(gpu_inputs: CloudGPU, texels: np.ndarray, mode: tuple[float, float, float, float]) -> np.ndarray:

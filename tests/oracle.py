@@ -141,12 +141,18 @@ def padded_texture(arr: np.ndarray, spatial_axes: int) -> np.ndarray:
 # ---- nubis_density_lib.glsl ----------------------------------------------------------------------------
 
 
+def top_ramp_end(top_type):
+    """The height fraction above which the profile of this top type is zero."""
+    t = clamp01(np.asarray(top_type, np.float64))
+    return np.where(t < 0.5, mix(0.20, 0.60, t * 2.0), mix(0.60, 1.00, t * 2.0 - 1.0))
+
+
 def vertical_profile(h, top_type, bottom_type):
     """Trapezoids (docs/sources.md#vertical-profile), split into bottom x top ramps (GDC22)."""
     t = clamp01(np.asarray(top_type, np.float64))
     low_half = t < 0.5
     ramp_start = np.where(low_half, mix(0.10, 0.40, t * 2.0), mix(0.40, 0.70, t * 2.0 - 1.0))
-    ramp_end = np.where(low_half, mix(0.20, 0.60, t * 2.0), mix(0.60, 1.00, t * 2.0 - 1.0))
+    ramp_end = top_ramp_end(t)
     bottom_end = mix(0.05, 0.35, clamp01(bottom_type))
     bottom = clamp01(h / bottom_end)
     top = clamp01(remap(h, ramp_start, ramp_end, 1.0, 0.0))

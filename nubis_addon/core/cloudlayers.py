@@ -51,6 +51,12 @@ class LayerField:
         hi = fieldstats.channel_max(self.field_b, 2)
         return bottom + min(lo, 0.0) * thickness, bottom + max(hi, 1.0) * thickness
 
+    def reach_channels(self) -> tuple[float, float, float, float]:
+        """The greatest top type, min height and max height of its field: how high its clouds can reach
+        (nubis_layer_reach in shaders/nubis_march_lib.glsl)."""
+        a, b = self.field_a, self.field_b
+        return (fieldstats.channel_max(a, 2), fieldstats.channel_max(b, 1), fieldstats.channel_max(b, 2), 0.0)
+
 
 def own_params(params: dict[str, Any]) -> dict[str, Any]:
     """The values of a layer's own settings taken from a full set of scene settings."""

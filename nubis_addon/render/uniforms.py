@@ -279,6 +279,7 @@ def layer_rows(state: CloudState) -> dict[str, list[tuple]]:
         )
         rows["cloud_layer_wind"].append((*wind, p["wind_speed"] * state.time, p["wind_top_offset"]))
         rows["cloud_layer_wind2"].append((p["wind_upward_bias"], p["wind_detail_speed"], 0.0, 0.0))
+        rows["cloud_layer_reach"].append(layer.reach_channels())
     return rows
 
 
@@ -289,6 +290,7 @@ _LAYER_ARRAYS: tuple[tuple[str, str], ...] = (
     ("cloud_layer_density", "its sigma / density_sigma, erosion, coverage multiplier, multiply coverage (0/1)"),
     ("cloud_layer_wind", "its wind direction x, y, distance travelled (speed x time), cloud-top offset"),
     ("cloud_layer_wind2", "its upward bias, detail speed, -, -"),
+    ("cloud_layer_reach", "the greatest top type, min height and max height in its field (nubis_layer_reach), -"),
 )
 
 

@@ -63,3 +63,14 @@ def test_the_cirrus_check_reads_the_remembered_cover():
     fieldstats.edited(c)
     assert state.has_cirrus()
     assert not CloudState(params={"cirrus_coverage": 0.0}, field_c=c).has_cirrus()
+
+
+def test_a_layers_reach_channels_are_its_fields_greatest_top_type_and_heights():
+    """What the view march bounds a layer's clouds by (nubis_layer_reach): the greatest top type, min
+    height and max height of its field, each over every column."""
+    a = np.zeros((16, 16, 4), np.float32)
+    b = field(max_height=0.9, min_height=0.05, size=16)
+    a[..., 2] = 0.3
+    a[2, 3, 2], b[5, 6, 1], b[7, 8, 2] = 0.8, 0.2, 1.3
+    layer = cloudlayers.LayerField("", {"layer_bottom": 0.0, "layer_top": 1.0}, a, b)
+    assert layer.reach_channels() == (np.float32(0.8), np.float32(0.2), np.float32(1.3), 0.0)

@@ -97,6 +97,116 @@ def test_a_higher_layer_shades_the_deck_under_it(make_scene):
     assert lum_shaded < 0.9 * lum_open, (lum_shaded, lum_open)
 
 
+def _view_samples(scene, width=64, height=36) -> tuple[float, float]:
+    """The view march's samples per pixel (its own count, NUBIS_FETCH_STATS) in the upper and lower halves
+    of the camera's view."""
+    import mathutils
+
+    from nubis_addon.blender import preview, runtime, scene_io
+    from nubis_addon.core import camera
+    from nubis_addon.render import engine
+
+    clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
+    view = preview.camera_view(scene, width, height)
+    state = scene_io.state_from_scene(scene)
+    state.pixel_angle, state.pixel_size = camera.pixel_footprint(np.array(view.inv_view_proj), width, height)
+    clouds.update(state)
+    inv = mathutils.Matrix(view.inv_view_proj)
+    samples = engine.render_offscreen(clouds, inv, view.eye, width, height, NUBIS_FETCH_STATS=1)[..., 1]
+    return float(samples[: height // 2].mean()), float(samples[height // 2 :].mean())
+
+
+def test_each_layer_is_marched_as_high_as_its_clouds_reach_at_the_skys_one_step_length(make_scene, monkeypatch):
+    """docs/layers.md#step-length: the view march ends a layer where its tallest profile ends (above it
+    every sample is empty), and takes steps of the thickest layer's length there. The clouds are the same,
+    the samples fewer: the deck's (type 0.5) reach 0.6 of it, the altocumulus's (0.45) 0.56 of it."""
+    from nubis_addon.core import cloudlayers, metrics
+
+    scene = make_scene(PRESET)
+    above, below = _view_samples(scene)
+    image = _render(scene, 64, 36)
+    # As if some column of every layer had cumulus reaching the layer's top: the whole layer is marched.
+    monkeypatch.setattr(cloudlayers.LayerField, "reach_channels", lambda _layer: (1.0, 0.0, 1.0, 0.0))
+    whole_above, whole_below = _view_samples(scene)
+    whole = _render(scene, 64, 36)
+    monkeypatch.undo()
+    # Measured 2026-12-06 (5.3, llvmpipe): 34.0 -> 22.2 samples above, 35.9 -> 22.6 below (at 320x180).
+    assert above < 0.8 * whole_above and below < 0.8 * whole_below, (above, whole_above, below, whole_below)
+    for half in (slice(0, 18), slice(18, 36)):
+        a, b = image[half], whole[half]
+        assert abs(a[..., 3].mean() - b[..., 3].mean()) < 0.01, (a[..., 3].mean(), b[..., 3].mean())
+        la, lb = metrics.luminance(a).mean(), metrics.luminance(b).mean()
+        assert abs(la - lb) < 0.02 * lb, (la, lb)
+    # One step length: the altocumulus alone is its own thickest layer (600 m); under the 800 m deck its
+    # steps are the deck's, 600/800 as many. The deck, the thickest, takes the same steps either way.
+    scene.nubis.cloud_layers[0].solo = True
+    alone_above, _ = _view_samples(scene)
+    scene.nubis.cloud_layers[0].solo = False
+    scene.nubis.first_layer_solo = True
+    _, deck_below = _view_samples(scene)
+    assert above == pytest.approx(0.75 * alone_above, rel=0.1), (above, alone_above)
+    assert deck_below == pytest.approx(below, rel=1e-6), (deck_below, below)
+
+
+def _with_tall_columns(layer, top_type: float, origin: tuple[float, float]):
+    """A copy of `layer`'s fields covered everywhere (coverage 1) at a low top type, and a patch of columns
+    around `origin` (world xy) of cumulus type `top_type` lifted off the base and reaching past the top."""
+    from nubis_addon.core import fields
+
+    a, b = layer.field_a.copy(), layer.field_b.copy()
+    a[..., 0], a[..., 2], b[..., 1], b[..., 2] = 1.0, 0.3, 0.05, 0.9
+    xs, ys = fields.pixel_centres(layer.params)
+    patch = (np.abs(xs - origin[0]) < 600.0) & (np.abs(ys - origin[1]) < 600.0)
+    a[patch, 2], b[patch, 1], b[patch, 2] = top_type, 0.1, 1.1
+    return a, b
+
+
+def test_no_cloud_stands_above_where_the_view_march_ends_a_layer(make_scene):
+    """nubis_layer_reach (docs/layers.md#step-length) on fields whose top type, min and max height vary:
+    it is the highest column's top (the oracle's profile, tests/oracle.py) within 2 m, and the shader's
+    density is zero everywhere above it and not below it."""
+    from dataclasses import replace
+
+    from gpu_probe import probe_density, probe_reach
+    from oracle import top_ramp_end
+
+    from nubis_addon.blender import runtime, scene_io
+    from nubis_addon.core import cloudlayers
+
+    scene = make_scene(PRESET)
+    state = scene_io.state_from_scene(scene)
+    first, upper = state.drawn_layers()
+    fa, fb = _with_tall_columns(first, 0.7, (0.0, 0.0))
+    ua, ub = _with_tall_columns(upper, 0.4, (0.0, 0.0))
+    state = replace(state, field_a=fa, field_b=fb, cloud_layers=[replace(upper, field_a=ua, field_b=ub)])
+    clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
+    clouds.update(state, light=False)
+    reach = probe_reach(clouds)
+    radius = state.params["layer_planet_radius"]
+    g = np.linspace(-500.0, 500.0, 21)
+    x, y = (v.ravel() for v in np.meshgrid(g, g))
+    for i, (layer, (_lo, extent_top)) in enumerate(
+        zip(state.drawn_layers(), cloudlayers.disjoint_extents(state.drawn_layers()), strict=True)
+    ):
+        bottom, top = layer.params["layer_bottom"], layer.params["layer_top"]
+        lo = bottom + layer.field_b[..., 1] * (top - bottom)
+        hi = bottom + layer.field_b[..., 2] * (top - bottom)
+        highest = float((lo + top_ramp_end(layer.field_a[..., 2]) * (hi - lo)).max())
+        assert highest < extent_top - 50.0  # the reach, not the extent, is what is tested
+        assert highest <= reach[i] <= highest + 2.0, (i, reach[i], highest)
+
+        def density(altitudes, xs=x, ys=y):
+            alt = np.repeat(altitudes, len(xs))
+            px, py = np.tile(xs, len(altitudes)), np.tile(ys, len(altitudes))
+            z = np.sqrt((radius + alt) ** 2 - px**2 - py**2) - radius  # on the planet's curve
+            return probe_density(clouds, np.stack([px, py, z], axis=1))
+
+        above = density(np.linspace(reach[i] + 0.5, extent_top, 12))
+        assert above[:, :2].max() == 0.0, (i, above[:, :2].max())
+        under = density(np.linspace(bottom, highest, 24))
+        assert under[:, 1].max() > 0.0, i
+
+
 FOUR = """
 [[cloud_layers]]
 name = "Middle"
