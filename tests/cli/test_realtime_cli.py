@@ -75,8 +75,9 @@ def test_benchmark_of_a_layered_sky_times_its_lowest_layer_alone_first(tmp_path)
     lowest = json.loads((out / "lowest_layer" / "benchmark.json").read_text())
     assert whole["baseline_redraw_ms"] == lowest["redraw_ms"] and whole["redraw_ms"] > 0
     deck, both = lowest["fetches"]["coarse_to_fine"], whole["fetches"]["coarse_to_fine"]
-    # Measured 2026-12-06 at 48x27: 18.3 view samples a pixel for the deck, 35.8 for both layers.
-    assert 1.5 * deck["view_samples_per_pixel"] < both["view_samples_per_pixel"] < 2.5 * deck["view_samples_per_pixel"]
+    # Measured 2026-12-06 at 48x27: 11.6 view samples a pixel for the deck, 20.5 for both layers: the thinner
+    # altocumulus, stepped at the deck's step length, adds fewer than the deck's own (docs/layers.md#step-length).
+    assert 1.5 * deck["view_samples_per_pixel"] < both["view_samples_per_pixel"] < 1.9 * deck["view_samples_per_pixel"]
     assert {p.name for p in (out / "lowest_layer").iterdir()} == {"benchmark.json", "naive.png", "converged.png"}
 
 
