@@ -164,6 +164,15 @@ NubisFieldSample nubis_sample_field(vec2 xy, int slice)
   return f;
 }
 
+/* The height fractions over which the top ramp falls from 1 to 0 for this top type: above its end the
+ * profile is zero (the view march's reach, nubis_layer_reach, reads it too). */
+vec2 nubis_top_ramp(float top_type)
+{
+  float t = clamp01(top_type);
+  return t < 0.5 ? mix(NUBIS_PROFILE_TOP_STRATUS, NUBIS_PROFILE_TOP_STRATOCUMULUS, t * 2.0) :
+                   mix(NUBIS_PROFILE_TOP_STRATOCUMULUS, NUBIS_PROFILE_TOP_CUMULUS, t * 2.0 - 1.0);
+}
+
 /* Vertical profile. The sources show the curves only as figures; these are trapezoids of our own
  * (docs/sources.md#vertical-profile). Horizon Forbidden West's split (GDC22): the top ramp follows the
  * top type (0 stratus, 0.5 stratocumulus, 1 cumulus), the bottom ramp follows the bottom type and
@@ -171,9 +180,7 @@ NubisFieldSample nubis_sample_field(vec2 xy, int slice)
  * fair-weather clouds. */
 float nubis_vertical_profile(float h, float top_type, float bottom_type)
 {
-  float t = clamp01(top_type);
-  vec2 top_ramp = t < 0.5 ? mix(NUBIS_PROFILE_TOP_STRATUS, NUBIS_PROFILE_TOP_STRATOCUMULUS, t * 2.0) :
-                            mix(NUBIS_PROFILE_TOP_STRATOCUMULUS, NUBIS_PROFILE_TOP_CUMULUS, t * 2.0 - 1.0);
+  vec2 top_ramp = nubis_top_ramp(top_type);
   float bottom_end = mix(NUBIS_PROFILE_BASE_CRISP, NUBIS_PROFILE_BASE_RELAXED, clamp01(bottom_type));
   float bottom = clamp01(h / bottom_end);
   float top = clamp01(remap(h, top_ramp.x, top_ramp.y, 1.0, 0.0));

@@ -358,9 +358,7 @@ float nubis_layer_reach(int i)
   return heights.w;
 #else
   vec4 r = P.cloud_layer_reach[i];
-  float t = clamp01(r.x);
-  float e = t < 0.5 ? mix(NUBIS_PROFILE_TOP_STRATUS.y, NUBIS_PROFILE_TOP_STRATOCUMULUS.y, t * 2.0) :
-                      mix(NUBIS_PROFILE_TOP_STRATOCUMULUS.y, NUBIS_PROFILE_TOP_CUMULUS.y, t * 2.0 - 1.0);
+  float e = nubis_top_ramp(r.x).y;
   float top = heights.x + (heights.y - heights.x) * max(r.y, mix(r.y, r.z, e)) + NUBIS_REACH_MARGIN;
   return clamp(top, heights.z + NUBIS_REACH_MARGIN, heights.w);
 #endif

@@ -15,7 +15,7 @@ import weakref
 
 import numpy as np
 
-# id(array) -> (a weak reference to the array, {(channel, "min" | "max"): value})
+# id(array) -> (a weak reference to the array, {(channel, the reduction's name): value})
 _REMEMBERED: dict[int, tuple[weakref.ref, dict[tuple[int, str], float]]] = {}
 
 
@@ -35,20 +35,22 @@ def _values(array: np.ndarray) -> dict[tuple[int, str], float]:
     return _REMEMBERED[key][1]
 
 
+def _reduced(array: np.ndarray, channel: int, reduce) -> float:
+    values = _values(array)
+    key = (channel, reduce.__name__)
+    if key not in values:
+        values[key] = float(reduce(array[..., channel]))
+    return values[key]
+
+
 def channel_min(array: np.ndarray, channel: int) -> float:
     """The least value of `array[..., channel]`."""
-    values = _values(array)
-    if (channel, "min") not in values:
-        values[(channel, "min")] = float(np.min(array[..., channel]))
-    return values[(channel, "min")]
+    return _reduced(array, channel, np.min)
 
 
 def channel_max(array: np.ndarray, channel: int) -> float:
     """The greatest value of `array[..., channel]`."""
-    values = _values(array)
-    if (channel, "max") not in values:
-        values[(channel, "max")] = float(np.max(array[..., channel]))
-    return values[(channel, "max")]
+    return _reduced(array, channel, np.max)
 
 
 def edited(array: np.ndarray) -> None:

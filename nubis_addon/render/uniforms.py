@@ -261,7 +261,7 @@ def state_max_steps(state: CloudState) -> int:
 
 def layer_rows(state: CloudState) -> dict[str, list[tuple]]:
     """The drawn cloud layers' rows of the block (core/cloudlayers.py; NubisLayer in
-    shaders/nubis_density_lib.glsl), made once per pack: each layer's extent reads its whole field."""
+    shaders/nubis_density_lib.glsl), made once per pack."""
     layers = state.drawn_layers()
     extents = cloudlayers.disjoint_extents(layers)
     sigma = state.params["density_sigma"]
