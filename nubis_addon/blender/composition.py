@@ -166,7 +166,7 @@ def split_clouds(scene, shot, clouds) -> np.ndarray:
     last_frame.clear()
     last_frame.update(veil=float(veiled or margin > composition.FILTER_MARGIN), margin=float(margin))
     if not last_frame["veil"]:
-        hide(scene)
+        stow_veil(scene)
         whole = near + (1.0 - near[..., 3:4]) * far
         clouds_image = whole[inside][::-1].copy()
     else:
@@ -187,10 +187,9 @@ def place(scene, frame: composition.Frame, hits: np.ndarray, near: np.ndarray) -
     last_frame["distance"] = distance
     image = write_image(VEIL_IMAGE, near)
     obj = _veil_object(scene, image)
-    obj.data.vertices.foreach_set("co", corners.astype(np.float32).ravel())
-    obj.data.update()
+    set_corners(obj, corners)
     obj.matrix_world = Matrix.Identity(4)
-    obj.hide_render = False
+    show(obj)
     return obj
 
 
@@ -219,14 +218,63 @@ def render_quad(scene, name: str, material) -> bpy.types.Object:
     obj[OWN_KEY] = True
     if obj.name not in scene.collection.objects:
         scene.collection.objects.link(obj)
-    obj.hide_select = True
-    obj.display_type = "WIRE"
-    obj.hide_viewport = True  # the viewport draws the clouds itself
+    # Each only when it differs: a visibility set during a render, even to its own value, syncs the
+    # view layer's bases under the render's dependency graph (docs/sky.md#render-animation).
+    for key, value in (("hide_select", True), ("display_type", "WIRE"), ("hide_viewport", True)):
+        if getattr(obj, key) != value:
+            setattr(obj, key, value)  # hide_viewport: the viewport draws the clouds itself
     if not obj.data.materials:
         obj.data.materials.append(material)
-    else:
+    elif obj.data.materials[0] != material:
         obj.data.materials[0] = material
     return obj
+
+
+# ---- a render object's visibility over a render -------------------------------------------------------
+#
+# Render Animation builds one dependency graph for all its frames before the first. An object whose render
+# visibility changed between two frames (shown for one frame, hidden after it) made the next frame's
+# update fail inside Blender (a segfault in deg_check_base_in_depsgraph). So Nubis's render objects are
+# shown once when a render starts (ready), stowed when a frame does not need them (collapsed to a point:
+# no ray meets them) and hidden when the render has ended (put_away).
+
+
+def set_corners(obj, corners) -> None:
+    """The quad's four corners (4, 3), object space."""
+    obj.data.vertices.foreach_set("co", np.asarray(corners, np.float32).ravel())
+    obj.data.update()
+
+
+def collapsed(obj) -> bool:
+    """Whether the quad's corners are at one point."""
+    co = np.empty(len(obj.data.vertices) * 3, np.float32)
+    obj.data.vertices.foreach_get("co", co)
+    co = co.reshape(-1, 3)
+    return bool((co == co[0]).all())
+
+
+def stowed(obj) -> bool:
+    """Whether no ray of a render meets the quad: collapsed, or out of renders, or not there."""
+    return obj is None or obj.hide_render or collapsed(obj)
+
+
+def stow(obj) -> None:
+    """Out of this frame without a change of visibility: its corners at one point."""
+    if obj is not None and not stowed(obj):
+        set_corners(obj, np.zeros((4, 3)))
+
+
+def show(obj) -> None:
+    """Into the render. Already so for the whole render once ready() has run; a render that started
+    without it (no render_init) changes the visibility here, once."""
+    if obj.hide_render:
+        obj.hide_render = False
+
+
+def put_away(obj) -> None:
+    """Out of renders and of the saved file's renders, once the render has ended."""
+    if obj is not None and not obj.hide_render:
+        obj.hide_render = True
 
 
 def image_material(name: str, image, interpolation: str):
@@ -244,10 +292,26 @@ def image_material(name: str, image, interpolation: str):
     return mat, nt, tex
 
 
+RECIPE_KEY = "nubis_recipe"  # a render material's ID property: which of Nubis's materials it was built as
+
+
+def built(name: str, recipe: str, image) -> bpy.types.Material | None:
+    """The material `name` when it was built as `recipe` and reads `image`: kept as it is, so a frame of an
+    animation rebuilds no node tree (EEVEE would compile its shader again) when only the pixels changed."""
+    mat = bpy.data.materials.get(name)
+    if mat is None or mat.get(RECIPE_KEY) != recipe or mat.node_tree is None:
+        return None
+    texs = [n for n in mat.node_tree.nodes if n.type == "TEX_IMAGE"]
+    return mat if len(texs) == 1 and texs[0].image == image else None
+
+
 def _veil_material(image) -> bpy.types.Material:
     """The clouds' light as emission and what they let through as transparency: premultiplied `over`,
     exact in both engines. Closest texels, so an edge's samples each take their own pixel's clouds."""
+    if (kept := built(VEIL_MATERIAL, "veil", image)) is not None:
+        return kept
     mat, nt, tex = image_material(VEIL_MATERIAL, image, "Closest")
+    mat[RECIPE_KEY] = "veil"
     light = nt.nodes.new("ShaderNodeEmission")
     light.inputs["Strength"].default_value = 1.0
     nt.links.new(tex.outputs["Color"], light.inputs["Color"])
@@ -276,18 +340,30 @@ def finished(mat, method: str) -> bpy.types.Material:
     return mat
 
 
-def hide(scene) -> None:
+def ready(scene) -> None:
+    """When a render with the clouds starts: the veil made (empty) if need be, shown and stowed, so no
+    frame changes its visibility."""
     obj = scene.objects.get(VEIL_NAME)
-    if obj is not None and not obj.hide_render:
-        obj.hide_render = True
+    if obj is None:
+        obj = _veil_object(scene, write_image(VEIL_IMAGE, np.zeros((1, 1, 4), np.float32)))
+    stow(obj)
+    show(obj)
+
+
+def stow_veil(scene) -> None:
+    """This frame has no veil."""
+    stow(scene.objects.get(VEIL_NAME))
+
+
+def put_away_veil(scene) -> None:
+    put_away(bpy.data.objects.get(VEIL_NAME))
 
 
 def lend_bounces(scene, casters: int = 0) -> None:
     """Cycles counts the veil as one transparent bounce of every camera ray, and each shadow caster one of
     every shadow ray: as many more for this render (the veil's one and `casters`, those of a stack beyond
     its first), so the artist's own transparent surfaces keep theirs. Given back by give_back."""
-    obj = scene.objects.get(VEIL_NAME)
-    extra = casters + (0 if obj is None or obj.hide_render else 1)
+    extra = casters + (0 if stowed(scene.objects.get(VEIL_NAME)) else 1)
     if scene.render.engine != "CYCLES" or extra == 0 or scene.name in _changed:
         return
     _changed[scene.name] = {"transparent_max_bounces": scene.cycles.transparent_max_bounces}
@@ -295,7 +371,6 @@ def lend_bounces(scene, casters: int = 0) -> None:
 
 
 def give_back(scene) -> None:
-    """The settings lend_bounces changed, as the artist had them; the veil out of later renders."""
+    """The settings lend_bounces changed, as the artist had them."""
     for key, value in _changed.pop(scene.name, {}).items():
         setattr(scene.cycles, key, value)
-    hide(scene)

@@ -21,10 +21,11 @@ import bpy
 from ..core import bricks, noise
 from ..core.errors import NubisError
 from ..render.engine import CloudGPU
-from ..render.gpu_context import ensure_gpu_context
+from ..render.gpu_context import ensure_gpu_context, release_at_exit
 
 _EXT_PACKAGE = __package__.rsplit(".", 2)[0]  # "bl_ext.<repo>.nubis" when installed, "nubis_addon"'s parent otherwise
 _gpu: dict[int, CloudGPU] = {}
+release_at_exit(_gpu.clear)
 
 
 def _user_folder(env: str, name: str) -> Path:

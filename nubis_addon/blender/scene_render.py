@@ -43,6 +43,7 @@ PANORAMA_ALPHA = "Nubis Panorama Alpha"  # the Environment Texture node has no a
 ENGINES = ("CYCLES", "BLENDER_EEVEE", "BLENDER_EEVEE_NEXT")
 
 _swapped: dict[str, str] = {}  # scene name -> the World it had before the render
+_frames: dict[str, int] = {}  # scene name -> the frames the running render has prepared so far
 last_error: list[str] = []
 last_seconds: dict[str, float] = {}  # what the last frame's clouds took, part by part (tests/benchmarks/bench_f12.py)
 
@@ -63,8 +64,11 @@ def wants_clouds(scene) -> bool:
 
 
 def render_size(scene) -> tuple[int, int]:
-    pct = scene.render.resolution_percentage / 100.0
-    return max(4, round(scene.render.resolution_x * pct)), max(4, round(scene.render.resolution_y * pct))
+    """The frame's size in pixels as Blender makes it: the resolution times the percentage, truncated
+    (101 x 57 at 33 % is 33 x 18), so the clouds' image has the frame's pixels exactly."""
+    r = scene.render
+    pct = r.resolution_percentage
+    return max(1, r.resolution_x * pct // 100), max(1, r.resolution_y * pct // 100)
 
 
 _noted: set[str] = set()
@@ -90,7 +94,7 @@ def prepare_frame(scene) -> None:
     why_not = composition.fallback(scene)
     if why_not:
         _note_once(why_not)
-        composition.hide(scene)
+        composition.stow_veil(scene)
         rgba = pipeline.render_shot(shot)  # top row first
     else:
         rgba = composition.split_clouds(scene, shot, clouds)
@@ -116,7 +120,7 @@ def prepare_frame(scene) -> None:
         shadows.update_shadow(scene, state, clouds)
         last_seconds["shadow map"] = time.perf_counter() - t
     else:
-        shadows.hide_casters(scene)
+        shadows.stow_casters(scene)
 
 
 # ---- the render World -------------------------------------------------------------------------------
@@ -212,8 +216,8 @@ def attach(scene) -> None:
 
 
 def detach(scene) -> None:
-    """Give the scene its own World back (and its VDB clouds' render visibility)."""
-    vdbclouds.step_back(scene)
+    """After a frame: give the scene its own World and Cycles settings back (render objects' visibility
+    waits for the render's end: finish)."""
     composition.give_back(scene)
     name = _swapped.pop(scene.name, None)
     if name is None:
@@ -226,14 +230,20 @@ def _before_frame(scene) -> None:
     the render World; a render without them gets no stale shadow."""
     if not wants_clouds(scene):
         # An earlier frame's shadow must not fall on a render without the clouds (or on the VDB's).
-        shadows.hide_casters(scene)
-        composition.hide(scene)
+        shadows.stow_casters(scene)
+        composition.stow_veil(scene)
         return
-    # An animation rendered from the interface moves the scene's frame on the render thread; the main
-    # thread's evaluated scene (the camera, the sun, keyed settings) follows it here.
+    # An animation moves the scene's frame under the main thread's evaluated scene (the camera, the objects,
+    # the sun, keyed settings), which follows it here. Its frame number alone cannot tell: a change of the
+    # scene during a frame copies the new number into it without evaluating the animation (an object keyed
+    # into the clouds at frame 2 stayed where frame 1 had it), so every frame after a render's first is
+    # evaluated. The first only when its number differs: frame_set writes the animation over an artist's
+    # unkeyed edit, which a still F12 keeps.
     evaluated = bpy.context.evaluated_depsgraph_get().scene_eval
-    if (evaluated.frame_current, evaluated.frame_subframe) != (scene.frame_current, scene.frame_subframe):
+    moved = (evaluated.frame_current, evaluated.frame_subframe) != (scene.frame_current, scene.frame_subframe)
+    if moved or _frames.get(scene.name, 0) > 0:
         scene.frame_set(scene.frame_current, subframe=scene.frame_subframe)
+    _frames[scene.name] = _frames.get(scene.name, 0) + 1
     attach(scene)
 
 
@@ -258,21 +268,67 @@ def on_render_pre(scene, _depsgraph=None) -> None:
         )
 
 
-@bpy.app.handlers.persistent
-def on_render_post(scene, _depsgraph=None) -> None:
-    """After a frame (or a cancelled render): the artist's World back, on the main thread when it responds."""
+def begin(scene) -> None:
+    """When a render starts (a still or a whole animation), before Blender builds the dependency graph its
+    frames share: every object whose render visibility the clouds change is changed now, once, and not
+    again until the render ends (docs/sky.md#render-animation): the veil and the shadow casters shown
+    (stowed until a frame places them), the VDB clouds stepped aside."""
+    _frames[scene.name] = 0
+    if not wants_clouds(scene):
+        return
+    composition.ready(scene)
+    shadows.ready_casters(scene)
+    vdbclouds.step_aside(scene)
+
+
+def finish(scene) -> None:
+    """When the render has ended, completed, cancelled or failed: the artist's World and settings back,
+    Nubis's render objects out of renders and the VDB clouds rendering as the artist left them."""
+    _frames.pop(scene.name, None)
+    detach(scene)
+    composition.put_away_veil(scene)
+    shadows.put_away_casters(scene)
+    vdbclouds.step_back(scene)
+
+
+def _on_main_thread(fn, scene) -> None:
+    """`fn(scene)` on the main thread when it responds, else here (Blender quitting: the main thread takes
+    no work)."""
     if sky.capturing():
         return
     try:
-        mainthread.call(lambda: detach(scene), timeout=60.0)
+        mainthread.call(lambda: fn(scene), timeout=60.0)
     except NubisError:
-        detach(scene)  # the main thread is not taking work (Blender quitting): only a pointer changes
+        fn(scene)
+
+
+@bpy.app.handlers.persistent
+def on_render_init(scene, _depsgraph=None) -> None:
+    try:
+        _on_main_thread(begin, scene)
+    except Exception as err:  # noqa: BLE001 - a handler must not fail silently; the artist is told
+        traceback.print_exc()
+        mainthread.report(f"the clouds could not prepare the render: {type(err).__name__}: {err}")
+
+
+@bpy.app.handlers.persistent
+def on_render_post(scene, _depsgraph=None) -> None:
+    """After a frame: the artist's World back."""
+    _on_main_thread(detach, scene)
+
+
+@bpy.app.handlers.persistent
+def on_render_end(scene, _depsgraph=None) -> None:
+    """After the render (completed, cancelled by Esc, or failed: a frame that could not be written)."""
+    _on_main_thread(finish, scene)
 
 
 HANDLERS = (
+    (bpy.app.handlers.render_init, on_render_init),
     (bpy.app.handlers.render_pre, on_render_pre),
     (bpy.app.handlers.render_post, on_render_post),
-    (bpy.app.handlers.render_cancel, on_render_post),
+    (bpy.app.handlers.render_complete, on_render_end),
+    (bpy.app.handlers.render_cancel, on_render_end),
 )
 
 

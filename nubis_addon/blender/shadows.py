@@ -16,7 +16,22 @@ from mathutils import Matrix, Vector
 from ..core import composition as plan
 from ..render import engine
 from . import scene_io
-from .composition import OWN_KEY, SOLID_TYPES, finished, image_material, render_quad, write_image
+from .composition import (
+    RECIPE_KEY,
+    OWN_KEY,
+    SOLID_TYPES,
+    built,
+    collapsed,
+    finished,
+    image_material,
+    put_away,
+    render_quad,
+    set_corners,
+    show,
+    stow,
+    stowed,
+    write_image,
+)
 
 SHADOW_IMAGE = "Nubis Cloud Shadow"
 CASTER_NAME = "Nubis Cloud Shadow"
@@ -115,26 +130,51 @@ def update_shadow(scene, state, clouds) -> bpy.types.Object:
                 (0.0, 0.0, 0.0, 1.0),
             )
         )
-        caster.hide_render = False
-    hide_casters(scene, first=len(centres))
+        if stowed(caster):
+            set_corners(caster, _UNIT_SQUARE)
+        show(caster)
+    stow_casters(scene, first=len(centres))
     return scene.objects[CASTER_NAME]
 
 
-def stacked(scene) -> int:
-    """How many casters of a stack this render has beyond the lowest (0 for one caster or none)."""
-    index = 1
-    while (obj := scene.objects.get(caster_name(index))) is not None and not obj.hide_render:
-        index += 1
-    return index - 1
+_UNIT_SQUARE = ((-0.5, -0.5, 0.0), (0.5, -0.5, 0.0), (0.5, 0.5, 0.0), (-0.5, 0.5, 0.0))
 
 
-def hide_casters(scene, first: int = 0) -> None:
-    """Keep the casters from `first` up out of the render (all of them by default)."""
+def _casters(scene, first: int = 0):
     index = first
     while (obj := bpy.data.objects.get(caster_name(index))) is not None:
-        if not obj.hide_render:
-            obj.hide_render = True
+        yield obj
         index += 1
+
+
+def in_use(scene) -> list:
+    """The casters the last frame's shadows used (the lowest first), during the render or after it."""
+    return [obj for obj in _casters(scene) if not collapsed(obj)]
+
+
+def stacked(scene) -> int:
+    """How many casters of a stack this frame uses beyond the lowest (0 for one caster or none)."""
+    return max(len([o for o in _casters(scene) if not stowed(o)]) - 1, 0)
+
+
+def ready_casters(scene) -> None:
+    """When a render with the clouds starts: the casters there are shown and stowed (the frames place
+    those they use; docs/sky.md#render-animation)."""
+    for obj in _casters(scene):
+        stow(obj)
+        show(obj)
+
+
+def stow_casters(scene, first: int = 0) -> None:
+    """The casters from `first` up out of this frame (all of them by default)."""
+    for obj in _casters(scene, first):
+        stow(obj)
+
+
+def put_away_casters(scene) -> None:
+    """Every caster out of renders, once the render has ended."""
+    for obj in _casters(scene):
+        put_away(obj)
 
 
 def ensure_caster(scene, image, index: int = 0) -> bpy.types.Object:
@@ -150,7 +190,10 @@ def ensure_caster(scene, image, index: int = 0) -> bpy.types.Object:
 def _caster_material(name: str, image) -> bpy.types.Material:
     """Opaque where the clouds block the sun, transparent where they let it through (a mix by the
     transmittance), so Cycles' and EEVEE's shadow rays carry the clouds' shadow."""
+    if (kept := built(name, "caster", image)) is not None:
+        return kept
     mat, nt, tex = image_material(name, image, "Linear")
+    mat[RECIPE_KEY] = "caster"
     opaque = nt.nodes.new("ShaderNodeEmission")
     opaque.inputs["Strength"].default_value = 0.0
     clear = nt.nodes.new("ShaderNodeBsdfTransparent")

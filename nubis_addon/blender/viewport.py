@@ -14,12 +14,15 @@ from mathutils import Matrix
 from ..core import camera
 from ..core.errors import NubisError
 from ..render import engine, temporal
+from ..render.gpu_context import release_at_exit
 from . import cycles_setup, runtime, scene_io, status, ui, vdbclouds
 
 _handle = None
 _fields_cache: dict = {}  # scene pointer -> (key, field arrays)
 _views: dict = {}  # region pointer -> TemporalViewport
 _depth_cache: dict = {}
+release_at_exit(_views.clear)
+release_at_exit(_depth_cache.clear)
 _geometry = [0]  # the scene's geometry generation (blender/events.py counts depsgraph updates)
 
 

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from . import fieldstats, schema
+from . import fieldstats, limits, schema
 from .errors import NubisError
 
 MAX_CLOUD_LAYERS = 4  # the first layer included (the cirrus sheet is not one of them)
@@ -77,7 +77,9 @@ def check_stack(ranges: list[tuple[str, float, float]], where: str = "") -> None
             f"{prefix}a sky holds at most {MAX_CLOUD_LAYERS} cloud layers, not {len(ranges)}: "
             f"remove {len(ranges) - MAX_CLOUD_LAYERS} of them or merge their fields"
         )
+    thinnest = schema.cross_limit("layer_bottom", "layer_top").gap
     for name, bottom, top in ranges:
+        limits.check_text(f"{prefix}the name of cloud layer", name)
         if bottom < 0.0:
             raise NubisError(
                 f"{prefix}cloud layer '{name}' starts under the ground ({bottom:g} m): raise its base to 0 m or more"
@@ -87,10 +89,12 @@ def check_stack(ranges: list[tuple[str, float, float]], where: str = "") -> None
                 f"{prefix}cloud layer '{name}' reaches {top:g} m, above the {MAX_ALTITUDE:g} m a layer may reach: "
                 "lower its top (the cirrus sheet draws the highest clouds)"
             )
-        if top <= bottom:
+        # The gap as a scene stores it, in float32: within one float32 step of the altitude (0.5 mm at
+        # 5 km), so a file the preset check takes renders, and one it refuses does not.
+        if top - bottom < thinnest - float(np.spacing(np.float32(max(abs(top), abs(bottom))))):
             raise NubisError(
-                f"{prefix}cloud layer '{name}' has its top ({top:g} m) at or under its base ({bottom:g} m): "
-                "raise its top"
+                f"{prefix}cloud layer '{name}' has its top ({top!r} m) less than {thinnest:g} m above its base "
+                f"({bottom!r} m): raise its top"
             )
     ordered = sorted(ranges, key=lambda r: r[1])
     for (lo_name, _b, lo_top), (hi_name, hi_bottom, _t) in zip(ordered, ordered[1:], strict=False):

@@ -7,9 +7,11 @@ three agree. No bpy here.
 from __future__ import annotations
 
 import math
+import unicodedata
 from collections.abc import Sequence
 
 from .errors import NubisError
+from .tomlfmt import toml_value
 
 # Blender's frame numbers stop at -1048574 and 1048574 (its MAXFRAME): frame_set clamps anything beyond.
 FRAME_RANGE = (-1048574, 1048574)
@@ -79,3 +81,15 @@ def check_position(what: str, xyz: Sequence[float], fix: str) -> None:
 def check_count(what: str, count: int, most: int, fix: str) -> None:
     if count > most:
         raise NubisError(f"{what}: {count} given, but a scene holds at most {most}: {fix}")
+
+
+def check_text(where: str, text: str) -> None:
+    """A name or other text a setting holds, free of control characters: a NUL (which Blender drops when
+    it stores the text), an escape code or a line break would end up in image and object names and on the
+    console. ``where`` names the setting."""
+    bad = next((c for c in text if unicodedata.category(c) == "Cc"), None)
+    if bad is not None:
+        raise NubisError(
+            f"{where} {toml_value(text)} holds the control character U+{ord(bad):04X}: "
+            "use printable characters only"
+        )

@@ -26,6 +26,7 @@ LAYER_KINDS = schema.LAYER_KINDS
 BLEND_MODES = schema.BLEND_MODES
 GRADIENT_SHAPES = schema.GRADIENT_SHAPES
 _SCENE_BY_PLACE: dict[tuple[str, str], schema.Setting] = {(s.section, s.name): s for s in schema.PRESET_SCENE}
+_PLACE_OF_KEY = {s.key: f"{s.section}.{s.name}" for s in schema.PRESET_SCENE}
 SECTIONS = frozenset(s.section for s in schema.PRESET_SCENE) | frozenset(schema.EXTRA_SECTIONS)
 
 
@@ -130,7 +131,7 @@ def parse_preset(data: dict[str, Any], path: Path | None = None) -> Preset:
                 raise NubisError(f"{where}: unknown setting {sec}.{key}: remove it or check the spelling")
     for rule in schema.CROSS_LIMITS:
         if not rule.holds(params):
-            raise NubisError(f"{where}: {rule.message}")
+            raise NubisError(f"{where}: {rule.message} ({rule.stated(params, _PLACE_OF_KEY)})")
     _check_span(extra["camera"]["location"], f"{where}: camera.location")
     _check_masks(layers, where)
     further = _parse_cloud_layers(data.get("cloud_layers", []), (params, layers), where)
@@ -182,6 +183,7 @@ def _parse_cloud_layer(raw: dict[str, Any], first_layer: tuple, here: str, i: in
             if not isinstance(table, str) or not table.strip():
                 raise NubisError(f"{here}.name must be a name in quotes, not {toml_value(table)}")
             name = table.strip()
+            limits.check_text(f"{here}.name", name)
             continue
         if sec == "enabled":
             if not isinstance(table, bool):
@@ -271,6 +273,8 @@ def check_value(setting: schema.Setting, value: Any, where: str) -> Any:
         return value
     elif not isinstance(value, str):  # enum, string, image
         raise NubisError(f"{where} must be text in quotes, not {toml_value(value)}")
+    elif setting.name != "description":  # names and paths; a description's tab or line break is harmless
+        limits.check_text(where, value)
     if kind == "enum" and value not in setting.choices:
         choices = ", ".join(toml_value(c) for c in setting.choices)
         raise NubisError(f"{where} = {toml_value(value)} is not allowed: use one of {choices}")

@@ -1724,6 +1724,15 @@ class CrossLimit:
     def holds(self, values: dict[str, Any]) -> bool:
         return values[self.high] - values[self.low] >= self.gap
 
+    def stated(self, values: dict[str, Any], places: dict[str, str]) -> str:
+        """The two values as they are, every digit shown (5000.000000001 is not 5000), each named by its
+        place in `places` (a preset's "layer.top")."""
+        return ", ".join(f"{places.get(k, k)} {values[k]!r}" for k in (self.high, self.low))
+
+
+def cross_limit(low: str, high: str) -> CrossLimit:
+    return next(rule for rule in CROSS_LIMITS if (rule.low, rule.high) == (low, high))
+
 
 CROSS_LIMITS: tuple[CrossLimit, ...] = (
     CrossLimit("layer_bottom", "layer_top", 1e-3, "layer.top must be above layer.bottom"),

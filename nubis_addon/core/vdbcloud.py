@@ -506,6 +506,9 @@ def _too_large(path: str, name: str, need: int, limit: int, why: str = "") -> st
 
 
 MAX_CLOUDS = 4  # VDB clouds drawn at once (the uniform block holds their placements)
+# The flattest placement drawn: its axes' scales within a million times of one another (its matrix's
+# condition number within a million), so float32 inverts it to a few digits.
+FLATTEST = 1e-6
 
 
 @dataclass(eq=False)
@@ -529,10 +532,17 @@ class Placement:
                 "reset its transform (Alt-G, Alt-R, Alt-S) or its Density"
             )
         lengths = np.linalg.norm(m[:3, :3], axis=0)
-        if lengths.min() <= 1e-6 * max(lengths.max(), 1e-30) or abs(np.linalg.det(m[:3, :3])) < 1e-18:
+        scale = ", ".join(f"{v:g}" for v in lengths)
+        if lengths.min() == 0.0 or np.linalg.det(m[:3, :3]) == 0.0:
             raise NubisError(
-                f"the object of the Nubis cloud '{label}' is scaled to zero along an axis (scale "
-                f"{', '.join(f'{v:g}' for v in lengths)}): give it a scale above zero"
+                f"the object of the Nubis cloud '{label}' is scaled to zero along an axis (scale {scale}): "
+                "give it a scale above zero"
+            )
+        # Relative, so a uniform scale of any size is drawn: only a matrix too flat to invert in float32.
+        if lengths.min() < FLATTEST * lengths.max() or np.linalg.cond(m[:3, :3]) > 1.0 / FLATTEST:
+            raise NubisError(
+                f"the object of the Nubis cloud '{label}' is flattened: its axes' scales ({scale}) differ more "
+                f"than {1.0 / FLATTEST:g} times, which the GPU's float32 cannot invert; make its scales closer"
             )
 
     @property

@@ -13,6 +13,7 @@ from gpu.types import GPUShaderCreateInfo, GPUStageInterfaceInfo
 from gpu_extras.batch import batch_for_shader
 
 from . import engine
+from .gpu_context import release_at_exit
 
 _VERTEX = """
 void main()
@@ -28,6 +29,7 @@ void main()
 }
 """
 _shader: list[gpu.types.GPUShader] = []
+release_at_exit(_shader.clear)
 
 
 def _hit_shader() -> gpu.types.GPUShader:

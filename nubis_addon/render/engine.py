@@ -17,6 +17,7 @@ from ..core.errors import NubisError
 from ..core.schema import defaults
 from ..core.state import CloudState
 from . import fieldpatch, uniforms, vdbclouds
+from .gpu_context import release_at_exit
 from .sources import CLOUD_LIBS, assemble, read_shader
 from .textures import NoiseTextures, field_stack_texture, field_texture, sky_texture
 
@@ -110,6 +111,8 @@ STAGES: dict[str, Stage] = {
 }
 _shaders: dict[tuple, gpu.types.GPUShader] = {}
 _batches: dict[tuple, gpu.types.GPUBatch] = {}
+release_at_exit(_batches.clear)  # (run in reverse: the batches before the shaders they draw with)
+release_at_exit(_shaders.clear)
 
 
 def _create_info(name: str, defines: dict[str, object]) -> GPUShaderCreateInfo:

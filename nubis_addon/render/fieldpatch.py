@@ -7,10 +7,12 @@ import gpu
 import numpy as np
 from gpu.types import GPUShaderCreateInfo
 
+from .gpu_context import release_at_exit
 from .sources import read_shader
 
 GROUP = 8
 _shader: list = []
+release_at_exit(_shader.clear)
 
 
 def _patch_shader(layered: bool) -> gpu.types.GPUShader:

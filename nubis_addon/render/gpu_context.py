@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import atexit
 import contextlib
+from collections.abc import Callable
 
 import bpy
 import gpu
@@ -10,13 +12,33 @@ import gpu
 from ..core.errors import NubisError
 
 _ready = False
+_releases: list[Callable[[], None]] = []
+
+
+def release_at_exit(release: Callable[[], None]) -> None:
+    """Have `release` (which drops module-level GPU objects: shaders, batches, textures) run when the
+    interpreter ends, before Blender's GPU context goes. A script that imports bpy as a module and ends
+    normally tears Blender down in bpy's own exit handler; GPU objects left in module globals were freed
+    after that, when Python cleared the modules, and a shader freed then crashed the process (GLShader's
+    destructor on a context already gone). Exit handlers run last-registered first, and this module imports
+    bpy first, so its handler runs before bpy's."""
+    if release not in _releases:
+        _releases.append(release)
+
+
+def _release_all() -> None:
+    for release in reversed(_releases):
+        release()
+
+
+atexit.register(_release_all)
 
 
 def _gpu_works() -> bool:
     try:
         gpu.types.Buffer("FLOAT", 1)
         gpu.types.GPUOffScreen(4, 4)
-    except SystemError:
+    except (SystemError, RuntimeError):  # background mode before the first render; no context current
         return False
     return True
 
@@ -45,7 +67,10 @@ def ensure_gpu_context() -> None:
             if not _context_current():
                 raise NubisError("no GPU context is current on Blender's main thread: redraw the window and try again")
         return
-    if _ready:
+    # Once made, the context is not always current: EEVEE's render of a frame leaves none current on the
+    # main thread, so frame 2 of a Render Animation found no context; the same tiny render makes it
+    # current again.
+    if _ready and _context_current():
         return
     if _gpu_works():
         _ready = True

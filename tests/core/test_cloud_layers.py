@@ -99,8 +99,16 @@ def _layer(name: str, bottom: float, top: float) -> str:
         (_with(_layer("Altocumulus", 7000.0, 8000.0)), 'another cloud layer is named "Altocumulus"'),
         (
             _with('\n[[cloud_layers]]\nname = "T"\n[cloud_layers.layer]\nbottom = 7000.0\ntop = 6500.0\n'),
-            "at or under its base",
+            "has its top (6500.0 m) less than 0.001 m above its base (7000.0 m)",
         ),
+        (  # passed the preset check and was refused by render as "5000 at or under 5000"
+            _with('\n[[cloud_layers]]\nname = "T"\n[cloud_layers.layer]\nbottom = 5000.0\ntop = 5000.000000001\n'),
+            "has its top (5000.000000001 m) less than 0.001 m above its base (5000.0 m)",
+        ),
+        (_with('\n[[cloud_layers]]\nname = "Alto\\u001b[31m"\n'), "holds the control character U+001B"),
+        (_with('\n[[cloud_layers]]\nname = "A\\u0000B"\n'), "holds the control character U+0000"),
+        (b'[preset]\nname = "Line\\nbreak"\n', "preset.name \"Line\\nbreak\" holds the control character U+000A"),
+        (b'[preset]\nname = "x"\n[layer]\nbottom = 1000.0\ntop = 1000.0000001\n', "layer.top 1000.0000001, layer.bottom"),
         (b'[preset]\nname = "x"\ncloud_layers = 3\n', "unknown setting preset.cloud_layers"),
         (b'[preset]\nname = "x"\n[cloud_layers]\nname = "y"\n', "must be written as [[cloud_layers]] tables"),
         (
@@ -163,3 +171,20 @@ def test_a_new_layer_goes_where_the_sky_has_room():
     with pytest.raises(NubisError, match="no free altitudes"):
         cloudlayers.new_layer_params(base, [(0.0, 19990.0)])
     assert np.isfinite(own["layer_bottom"])
+
+
+@pytest.mark.parametrize(
+    ("bottom", "top", "drawn"),
+    [(5000.0, 5000.001, True), (5000.0, 5000.0005, False), (19999.0, 20000.0, True), (0.0, 0.001, True)],
+)
+def test_the_thinnest_layer_is_the_same_for_a_preset_and_the_scene_that_stores_it_in_float32(bottom, top, drawn):
+    """A scene stores altitudes in float32 (5000.001 is 5000.0009765625): the check takes a gap within one
+    float32 step of the rule's 1 mm, so what a preset passes the scene renders."""
+    stored = (float(np.float32(bottom)), float(np.float32(top)))
+    for b, t in ((bottom, top), stored):
+        if drawn:
+            cloudlayers.check_stack([("L", b, t)])
+        else:
+            with pytest.raises(NubisError, match="less than 0.001 m above its base"):
+                cloudlayers.check_stack([("L", b, t)])
+

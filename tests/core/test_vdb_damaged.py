@@ -179,7 +179,7 @@ def test_a_nameless_grid_is_refused_as_blender_cannot_draw_it(tmp_path):
     "matrix, words",
     [
         (np.diag([0.0, 1.0, 1.0, 1.0]), "is scaled to zero along an axis"),
-        (np.diag([1e-9, 1e-9, 1e-9, 1.0]), "is scaled to zero along an axis"),
+        (np.diag([1e-7, 1.0, 1.0, 1.0]), r"is flattened: its axes' scales \(1e-07, 1, 1\) differ more than 1e\+06"),
         (np.diag([np.nan, 1.0, 1.0, 1.0]), "not a finite number"),
     ],
 )
@@ -188,6 +188,16 @@ def test_a_placement_that_cannot_be_inverted_is_one_sentence(tmp_path, matrix, w
     with pytest.raises(NubisError, match=words) as err:
         vdbcloud.Placement(cloud, matrix, 1.0).check("Cloud")
     one_sentence(err.value)
+
+
+@pytest.mark.parametrize("scale", [1e-9, 1e-6, 1e6])
+def test_a_uniform_scale_of_any_size_is_drawn(tmp_path, scale):
+    """The limit is the matrix's shape, not its size: a Volume scaled 1e-6 was refused as 'scaled to zero'
+    (an absolute determinant test), though its matrix inverts exactly."""
+    cloud = vdbcloud.read_cloud(write_grid(tmp_path / "ball.vdb", ball()))
+    placed = vdbcloud.Placement(cloud, np.diag([scale, scale, scale, 1.0]), 1.0)
+    placed.check("Cloud")
+    assert np.allclose(placed.world_to_leaf_index[:, :3] @ placed.index_to_world[:3, :3], np.eye(3))
 
 
 def test_the_layout_check_reads_every_transform_and_value_type(tmp_path):

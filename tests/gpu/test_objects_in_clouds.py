@@ -172,7 +172,7 @@ def test_without_an_object_in_the_clouds_the_render_keeps_its_background(blender
     _render(blender, scene, "CYCLES", tmp_path / "sky.png", samples=2)
     assert composition.last_frame["veil"] == 0.0, composition.last_frame
     veil = blender.data.objects.get(composition.VEIL_NAME)
-    assert veil is None or veil.hide_render
+    assert veil is None or (veil.hide_render and composition.collapsed(veil))
 
 
 def _box_blur_length(sharp: np.ndarray, blurred: np.ndarray, rows: np.ndarray) -> float:
@@ -246,13 +246,13 @@ def _stack_transmittance(blender, scene, points: np.ndarray) -> np.ndarray:
     sun = np.array(scene.objects["Nubis Sun"].matrix_world.to_3x3().col[2])
     total = np.ones(len(points))
     index = 0
-    while (caster := scene.objects.get(shadows.caster_name(index))) is not None and not caster.hide_render:
+    for caster in shadows.in_use(scene):
         m = np.array(caster.matrix_world)
         origin, u, v = m[:3, 3], m[:3, 0], m[:3, 1]
         above = points[:, 2] < origin[2]
         s = (origin[2] - points[:, 2]) / sun[2]
         q = points + s[:, None] * sun - origin
-        img = blender.data.images[shadows.caster_name(index)]
+        img = blender.data.images[caster.name]
         res = img.size[0]
         tmap = np.array(img.pixels[:], np.float32).reshape(res, res, 4)[..., 0]
         x = np.clip((((q @ u) / (u @ u) + 0.5) * res).astype(int), 0, res - 1)
