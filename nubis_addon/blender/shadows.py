@@ -17,8 +17,8 @@ from ..core import composition as plan
 from ..render import engine
 from . import scene_io
 from .composition import (
-    RECIPE_KEY,
     OWN_KEY,
+    RECIPE_KEY,
     SOLID_TYPES,
     built,
     collapsed,

@@ -90,6 +90,5 @@ def check_text(where: str, text: str) -> None:
     bad = next((c for c in text if unicodedata.category(c) == "Cc"), None)
     if bad is not None:
         raise NubisError(
-            f"{where} {toml_value(text)} holds the control character U+{ord(bad):04X}: "
-            "use printable characters only"
+            f"{where} {toml_value(text)} holds the control character U+{ord(bad):04X}: use printable characters only"
         )

@@ -22,6 +22,7 @@ EXPECTED = {
         "render_eevee",
         "render_cycles",
         "peak",
+        "peak_animation",
         "animation",
         "bake",
         "bake_disturbed",
@@ -31,7 +32,7 @@ EXPECTED = {
         "layers",
         "save",
     ],
-    "reopen": ["startup", "reopen"],
+    "reopen": ["startup", "reopen", "farm"],
 }
 
 

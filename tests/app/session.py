@@ -755,7 +755,6 @@ def s_peak(step: Step):
     """F12 of a peak through the clouds (a 5 km cone 16 km ahead of a camera 1 km up), in EEVEE and in Cycles
     from the interface: the share of its pixels the clouds veil is within 30 % of Cycles rendering the
     camera's bake of the same clouds."""
-    import numpy as np
 
     scene = bpy.context.scene
     cam = scene.camera
@@ -780,22 +779,134 @@ def s_peak(step: Step):
     scene.render.film_transparent, scene.render.image_settings.color_mode = True, "RGBA"
     clear = render_script(step, "peak_clear", clouds=False)
     scene.render.film_transparent = False
-    img = bpy.data.images.load(clear)
-    try:
-        alpha = np.empty(img.size[0] * img.size[1] * 4, np.float32)
-        img.pixels.foreach_get(alpha)
-        mask = alpha.reshape(img.size[1], img.size[0], 4)[..., 3] > 0.99
-    finally:
-        bpy.data.images.remove(img)
+    mask = _peak_mask()
     step.check(mask.sum() > 500, f"the peak covers {mask.sum()} pixels")
     want = PEAK_BAKE_SHARE
     for engine, path in renders.items():
         if step.check(bool(path) and os.path.exists(path), f"{engine}: the F12 result was saved"):
             got = _veiled_share(path, clear, mask)
             step.check(abs(got - want) <= 0.3 * want, f"{engine}: F12 veils {got:.1%} of the peak (bake {want:.1%})")
-    bpy.data.objects.remove(peak)
-    cam.location, cam.rotation_euler, cam.data.lens, cam.data.clip_end, scene.render.engine = keep
+    _PEAK.update(peak=peak, keep=keep, mask=mask)  # s_peak_animation renders it again, then removes it
     yield 1.0
+
+
+_PEAK: dict = {}  # the peak s_peak made, the camera it changed and the peak's pixels, for s_peak_animation
+
+
+def _veiled_frames(step: Step, frames: list[str], what: str) -> None:
+    """Each frame was written and the clouds veil as much of the peak as F12 does."""
+    mask, want = _PEAK["mask"], PEAK_BAKE_SHARE
+    clear = os.path.join(RENDERS, "peak_clear.png")
+    for f in frames:
+        if step.check(os.path.exists(f), f"{what}: {os.path.basename(f)} written"):
+            got = _veiled_share(f, clear, mask)
+            step.check(
+                abs(got - want) <= 0.3 * want,
+                f"{what}: {os.path.basename(f)} veils {got:.1%} of the peak (bake {want:.1%})",
+            )
+
+
+def s_peak_animation(step: Step):
+    """Render > Render Animation of three frames in Cycles with the peak in the clouds (it crashed Blender
+    after the first frame): every frame written and veiled, the World and the veil put back after. Then
+    the same scene saved as peak.blend for the reopen phase's `blender -b peak.blend -a` (s_farm)."""
+    scene = bpy.context.scene
+    if not step.check(bool(_PEAK), "the peak of the previous step is there"):
+        return
+    comp = ext_module("composition")
+    small_render(scene, "CYCLES")
+    keep = (scene.frame_start, scene.frame_end, scene.frame_step, scene.frame_current, scene.render.filepath)
+    scene.frame_start, scene.frame_end, scene.frame_step = 1, 3, 1
+    scene.render.filepath = os.path.join(RENDERS, "peak_anim_####")
+    yield from render_ui(step, "peak_anim", "invoke", animation=True)
+    frames = [os.path.join(RENDERS, f"peak_anim_{f:04d}.png") for f in (1, 2, 3)]
+    _veiled_frames(step, frames, "Render Animation with the peak")
+    veil = bpy.data.objects.get(comp.VEIL_NAME)
+    step.check(veil is not None and veil.hide_render, "the veil is out of renders after the animation")
+    yield from _cancel_during_frame_2(step, scene, comp)
+    # The farm's file: EEVEE, two frames, written beside it.
+    small_render(scene, eevee())
+    scene.frame_start, scene.frame_end = 1, 2
+    scene.render.filepath = "//renders/farm_####"
+    with override():
+        bpy.ops.wm.save_as_mainfile(filepath=os.path.join(OUT, "peak.blend"), copy=True)
+    step.check(os.path.exists(os.path.join(OUT, "peak.blend")), "saved peak.blend for the farm render")
+    scene.frame_start, scene.frame_end, scene.frame_step, _, scene.render.filepath = keep
+    scene.frame_set(keep[3])
+    cam = scene.camera
+    bpy.data.objects.remove(_PEAK["peak"])
+    cam.location, cam.rotation_euler, cam.data.lens, cam.data.clip_end, scene.render.engine = _PEAK["keep"]
+    yield 1.0
+
+
+def _cancel_during_frame_2(step: Step, scene, comp):
+    """Render Animation again, and Esc over the render window once frame 1 is written, as an artist stops
+    it: the render ends cancelled, with the World, the veil and the casters put back."""
+    world = scene.world.name if scene.world else None
+    scene.frame_end = 6
+    scene.render.filepath = os.path.join(RENDERS, "peak_cancel_####")
+    mouse_over_view()
+    since = time.monotonic()
+    with override():
+        bpy.ops.render.render("INVOKE_DEFAULT", animation=True)
+    first, t = os.path.join(RENDERS, "peak_cancel_0001.png"), time.monotonic()
+    while not os.path.exists(first) and time.monotonic() - t < ARGS.render_timeout:
+        yield 0.5
+    yield from close_render_window()  # Esc over the render window: the render job stops
+    events = yield from wait_render(step, since)
+    written = sorted(f for f in os.listdir(RENDERS) if f.startswith("peak_cancel_"))
+    step.check(bool(events) and events[-1] == "render_cancel", f"Esc during frame 2 cancels the render: {written}")
+    step.check(scene.world is not None and scene.world.name == world, "the World is the artist's after Esc")
+    casters = [o for o in bpy.data.objects if o.name.startswith("Nubis Cloud Shadow")]
+    veil = bpy.data.objects.get(comp.VEIL_NAME)
+    step.check(
+        veil is not None and veil.hide_render and all(o.hide_render for o in casters),
+        "the veil and the shadow casters are out of renders after Esc",
+    )
+    yield from close_render_window()
+
+
+def s_farm(step: Step):
+    """`blender -b peak.blend -a`, as a farm renders an animation with an object in the clouds (it exited
+    139 after the first frame): exit status 0, both frames written and veiled."""
+    path = os.path.join(OUT, "peak.blend")
+    if not step.check(os.path.exists(path), "the main phase saved peak.blend"):
+        return
+    mask = _peak_mask()
+    if mask is None:
+        step.check(False, "the main phase saved peak_clear.png")
+        return
+    _PEAK["mask"] = mask
+    log_path = os.path.join(OUT, "console-farm.log")
+    t = time.monotonic()
+    with open(log_path, "w") as log_file:
+        proc = subprocess.Popen(["blender", "-b", path, "-a"], stdout=log_file, stderr=subprocess.STDOUT)
+        while proc.poll() is None and time.monotonic() - t < ARGS.render_timeout:
+            yield 2.0
+    if proc.poll() is None:
+        proc.kill()
+    step.note(f"blender -b peak.blend -a: exit {proc.returncode} after {time.monotonic() - t:.0f} s")
+    step.check(proc.returncode == 0, f"blender -b peak.blend -a exits 0 (was {proc.returncode}; 139 is a crash)")
+    with open(log_path) as f:
+        errors = [line.strip() for line in f if ERROR_LINE.search(line)]
+    step.check(not errors, f"no error in the farm render's console: {errors[:4]}")
+    _veiled_frames(step, [os.path.join(RENDERS, f"farm_{f:04d}.png") for f in (1, 2)], "blender -b -a")
+
+
+def _peak_mask():
+    """The peak's pixels in the main phase's render of it alone (peak_clear.png), or None."""
+    import numpy as np
+
+    clear = os.path.join(RENDERS, "peak_clear.png")
+    if not os.path.exists(clear):
+        return None
+    img = bpy.data.images.load(clear, check_existing=False)
+    try:
+        alpha = np.empty(img.size[0] * img.size[1] * 4, np.float32)
+        img.pixels.foreach_get(alpha)
+        return alpha.reshape(img.size[1], img.size[0], 4)[..., 3] > 0.99
+    finally:
+        bpy.data.images.remove(img)
 
 
 def s_animation(step: Step):
@@ -1252,6 +1363,7 @@ MAIN = [
     s_render_eevee,
     s_render_cycles,
     s_peak,
+    s_peak_animation,
     s_animation,
     s_bake,
     s_bake_disturbed,
@@ -1261,7 +1373,7 @@ MAIN = [
     s_layers,
     s_save,
 ]
-REOPEN = [s_startup, s_reopen]
+REOPEN = [s_startup, s_reopen, s_farm]
 
 
 # ---- the runner ------------------------------------------------------------------------------------------

@@ -107,8 +107,11 @@ def _layer(name: str, bottom: float, top: float) -> str:
         ),
         (_with('\n[[cloud_layers]]\nname = "Alto\\u001b[31m"\n'), "holds the control character U+001B"),
         (_with('\n[[cloud_layers]]\nname = "A\\u0000B"\n'), "holds the control character U+0000"),
-        (b'[preset]\nname = "Line\\nbreak"\n', "preset.name \"Line\\nbreak\" holds the control character U+000A"),
-        (b'[preset]\nname = "x"\n[layer]\nbottom = 1000.0\ntop = 1000.0000001\n', "layer.top 1000.0000001, layer.bottom"),
+        (b'[preset]\nname = "Line\\nbreak"\n', 'preset.name "Line\\nbreak" holds the control character U+000A'),
+        (
+            b'[preset]\nname = "x"\n[layer]\nbottom = 1000.0\ntop = 1000.0000001\n',
+            "layer.top 1000.0000001, layer.bottom 1000.0",
+        ),
         (b'[preset]\nname = "x"\ncloud_layers = 3\n', "unknown setting preset.cloud_layers"),
         (b'[preset]\nname = "x"\n[cloud_layers]\nname = "y"\n', "must be written as [[cloud_layers]] tables"),
         (
@@ -187,4 +190,3 @@ def test_the_thinnest_layer_is_the_same_for_a_preset_and_the_scene_that_stores_i
         else:
             with pytest.raises(NubisError, match="less than 0.001 m above its base"):
                 cloudlayers.check_stack([("L", b, t)])
-
