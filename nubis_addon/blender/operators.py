@@ -155,10 +155,15 @@ class NUBIS_OT_layer_add(NeedsCloudscape, NubisOperator, bpy.types.Operator):
     bl_label = "Add Layer"
     bl_options = {"REGISTER", "UNDO"}
 
+    @classmethod
+    def unavailable(cls, scene) -> str:
+        if len(ui.active_cloud_layer(scene).layers) >= MAX_LAYERS:
+            return f"a scene holds at most {MAX_LAYERS} field layers: merge or remove one first"
+        return ""
+
     def run(self, context):
+        self.refuse_if_unavailable(context.scene)
         s = ui.active_cloud_layer(context.scene)
-        if len(s.layers) >= MAX_LAYERS:
-            raise NubisError(f"a scene holds at most {MAX_LAYERS} field layers: merge or remove one first")
         layer = s.layers.add()
         layer.name = f"Layer {len(s.layers)}"
         s.layers.move(len(s.layers) - 1, min(s.active_layer + 1, len(s.layers) - 1))
@@ -166,15 +171,35 @@ class NUBIS_OT_layer_add(NeedsCloudscape, NubisOperator, bpy.types.Operator):
         return None
 
 
+def _no_active_layer(settings, doing: str) -> str:
+    """Why there is no active field layer to `doing`, or ""."""
+    if not settings.layers or not 0 <= settings.active_layer < len(settings.layers):
+        return f"there is no layer to {doing}: add one with + first"
+    return ""
+
+
 def _active_layer(settings, doing: str):
     """The active field layer, or the sentence that there is none to `doing`."""
-    if not settings.layers or not 0 <= settings.active_layer < len(settings.layers):
-        raise NubisError(f"there is no layer to {doing}: add one with + first")
+    why = _no_active_layer(settings, doing)
+    if why:
+        raise NubisError(why)
     return settings.layers[settings.active_layer]
 
 
-class NUBIS_OT_layer_remove(NeedsCloudscape, NubisOperator, bpy.types.Operator):
+class ActsOnFieldLayer(NeedsCloudscape):
+    """Grey, and says why, while the chosen cloud layer's field has no active layer to act on."""
+
+    doing = "act on"
+
+    @classmethod
+    def unavailable(cls, scene) -> str:
+        return _no_active_layer(ui.active_cloud_layer(scene), cls.doing)
+
+
+class NUBIS_OT_layer_remove(ActsOnFieldLayer, NubisOperator, bpy.types.Operator):
     """Remove the active field layer"""
+
+    doing = "remove"
 
     bl_idname = "nubis.layer_remove"
     bl_label = "Remove Layer"
@@ -189,8 +214,10 @@ class NUBIS_OT_layer_remove(NeedsCloudscape, NubisOperator, bpy.types.Operator):
         return None
 
 
-class NUBIS_OT_layer_move(NeedsCloudscape, NubisOperator, bpy.types.Operator):
+class NUBIS_OT_layer_move(ActsOnFieldLayer, NubisOperator, bpy.types.Operator):
     """Move the active field layer up or down the stack"""
+
+    doing = "move"
 
     bl_idname = "nubis.layer_move"
     bl_label = "Move Layer"
@@ -208,8 +235,10 @@ class NUBIS_OT_layer_move(NeedsCloudscape, NubisOperator, bpy.types.Operator):
         return None
 
 
-class NUBIS_OT_layer_duplicate(NeedsCloudscape, NubisOperator, bpy.types.Operator):
+class NUBIS_OT_layer_duplicate(ActsOnFieldLayer, NubisOperator, bpy.types.Operator):
     """Duplicate the active field layer"""
+
+    doing = "duplicate"
 
     bl_idname = "nubis.layer_duplicate"
     bl_label = "Duplicate Layer"
@@ -260,10 +289,15 @@ class NUBIS_OT_storm_add(NeedsCloudscape, NubisOperator, bpy.types.Operator):
     bl_label = "Add Superstorm"
     bl_options = {"REGISTER", "UNDO"}
 
+    @classmethod
+    def unavailable(cls, scene) -> str:
+        if len(scene.nubis.storms) >= MAX_STORMS:
+            return f"a scene holds at most {MAX_STORMS} superstorms: remove one first"
+        return ""
+
     def run(self, context):
+        self.refuse_if_unavailable(context.scene)
         s = context.scene.nubis
-        if len(s.storms) >= MAX_STORMS:
-            raise NubisError(f"a scene holds at most {MAX_STORMS} superstorms: remove one first")
         cursor = context.scene.cursor.location
         scene_io.add_storm(context.scene, {"name": "Superstorm", "x": cursor.x, "y": cursor.y})
         s.active_storm = len(s.storms) - 1
@@ -278,11 +312,14 @@ class NUBIS_OT_storm_remove(NeedsCloudscape, NubisOperator, bpy.types.Operator):
     bl_label = "Remove Superstorm"
     bl_options = {"REGISTER", "UNDO"}
 
+    @classmethod
+    def unavailable(cls, scene) -> str:
+        return "" if scene.nubis.storms else "there is no superstorm to remove: add one with Add Superstorm"
+
     def run(self, context):
+        self.refuse_if_unavailable(context.scene)
         s = context.scene.nubis
-        if not s.storms:
-            raise NubisError("there is no superstorm to remove")
-        storm = s.storms[s.active_storm]
+        storm = s.storms[min(s.active_storm, len(s.storms) - 1)]
         if storm.empty is not None:
             bpy.data.objects.remove(storm.empty)
         scene_io.remove_storm_animation(context.scene, s.active_storm)

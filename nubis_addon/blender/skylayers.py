@@ -8,7 +8,6 @@ import bpy
 from bpy.props import EnumProperty
 
 from ..core import cloudlayers
-from ..core.errors import NubisError
 from . import scene_io, ui
 from .operators import NubisOperator
 
@@ -18,14 +17,23 @@ def _ranges(settings) -> list[tuple[float, float]]:
     return first + [(c.layer_bottom, c.layer_top) for c in settings.cloud_layers]
 
 
-def _further(settings, doing: str) -> int:
-    """The chosen further layer's index, or the sentence that says why there is none to `doing`."""
-    index = settings.active_further_layer
+def _no_further(settings, doing: str) -> str:
+    """Why no further layer is chosen to `doing`, or ""."""
     if not settings.cloud_layers:
-        raise NubisError(f"there is no further cloud layer to {doing}: add one with + first")
-    if not 0 <= index < len(settings.cloud_layers):
-        raise NubisError(f"the first cloud layer is the cloudscape's own and cannot {doing}: choose a further one")
-    return index
+        return f"there is no further cloud layer to {doing}: add one with + first"
+    if not 0 <= settings.active_further_layer < len(settings.cloud_layers):
+        return f"the first cloud layer is the cloudscape's own and cannot {doing}: choose a further one"
+    return ""
+
+
+class ActsOnFurtherLayer(ui.NeedsCloudscape):
+    """Grey, and says why, while no further cloud layer is chosen."""
+
+    doing = "act"
+
+    @classmethod
+    def unavailable(cls, scene) -> str:
+        return _no_further(scene.nubis, cls.doing)
 
 
 class NUBIS_OT_cloud_layer_add(ui.NeedsCloudscape, NubisOperator, bpy.types.Operator):
@@ -35,14 +43,17 @@ class NUBIS_OT_cloud_layer_add(ui.NeedsCloudscape, NubisOperator, bpy.types.Oper
     bl_label = "Add Cloud Layer"
     bl_options = {"REGISTER", "UNDO"}
 
+    @classmethod
+    def unavailable(cls, scene) -> str:
+        if len(scene.nubis.cloud_layers) + 1 >= cloudlayers.MAX_CLOUD_LAYERS:
+            return f"a sky holds at most {cloudlayers.MAX_CLOUD_LAYERS} cloud layers: remove one before adding another"
+        return ""
+
     def run(self, context):
+        self.refuse_if_unavailable(context.scene)
         scene = context.scene
         s = scene.nubis
         count = len(s.cloud_layers) + 1
-        if count >= cloudlayers.MAX_CLOUD_LAYERS:
-            raise NubisError(
-                f"a sky holds at most {cloudlayers.MAX_CLOUD_LAYERS} cloud layers: remove one before adding another"
-            )
         source = ui.active_cloud_layer(scene)
         first = ui.first_layer_chosen(scene)
         base = scene_io.params_from_scene(s) if first else scene_io.cloud_layer_params(s, source)
@@ -62,33 +73,37 @@ class NUBIS_OT_cloud_layer_add(ui.NeedsCloudscape, NubisOperator, bpy.types.Oper
         return f"added cloud layer '{cloud.name}' at {cloud.layer_bottom:.0f}-{cloud.layer_top:.0f} m"
 
 
-class NUBIS_OT_cloud_layer_remove(ui.NeedsCloudscape, NubisOperator, bpy.types.Operator):
+class NUBIS_OT_cloud_layer_remove(ActsOnFurtherLayer, NubisOperator, bpy.types.Operator):
     """Remove the chosen cloud layer (the first is the cloudscape's own: switch it off instead)"""
 
     bl_idname = "nubis.cloud_layer_remove"
     bl_label = "Remove Cloud Layer"
     bl_options = {"REGISTER", "UNDO"}
+    doing = "be removed"
 
     def run(self, context):
+        self.refuse_if_unavailable(context.scene)
         s = context.scene.nubis
-        index = _further(s, "be removed")
+        index = s.active_further_layer
         s.cloud_layers.remove(index)
         s.active_further_layer = min(index, len(s.cloud_layers) - 1)
         return None
 
 
-class NUBIS_OT_cloud_layer_move(ui.NeedsCloudscape, NubisOperator, bpy.types.Operator):
+class NUBIS_OT_cloud_layer_move(ActsOnFurtherLayer, NubisOperator, bpy.types.Operator):
     """Move the chosen cloud layer up or down the list (the first stays first)"""
 
     bl_idname = "nubis.cloud_layer_move"
     bl_label = "Move Cloud Layer"
     bl_options = {"REGISTER", "UNDO"}
+    doing = "move"
 
     direction: EnumProperty(items=(("UP", "Up", ""), ("DOWN", "Down", "")))
 
     def run(self, context):
+        self.refuse_if_unavailable(context.scene)
         s = context.scene.nubis
-        index = _further(s, "move")
+        index = s.active_further_layer
         target = index + (-1 if self.direction == "UP" else 1)
         if 0 <= target < len(s.cloud_layers):
             s.cloud_layers.move(index, target)

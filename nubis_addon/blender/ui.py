@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import bpy
 
+from ..core.errors import NubisError
+
 
 def has_cloudscape(scene) -> bool:
     """Whether `scene` holds a Nubis cloudscape (New Cloudscape has made its field images)."""
@@ -55,14 +57,30 @@ def property_group_registration(classes: tuple, id_type, attr: str, group):
 
 
 class NeedsCloudscape:
-    """An operator's poll: available once the scene has a cloudscape, and says how to make one."""
+    """An operator's poll: available once the scene has a cloudscape, and says how to make one; an operator
+    that also needs something of the scene (a layer to remove, room for one more) says why it is grey
+    through `unavailable`, the sentence its run refuses with (`refuse_if_unavailable`), stated once."""
 
     @classmethod
     def poll(cls, context):
         if not has_cloudscape(context.scene):
             cls.poll_message_set("Create a cloudscape first (Nubis > New Cloudscape)")
             return False
+        why = cls.unavailable(context.scene)
+        if why:
+            cls.poll_message_set(why[:1].upper() + why[1:])
+            return False
         return True
+
+    @classmethod
+    def unavailable(cls, scene) -> str:
+        """Why the operator cannot act on `scene` now ("" when it can): cheap, as every redraw asks."""
+        return ""
+
+    def refuse_if_unavailable(self, scene) -> None:
+        why = self.unavailable(scene)
+        if why:
+            raise NubisError(why)
 
 
 class SidebarPanel:

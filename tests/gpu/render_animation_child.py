@@ -9,6 +9,7 @@ render to stdout ("RESULT {...}"):
 - anim:     Render Animation of frames 1-3: the wall under the ground in frame 1 and in the clouds from
             frame 2 (the veil comes in mid-animation, the shadow casters' stack grows), after the still;
 - failing:  Render Animation whose frame 2 cannot be written (a folder stands where its file goes);
+- vdb:      (not a render) a marked VDB cloud in the scene for all of them;
 and then ends as a script ends (no os._exit): the test reads its exit status.
 """
 
@@ -18,6 +19,7 @@ import json
 import math
 import os
 import sys
+from pathlib import Path
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 sys.path.insert(0, ROOT)
@@ -56,6 +58,19 @@ def scene_with_a_wall():
     return scene, wall
 
 
+def add_vdb_cloud(scene) -> None:
+    """A small cumulus in a marked Volume (its visibility once changed every frame: a crash at frame 2)."""
+    sys.path.insert(0, os.path.join(ROOT, "tests"))
+    from vdb_helpers import write_cumulus
+
+    path = write_cumulus(Path(OUT) / "cloud.vdb", base=(-1500.0, 2000.0, 1500.0), n_xy=16, n_z=12)
+    volume = bpy.data.volumes.new("Cloud")
+    volume.filepath = str(path)
+    obj = bpy.data.objects.new("Cloud", volume)
+    scene.collection.objects.link(obj)
+    volume.nubis_cloud.enabled = True
+
+
 def on_pre(scene, *_args) -> None:
     """What each frame of the scene's own renders composed, read after Nubis's own render_pre handler
     prepared it (the World capture's renders are left out). A frame that fails to be written gets no
@@ -76,7 +91,9 @@ def after(scene, world: str) -> dict:
     """What a render must leave as it found it."""
     veil = bpy.data.objects.get(composition.VEIL_NAME)
     casters = [o for o in bpy.data.objects if o.name.startswith(shadows.CASTER_NAME)]
+    volumes = [o for o in scene.objects if o.type == "VOLUME"]
     return {
+        "volumes_back": all(not o.hide_render for o in volumes),
         "world_back": scene.world is not None and scene.world.name == world,
         "veil_out": veil is None or veil.hide_render,
         "casters_out": all(o.hide_render for o in casters),
@@ -86,6 +103,8 @@ def after(scene, world: str) -> dict:
 
 def main() -> None:
     scene, wall = scene_with_a_wall()
+    if "vdb" in RENDERS:  # a marked VDB cloud beside the wall: stepped aside for the whole render, and back
+        add_vdb_cloud(scene)
     world = scene.world.name
     bpy.app.handlers.render_pre.append(on_pre)  # after the extension's, registered with it
     r = scene.render

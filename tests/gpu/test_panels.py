@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import types
 
+import pytest
+
 
 class RecordingLayout:
     """Stands in for bpy's UILayout: records every property drawn; sub-layouts share the record."""
@@ -141,3 +143,56 @@ def test_units_and_soft_ranges_come_from_the_schema(blender):
     assert props["wind_direction"].subtype == "ANGLE"
     assert props["layer_planet_radius"].soft_max < props["layer_planet_radius"].hard_max
     assert props["ambient_color"].name == "Ambient Color"
+
+
+# Each button that needs something of the scene, the state where it cannot act, and the words it says why.
+GREY_BUTTONS = [
+    ("cloud_layer_remove", "first", "There is no further cloud layer to be removed: add one with + first"),
+    ("cloud_layer_move", "first", "There is no further cloud layer to move: add one with + first"),
+    ("cloud_layer_remove", "first chosen", "The first cloud layer is the cloudscape's own and cannot be removed"),
+    ("cloud_layer_add", "four layers", "A sky holds at most 4 cloud layers: remove one before adding another"),
+    ("storm_remove", "no storm", "There is no superstorm to remove: add one with Add Superstorm"),
+    ("storm_add", "every storm", "A scene holds at most 4 superstorms: remove one first"),
+    ("layer_remove", "no field layer", "There is no layer to remove: add one with + first"),
+    ("layer_duplicate", "no field layer", "There is no layer to duplicate: add one with + first"),
+    ("layer_add", "128 field layers", "A scene holds at most 128 field layers: merge or remove one first"),
+]
+
+
+@pytest.mark.parametrize(("op", "state", "words"), GREY_BUTTONS, ids=[f"{o}-{s}" for o, s, _w in GREY_BUTTONS])
+def test_a_grey_button_says_why_in_the_sentence_its_click_would_refuse_with(make_scene, op, state, words):
+    """Blender shows a failed poll's message as the button's tooltip ("Disabled: ..."); the same sentence is
+    what the operator refuses with when run anyway (stated once: `unavailable`)."""
+    import bpy
+
+    from nubis_addon.blender import operators, skylayers
+    from nubis_addon.core.errors import NubisError
+    from nubis_addon.core.state import MAX_STORMS
+
+    scene = make_scene("default")
+    s = scene.nubis
+    if state == "first chosen":
+        assert bpy.ops.nubis.cloud_layer_add() == {"FINISHED"}
+        s.active_further_layer = -1
+    elif state == "four layers":
+        for _ in range(3):
+            assert bpy.ops.nubis.cloud_layer_add() == {"FINISHED"}
+    elif state == "no storm":
+        assert not s.storms
+    elif state == "every storm":
+        for _ in range(MAX_STORMS):
+            assert bpy.ops.nubis.storm_add() == {"FINISHED"}
+    elif state == "no field layer":
+        s.layers.clear()
+    elif state == "128 field layers":
+        while len(s.layers) < 128:
+            s.layers.add()
+    fn = getattr(bpy.ops.nubis, op)
+    assert not fn.poll()
+    with pytest.raises(RuntimeError) as err:
+        fn()
+    assert words in str(err.value), str(err.value)
+    cls = next(c for m in (operators, skylayers) for c in m.CLASSES if getattr(c, "bl_idname", "") == f"nubis.{op}")
+    with pytest.raises(NubisError) as refused:
+        cls.refuse_if_unavailable(cls, scene)
+    assert words.lower() in str(refused.value).lower()
