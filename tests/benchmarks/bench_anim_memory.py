@@ -8,7 +8,7 @@ The default cloudscape with a 5 km peak 16 km ahead of a camera 1 km up (the vei
 the shadow casters' stack through the layer), the wind moving the clouds from frame to frame, rendered by
 `bpy.ops.render.render(animation=True)` as a pipeline's script does. Prints a table: resident memory at
 frames 1, 10, 50, 100, ... and the last, the growth after frame 10 in MB and per frame, the data-blocks
-(images, materials, objects, meshes, worlds) at frame 10 and at the end. Goal (issue 59): less than 50 MB
+(images, materials, objects, meshes, worlds) at frame 10 and at the end. The goal: less than 50 MB
 of growth after frame 10 over 250 frames at 160 x 90.
 """
 

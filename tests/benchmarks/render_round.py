@@ -1,5 +1,5 @@
 """A hostile round over final renders with objects in the clouds and over layered skies on the command
-line: the surfaces issue 59 left unprobed. Each probe runs in a child process of its own under an 8 GB
+line: the surfaces an earlier round left unprobed. Each probe runs in a child process of its own under an 8 GB
 address-space cap with a timeout (tests/benchmarks/hostile_round.py's Child), and ends as
 
 - held:   exit 0 and every check the probe makes holds (printed as one `HR-RESULT {...}` line);
