@@ -62,56 +62,17 @@ const float NUBIS_TURN_HASH_SCALE = 24634.6345;
 /* A grazing ray's slant through a thin layer is capped at 1 / this cosine (docs/sources.md#cirrus-lighting). */
 const float NUBIS_MIN_SLANT_COS = 0.05;
 
-/* One cloud layer of a layered sky (docs/layers.md; render/uniforms.py packs its rows): its slice of the
- * field textures and its own settings. Layers share no altitude, so a point of the sky is in one layer
- * at most (nubis_layer_at). */
-struct NubisLayer {
-  int slice;
-  float bottom;            /* base altitude (the layer setting, before the min/max height channels) */
-  float top;               /* top altitude */
-  float extent_top;        /* the highest its clouds reach: the storm anvil's band hangs under it */
-  vec4 noise;              /* base shape period, detail period, curl period, curl strength */
-  float sigma_scale;       /* its density sigma over P.density_sigma, which the light model multiplies by */
-  float erosion;
-  float coverage;          /* the multiplier on its coverage channel */
-  float multiply_coverage; /* 0 or 1 */
-  vec2 wind_dir;
-  float wind_distance;     /* wind speed x time */
-  float top_offset;
-  float upward_bias;
-  float detail_speed;
-};
-
-NubisLayer nubis_layer(int i)
-{
-  NubisLayer L;
-  L.slice = i;
-  vec4 heights = P.cloud_layer_heights[i];
-  L.bottom = heights.x;
-  L.top = heights.y;
-  L.extent_top = heights.w;
-  L.noise = P.cloud_layer_noise[i];
-  vec4 density = P.cloud_layer_density[i];
-  L.sigma_scale = density.x;
-  L.erosion = density.y;
-  L.coverage = density.z;
-  L.multiply_coverage = density.w;
-  vec4 wind = P.cloud_layer_wind[i];
-  L.wind_dir = wind.xy;
-  L.wind_distance = wind.z;
-  L.top_offset = wind.w;
-  vec4 wind2 = P.cloud_layer_wind2[i];
-  L.upward_bias = wind2.x;
-  L.detail_speed = wind2.y;
-  return L;
-}
+/* NubisLayer (declared with the uniform block), its accessors nubis_layer_<field>(i) and nubis_layer(i):
+ * generated from render/uniforms.py's _LAYER_ROWS, where each field's place in the block is stated once.
+ * Layers share no altitude, so a point of the sky is in one layer at most (nubis_layer_at). */
+NUBIS_GENERATED(nubis_layer)
 
 /* The layer whose clouds can reach this altitude, or -1 (between layers, above or under them all).
  * Unrolled: no loop iterations against the platform's loop limit (core/march.py). */
 bool nubis_in_layer(int i, float altitude)
 {
-  vec4 heights = P.cloud_layer_heights[i];
-  return int(P.cloud_layer_count) > i && altitude >= heights.z && altitude <= heights.w;
+  return int(P.cloud_layer_count) > i && altitude >= nubis_layer_extent_bottom(i) &&
+         altitude <= nubis_layer_extent_top(i);
 }
 
 int nubis_layer_at(float altitude)

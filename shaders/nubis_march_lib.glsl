@@ -353,14 +353,14 @@ struct NubisSegments {
  * under the extent's top: with storms, the extent. */
 float nubis_layer_reach(int i)
 {
-  vec4 heights = P.cloud_layer_heights[i];
 #if NUBIS_STORMS
-  return heights.w;
+  return nubis_layer_extent_top(i);
 #else
-  vec4 r = P.cloud_layer_reach[i];
+  vec4 r = nubis_layer_reach_channels(i);
   float e = nubis_top_ramp(r.x).y;
-  float top = heights.x + (heights.y - heights.x) * max(r.y, mix(r.y, r.z, e)) + NUBIS_REACH_MARGIN;
-  return clamp(top, heights.z + NUBIS_REACH_MARGIN, heights.w);
+  float bottom = nubis_layer_bottom(i);
+  float top = bottom + (nubis_layer_top(i) - bottom) * max(r.y, mix(r.y, r.z, e)) + NUBIS_REACH_MARGIN;
+  return clamp(top, nubis_layer_extent_bottom(i) + NUBIS_REACH_MARGIN, nubis_layer_extent_top(i));
 #endif
 }
 
@@ -384,10 +384,10 @@ NubisSegments nubis_march_segments(vec3 origin, vec3 dir)
     if (i >= int(P.cloud_layer_count)) {
       break;
     }
-    vec4 heights = P.cloud_layer_heights[i];
-    segments.thickest = max(segments.thickest, heights.w - heights.z);
+    float extent_bottom = nubis_layer_extent_bottom(i);
+    segments.thickest = max(segments.thickest, nubis_layer_extent_top(i) - extent_bottom);
     float reach = nubis_layer_reach(i);
-    if (!nubis_shell_segment(origin, dir, heights.z, reach, t0, t1)) {
+    if (!nubis_shell_segment(origin, dir, extent_bottom, reach, t0, t1)) {
       continue;
     }
     /* Insertion by the segment's start: layers share no altitude, so their segments do not overlap. */
@@ -396,7 +396,7 @@ NubisSegments nubis_march_segments(vec3 origin, vec3 dir)
       segments.part[at] = segments.part[at - 1];
       at--;
     }
-    segments.part[at] = vec4(t0, t1, reach - heights.z, P.cloud_layer_noise[i].x);
+    segments.part[at] = vec4(t0, t1, reach - extent_bottom, nubis_layer_noise(i).x);
     segments.count++;
   }
 #endif

@@ -26,7 +26,7 @@ import numpy as np
 
 from nubis_addon.core.noise import FBM_WEIGHTS, NoiseSet, downsample2
 from nubis_addon.core.state import CloudState
-from nubis_addon.render.uniforms import member_values
+from nubis_addon.render.uniforms import layer_fields, member_values
 
 _FBM = np.asarray(FBM_WEIGHTS, np.float64)
 
@@ -166,18 +166,17 @@ def _vectors(state: CloudState) -> dict[str, tuple]:
     def group(*names):
         return tuple(m[n] for n in names)
 
-    # The first cloud layer's rows (render/uniforms.py, layer_rows): the oracle draws one layer.
-    heights, noise = m["cloud_layer_heights"][0], m["cloud_layer_noise"][0]
-    dens, wind, wind2 = m["cloud_layer_density"][0], m["cloud_layer_wind"][0], m["cloud_layer_wind2"][0]
+    # The first cloud layer's fields (render/uniforms.py, _LAYER_ROWS): the oracle draws one layer.
+    L = layer_fields(state)[0]
     return {
-        "layer": (m["layer_planet_radius"], heights[0], heights[1], m["layer_draw_radius"]),
+        "layer": (m["layer_planet_radius"], L["bottom"], L["top"], m["layer_draw_radius"]),
         "shell": group("shell_bottom", "shell_top"),
         "field": group("field_origin_x", "field_origin_y", "field_size", "field_inv_size"),
         "draw": group("draw_center_x", "draw_center_y", "draw_fade"),
-        "noise": tuple(noise),
-        "wind": (wind[0], wind[1], wind[2], wind2[1]),
-        "wind2": (wind[3], wind2[0], m["time"]),
-        "density": (m["density_sigma"], dens[2], dens[1], dens[3]),
+        "noise": tuple(L["noise"]),
+        "wind": (*L["wind_dir"], L["wind_distance"], L["detail_speed"]),
+        "wind2": (L["top_offset"], L["upward_bias"], m["time"]),
+        "density": (m["density_sigma"], L["coverage"], L["erosion"], L["multiply_coverage"]),
         "clip_box": m["clip_box"],
     }
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 from functools import cache
 
 import numpy as np
@@ -187,7 +188,7 @@ def struct_members() -> tuple[tuple[str, str, int], ...]:
     floats = [(s.key, "float", 0) for s in schema.gpu_settings()] + [(n, "float", 0) for n, _d, _f in _FLOATS]
     floats += [(f"_pad{i}", "float", 0) for i in range(-len(floats) % 4)]
     arrays = [(name, "vec4", n) for name, n, _doc, _fn in _ARRAYS]
-    arrays += [(name, "vec4", cloudlayers.MAX_CLOUD_LAYERS) for name, _doc in _LAYER_ARRAYS]
+    arrays += [(name, "vec4", cloudlayers.MAX_CLOUD_LAYERS) for name, _fields in _LAYER_ROWS]
     return tuple(vec4 + floats + arrays)
 
 
@@ -197,7 +198,7 @@ def struct_source() -> str:
     docs = {s.key: f"{s.label} ({s.unit.lower()})" if s.unit != "NONE" else s.label for s in schema.gpu_settings()}
     docs.update({n: d for n, d, _f in _VEC4 + _FLOATS})
     docs.update({n: d for n, _c, d, _f in _ARRAYS})
-    docs.update(dict(_LAYER_ARRAYS))
+    docs.update({name: _row_doc(fields) for name, fields in _LAYER_ROWS})
     lines = ["/* Generated from core/schema.py by render/uniforms.py: one member per setting, by its key. */"]
     lines.append(f"#define NUBIS_MAX_STORMS {MAX_STORMS}")
     lines.append(f"#define NUBIS_MAX_LIGHT_TAPS {march.MAX_LIGHT_TAPS}")
@@ -216,7 +217,7 @@ def struct_source() -> str:
         decl = f"{typ} {name}[{size_name(name)}];" if n else f"{typ} {name};"
         lines.append(f"  {decl:<40} /* {docs.get(name, 'padding to whole vec4s')} */")
     lines.append("};")
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines) + "\n" + _layer_struct()
 
 
 def member_values(state: CloudState) -> dict:
@@ -259,39 +260,172 @@ def state_max_steps(state: CloudState) -> int:
     return march.max_steps(p["march_light_samples"], len(state.storms), state.light_mode, len(state.vdb_clouds))
 
 
-def layer_rows(state: CloudState) -> dict[str, list[tuple]]:
-    """The drawn cloud layers' rows of the block (core/cloudlayers.py; NubisLayer in
-    shaders/nubis_density_lib.glsl), made once per pack."""
+@dataclass(frozen=True)
+class LayerField:
+    """One field of a cloud layer on the GPU: NubisLayer's member `name` (None: the row's unused rest), its
+    GLSL type, what it holds, and its value from a _Layer."""
+
+    name: str | None
+    glsl: str  # "float", "vec2" or "vec4": how many of its row's components it takes
+    doc: str
+    value: Callable[[_Layer], float | tuple]
+
+    @property
+    def size(self) -> int:
+        return {"float": 1, "vec2": 2, "vec3": 3, "vec4": 4}[self.glsl]
+
+
+@dataclass(frozen=True)
+class _Layer:
+    """What a drawn layer's fields are read from: its settings, its altitudes (disjoint_extents), its field,
+    the state (the wind's time, the sky's sigma)."""
+
+    p: dict
+    lo: float
+    hi: float
+    field: cloudlayers.LayerField
+    state: CloudState
+
+
+def _setting(key: str) -> Callable[[_Layer], float]:
+    return lambda c: float(c.p[key])
+
+
+def _noise(c: _Layer) -> tuple:
+    return tuple(c.p[k] for k in ("noise_lf_period", "noise_hf_period", "noise_curl_period", "noise_curl_strength"))
+
+
+def _sigma_scale(c: _Layer) -> float:
+    return c.p["density_sigma"] / c.state.params["density_sigma"]
+
+
+F = LayerField
+# A cloud layer on the GPU, stated once: its rows of the uniform block (vec4 arrays, one row a drawn layer,
+# NUBIS_MAX_LAYERS rows) and, in each, the fields they hold. The rows, their documentation, NubisLayer, its
+# accessors and nubis_layer() (layer_source) are all made from this table.
+_LAYER_ROWS: tuple[tuple[str, tuple[LayerField, ...]], ...] = (
+    (
+        "cloud_layer_heights",
+        (
+            F(
+                "bottom",
+                "float",
+                "base altitude (the setting, before the min/max height channels)",
+                _setting("layer_bottom"),
+            ),
+            F("top", "float", "top altitude", _setting("layer_top")),
+            F("extent_bottom", "float", "the lowest its clouds reach", lambda c: c.lo),
+            F("extent_top", "float", "the highest its clouds reach: a storm's anvil hangs under it", lambda c: c.hi),
+        ),
+    ),
+    (
+        "cloud_layer_noise",
+        (F("noise", "vec4", "base shape period, detail period, curl period, curl strength", _noise),),
+    ),
+    (
+        "cloud_layer_density",
+        (
+            F(
+                "sigma_scale",
+                "float",
+                "its sigma over P.density_sigma, which the light model multiplies by",
+                _sigma_scale,
+            ),
+            F("erosion", "float", "erosion", _setting("density_erosion")),
+            F("coverage", "float", "the multiplier on its coverage channel", _setting("density_coverage")),
+            F("multiply_coverage", "float", "0 or 1", _setting("density_multiply_coverage")),
+        ),
+    ),
+    (
+        "cloud_layer_wind",
+        (
+            F("wind_dir", "vec2", "the wind's direction", lambda c: tuple(wind_vector(c.p["wind_direction"]))),
+            F("wind_distance", "float", "wind speed x time", lambda c: c.p["wind_speed"] * c.state.time),
+            F("top_offset", "float", "the cloud tops' offset downwind", _setting("wind_top_offset")),
+        ),
+    ),
+    (
+        "cloud_layer_wind2",
+        (
+            F("upward_bias", "float", "upward bias", _setting("wind_upward_bias")),
+            F("detail_speed", "float", "detail speed", _setting("wind_detail_speed")),
+            F(None, "vec2", "-", lambda c: (0.0, 0.0)),
+        ),
+    ),
+    (
+        "cloud_layer_reach",
+        (
+            F(
+                "reach_channels",
+                "vec4",
+                "the greatest top type, min height and max height in its field (nubis_layer_reach), -",
+                lambda c: c.field.reach_channels(),
+            ),
+        ),
+    ),
+)
+assert all(sum(f.size for f in fields) == 4 for _row, fields in _LAYER_ROWS), "each row fills one vec4"
+
+
+def layer_fields(state: CloudState) -> list[dict[str, float | tuple]]:
+    """Each drawn cloud layer's fields by name (its NubisLayer), in the layers' order."""
     layers = state.drawn_layers()
-    extents = cloudlayers.disjoint_extents(layers)
-    sigma = state.params["density_sigma"]
-    rows: dict[str, list[tuple]] = {name: [] for name, _doc in _LAYER_ARRAYS}
-    for layer, (lo, hi) in zip(layers, extents, strict=True):
-        p = layer.params
-        wind = wind_vector(p["wind_direction"])
-        rows["cloud_layer_heights"].append((p["layer_bottom"], p["layer_top"], lo, hi))
-        rows["cloud_layer_noise"].append(
-            (p["noise_lf_period"], p["noise_hf_period"], p["noise_curl_period"], p["noise_curl_strength"])
-        )
-        multiply = float(p["density_multiply_coverage"])
-        rows["cloud_layer_density"].append(
-            (p["density_sigma"] / sigma, p["density_erosion"], p["density_coverage"], multiply)
-        )
-        rows["cloud_layer_wind"].append((*wind, p["wind_speed"] * state.time, p["wind_top_offset"]))
-        rows["cloud_layer_wind2"].append((p["wind_upward_bias"], p["wind_detail_speed"], 0.0, 0.0))
-        rows["cloud_layer_reach"].append(layer.reach_channels())
+    out = []
+    for layer, (lo, hi) in zip(layers, cloudlayers.disjoint_extents(layers), strict=True):
+        c = _Layer(layer.params, lo, hi, layer, state)
+        out.append({f.name: f.value(c) for _row, fields in _LAYER_ROWS for f in fields if f.name})
+    return out
+
+
+def layer_rows(state: CloudState) -> dict[str, list[tuple]]:
+    """The drawn cloud layers' rows of the block, made once per pack from _LAYER_ROWS."""
+    layers = state.drawn_layers()
+    rows: dict[str, list[tuple]] = {row: [] for row, _fields in _LAYER_ROWS}
+    for layer, (lo, hi) in zip(layers, cloudlayers.disjoint_extents(layers), strict=True):
+        c = _Layer(layer.params, lo, hi, layer, state)
+        for row, fields in _LAYER_ROWS:
+            flat: list[float] = []
+            for f in fields:
+                v = f.value(c)
+                flat.extend(v if isinstance(v, tuple | list) else (v,))
+            rows[row].append(tuple(float(x) for x in flat))
     return rows
 
 
-# The cloud layers' arrays of vec4 (one row a drawn layer, NUBIS_MAX_LAYERS rows): name, what a row holds.
-_LAYER_ARRAYS: tuple[tuple[str, str], ...] = (
-    ("cloud_layer_heights", "a cloud layer's base, top, and the lowest and highest altitudes its clouds reach"),
-    ("cloud_layer_noise", "its base shape period, detail period, curl period, curl strength"),
-    ("cloud_layer_density", "its sigma / density_sigma, erosion, coverage multiplier, multiply coverage (0/1)"),
-    ("cloud_layer_wind", "its wind direction x, y, distance travelled (speed x time), cloud-top offset"),
-    ("cloud_layer_wind2", "its upward bias, detail speed, -, -"),
-    ("cloud_layer_reach", "the greatest top type, min height and max height in its field (nubis_layer_reach), -"),
-)
+def _row_doc(fields: tuple[LayerField, ...]) -> str:
+    return "a cloud layer's " + ", ".join(f.name or "-" for f in fields for _ in range(1 if f.name else f.size))
+
+
+@cache
+def layer_source() -> str:
+    """NubisLayer's accessors and nubis_layer(i), generated from _LAYER_ROWS (in the libraries' place of
+    `NUBIS_GENERATED(nubis_layer)`, after the block P they read)."""
+    lines = ["/* Generated from _LAYER_ROWS by render/uniforms.py: where each field of layer i lives in P. */"]
+    body = ["NubisLayer nubis_layer(int i)", "{", "  NubisLayer L;", "  L.slice = i;"]
+    for row, fields in _LAYER_ROWS:
+        at = 0
+        for f in fields:
+            if f.name:
+                swizzle = "xyzw"[at : at + f.size]
+                lines.append(f"{f.glsl} nubis_layer_{f.name}(int i) {{ return P.{row}[i].{swizzle}; }}")
+                body.append(f"  L.{f.name} = nubis_layer_{f.name}(i);")
+            at += f.size
+    return "\n".join([*lines, "", *body, "  return L;", "}"]) + "\n"
+
+
+def _layer_struct() -> str:
+    lines = [
+        "/* One cloud layer of a layered sky (docs/layers.md): its slice of the field textures and its own",
+        " * settings, unpacked by nubis_layer(i) (render/uniforms.py: _LAYER_ROWS). */",
+        "struct NubisLayer {",
+        "  int slice;",
+    ]
+    for _row, fields in _LAYER_ROWS:
+        for f in fields:
+            if f.name:
+                decl = f"{f.glsl} {f.name};"
+                lines.append(f"  {decl:<28} /* {f.doc} */")
+    return "\n".join([*lines, "};"]) + "\n"
 
 
 def _vortex_time(state: CloudState, storm) -> float:
