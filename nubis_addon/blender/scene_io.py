@@ -13,7 +13,7 @@ import bpy
 import numpy as np
 from mathutils import Euler, Matrix, Vector
 
-from ..core import bundled, camera, cloudlayers, coverage, limits, paint, schema, userpresets
+from ..core import bundled, camera, cloudlayers, coverage, fieldstack, limits, paint, schema, userpresets
 from ..core import fields as fieldgen
 from ..core import sky as skymath
 from ..core import storms as stormgen
@@ -311,44 +311,46 @@ def image_arrays(settings) -> dict[str, np.ndarray]:
     return out
 
 
-def generate_fields(scene, progress=None) -> None:
-    """Composite the layer stack into the field images (the Data Field Generator, GDC22), then apply
-    the weather rules the scene has switched on. ``progress`` gets the fraction of layers done."""
-    settings = scene.nubis
-    params = params_from_scene(settings)
-    layers = [layer_to_dict(layer) for layer in settings.layers]
-    result = fieldgen.composite(layers, params, image_arrays(settings), progress)
-    if settings.rule_rain:
-        fieldgen.apply_rain_rule(result, settings.rule_cumulonimbus_top)
-    if settings.rule_horizon:
-        fieldgen.apply_horizon_rule(result, params, _camera_xy(scene), settings.rule_horizon_start)
-    # Coverage is the fraction of the sky covered: the multiplier on this field that gives it, found from
-    # the field before the storms (a superstorm's stencil is its own system, GDC22: counting it would thin
-    # the fair-weather clouds everywhere else). Kept in the file, so a reopened file draws the same sky.
-    state = scene_state(scene)
-    state.cover_hist = coverage.histogram(result["a"][..., 0])
-    painted = paint_layers(settings, params)
-    state.cover_painted = any(p.channel == "coverage" for p in painted)
+def _stack_inputs(scene, owner, params, storms=(), progress=None) -> fieldstack.StackInputs:
+    """What `owner` (the scene's settings, or a further cloud layer) composites from."""
+    return fieldstack.StackInputs(
+        layers=[layer_to_dict(layer) for layer in owner.layers],
+        params=params,
+        images=image_arrays(owner),
+        rain=owner.rule_cumulonimbus_top if owner.rule_rain else None,
+        horizon=owner.rule_horizon_start if owner.rule_horizon else None,
+        camera_xy=_camera_xy(scene),
+        cover=owner.density_cover,
+        painted=paint_layers(owner, params),
+        has_paint=any(layer.kind == "PAINT" for layer in owner.layers),
+        storms=storms,
+        progress=progress,
+    )
+
+
+def _store_multiplier(owner, value: float) -> None:
     try:
         with batch_edit():
-            settings.density_coverage = coverage_multiplier(scene)
+            owner.density_coverage = value
     except (AttributeError, RuntimeError):
-        pass  # a composite made while Blender draws cannot write settings; renders read coverage_multiplier
-    # GDC22: superstorm stencils override the field inside their radius, after everything else
-    # (docs/sources.md#storm-stencil).
-    storms = storm_stencils(settings, params)
-    if storms:
-        stormgen.apply_storms(result, params, storms)
-    # The artist's strokes act last, coverage on top of the slider's cover (core/paint.py): kept before the
-    # paint while the scene has paint layers, so a live stroke re-applies its paint to a rectangle only.
-    if any(layer.kind == "PAINT" for layer in settings.layers):
-        pre = paint.pre_planes(result)
-        m = coverage.multiplier_for(settings.density_cover, state.cover_hist)
-        state.pre_paint = (pre, m)
-        paint.apply(result, pre, painted, m)
-    else:
-        state.pre_paint = None
-    for which, data in result.items():
+        pass  # a composite made while Blender draws cannot write settings; renders read the session state
+
+
+def generate_fields(scene, progress=None) -> None:
+    """Composite the layer stack into the field images (the Data Field Generator, GDC22), with the weather
+    rules, the coverage multiplier, the storms and the strokes (core/fieldstack.py), then every further
+    cloud layer's. ``progress`` gets the fraction of layers done."""
+    settings = scene.nubis
+    params = params_from_scene(settings)
+    inputs = _stack_inputs(scene, settings, params, storm_stencils(settings, params), progress)
+    done = fieldstack.composite_stack(inputs)
+    # Kept in the file, so a reopened file draws the same sky (coverage_multiplier).
+    state = scene_state(scene)
+    state.cover_hist = done.cover_hist
+    state.cover_painted = any(p.channel == "coverage" for p in inputs.painted)
+    state.pre_paint = done.pre_paint
+    _store_multiplier(settings, done.stored_multiplier)
+    for which, data in done.planes.items():
         write_field_image(settings, which, data)
     for cloud in settings.cloud_layers:
         composite_cloud_layer(scene, cloud)
@@ -365,29 +367,14 @@ def cloud_layer_params(settings, cloud) -> dict:
 
 
 def composite_cloud_layer(scene, cloud) -> None:
-    """Composite a further layer's stack into its own field images, with its weather rules, its coverage
-    multiplier and its strokes, as generate_fields does the first layer's. The superstorms are the first
-    layer's: their stencils and lights act there (docs/layers.md)."""
-    params = cloud_layer_params(scene.nubis, cloud)
-    result = fieldgen.composite([layer_to_dict(layer) for layer in cloud.layers], params, image_arrays(cloud))
-    if cloud.rule_rain:
-        fieldgen.apply_rain_rule(result, cloud.rule_cumulonimbus_top)
-    if cloud.rule_horizon:
-        fieldgen.apply_horizon_rule(result, params, _camera_xy(scene), cloud.rule_horizon_start)
-    painted = paint_layers(cloud, params)
-    m = coverage.multiplier_for(cloud.density_cover, coverage.histogram(result["a"][..., 0]))
-    if any(p.channel == "coverage" for p in painted):
-        m = max(m, paint.MULTIPLIER_FLOOR)
-    scene_state(scene).layer_coverage[cloud.name] = m
-    try:
-        with batch_edit():
-            cloud.density_coverage = m
-    except (AttributeError, RuntimeError):
-        pass  # a composite made while Blender draws cannot write settings; renders read layer_coverage
-    if painted:
-        paint.apply(result, paint.pre_planes(result), painted, m)
+    """Composite a further layer's stack into its own field images, as generate_fields does the first
+    layer's (core/fieldstack.py). The superstorms are the first layer's: their stencils and lights act
+    there (docs/layers.md)."""
+    done = fieldstack.composite_stack(_stack_inputs(scene, cloud, cloud_layer_params(scene.nubis, cloud)))
+    scene_state(scene).layer_coverage[cloud.name] = done.stored_multiplier
+    _store_multiplier(cloud, done.stored_multiplier)
     for which in ("a", "b"):
-        write_field_image(cloud, which, result[which], f"{FIELD_IMAGES[which][1]} ({cloud.name})")
+        write_field_image(cloud, which, done.planes[which], f"{FIELD_IMAGES[which][1]} ({cloud.name})")
 
 
 def drawn_cloud_layers(scene) -> tuple[tuple[cloudlayers.LayerField, ...], bool]:
