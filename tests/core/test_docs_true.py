@@ -272,3 +272,34 @@ def test_the_readme_counts_the_presets():
         f"README.md says '{m.group(1)} skies' but {count} presets ship in presets/: "
         f"write '**Presets.** {NUMBERS[count].title()} skies'"
     )
+
+
+# ---- the paths ------------------------------------------------------------------------------------------
+
+# A path a doc names from the repository's root: a top folder of the repository, then folders and a file name
+# with an extension. Names with a wildcard or a placeholder (`out/<name>.png`, `f_####`) are left out, as are
+# the folders a run writes (out/, build/) and the virtual environments.
+REPO_PATH = re.compile(
+    r"(?<![\w/.<-])((?:tests|shaders|nubis_addon|presets|docs|\.ci)/[\w./-]*\w\.(?:py|glsl|md|toml|png|json|js|txt))(?![\w/<*#])"
+)
+
+
+def _named_paths() -> list[tuple[str, int, str]]:
+    """(doc, line, path) for every repository path the README and docs/ name."""
+    found = []
+    for doc in [README, *sorted((ROOT / "docs").glob("*.md"))]:
+        for n, line in enumerate(doc.read_text(encoding="utf-8").splitlines(), 1):
+            for m in REPO_PATH.finditer(line):
+                found.append((doc.relative_to(ROOT).as_posix(), n, m.group(1)))
+    return found
+
+
+def test_the_path_reader_finds_paths():
+    """The reader itself: a doc's paths are found (a pattern that matched nothing would pass anything)."""
+    paths = {p for _d, _n, p in _named_paths()}
+    assert {"tests/core/test_docs_true.py", "shaders/nubis_density_lib.glsl"} <= paths, sorted(paths)[:20]
+
+
+def test_every_path_a_doc_names_exists():
+    dead = [f"{doc}:{n}: {path}" for doc, n, path in _named_paths() if not (ROOT / path).exists()]
+    assert not dead, "these paths do not exist; name the file as it is now:\n" + "\n".join(dead)
