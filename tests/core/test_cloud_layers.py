@@ -66,8 +66,13 @@ def test_a_further_layer_without_a_stack_of_its_own_copies_the_first_layers():
 
 
 def test_every_shipped_preset_without_layers_reads_as_one_layer():
+    """A preset with no [[cloud_layers]] is a sky of one layer, the preset's own; the layered ones hold
+    the layers their files list, and every stack is one the sky can draw."""
+    layered = {"altocumulus_over_stratocumulus": 1, "layered_overcast": 1}
     for name in presets.list_presets():
         p = presets.load_preset(name)
+        text = p.path.read_text(encoding="utf-8")
+        assert len(p.cloud_layers) == text.count("[[cloud_layers]]") == layered.get(name, 0), name
         ranges = [("first", p.params["layer_bottom"], p.params["layer_top"])]
         ranges += [(c.name, c.params["layer_bottom"], c.params["layer_top"]) for c in p.cloud_layers]
         cloudlayers.check_stack(ranges)

@@ -20,6 +20,10 @@ def _same(a: presets.Preset, b: presets.Preset) -> None:
     assert a.extra == b.extra
     assert a.layers == b.layers
     assert a.storms == b.storms
+    # A layered preset's further layers: each one's name, switch, own settings and field stack.
+    assert [(c.name, c.enabled, c.params, c.field_layers) for c in a.cloud_layers] == [
+        (c.name, c.enabled, c.params, c.field_layers) for c in b.cloud_layers
+    ]
 
 
 def _round_trip(preset: presets.Preset) -> presets.Preset:

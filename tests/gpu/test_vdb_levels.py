@@ -58,7 +58,9 @@ def test_over_the_budget_the_viewport_draws_a_coarser_level_and_says_so(blender,
     assert coarse[..., 3].max() > 0.3
     assert float(np.sqrt(np.mean((coarse[..., 3] - finest[..., 3]) ** 2))) < 0.05
     monkeypatch.setenv("NUBIS_VDB_GPU_BUDGET", "lots")
-    with pytest.raises(Exception, match="NUBIS_VDB_GPU_BUDGET is 'lots': set it to a whole number of megabytes"):
+    from nubis_addon.core.errors import NubisError
+
+    with pytest.raises(NubisError, match="NUBIS_VDB_GPU_BUDGET is 'lots': set it to a whole number of megabytes"):
         vdbclouds.gpu_budget()
 
 
