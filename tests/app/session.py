@@ -1272,8 +1272,16 @@ def s_layers(step: Step):
     s = scene.nubis
     _check_samples(step)
     area = view3d_area()
+    # Before +, the panel's Remove button is grey and says why (its poll message, Blender's "Disabled: ..."
+    # tooltip), in the sentence a click would have been refused with.
+    remover = next(c for c in ext_module("skylayers").CLASSES if c.bl_idname == "nubis.cloud_layer_remove")
+    with override(area, "UI"):
+        grey = not bpy.ops.nubis.cloud_layer_remove.poll()
+    why = remover.unavailable(scene)
+    step.check(grey and why.startswith("there is no further cloud layer"), f"Remove is grey before +: {why!r}")
     with override(area, "UI"):
         step.note(f"nubis.cloud_layer_add (the Cloud Layers panel's +) -> {bpy.ops.nubis.cloud_layer_add()}")
+        step.check(bpy.ops.nubis.cloud_layer_remove.poll(), "Remove is available once a further layer is chosen")
     step.check(len(s.cloud_layers) == 1, f"{len(s.cloud_layers)} further cloud layer(s) after +")
     if not s.cloud_layers:
         return
