@@ -341,7 +341,7 @@ bool nubis_shell_segment(vec3 origin, vec3 dir, float lo, float hi, out float t0
  * each cloud layer's on its own, so the air between layers costs no steps (docs/layers.md). With VDB
  * clouds, which may stand anywhere, one segment through the whole shell. Returns how many. */
 struct NubisSegments {
-  vec4 part[NUBIS_MAX_LAYERS];
+  vec4 part[NUBIS_MAX_CLOUD_LAYERS];
   int count;
   float thickest; /* the thickest drawn layer's thickness, whose steps set the sky's step length */
 };
@@ -370,7 +370,7 @@ NubisSegments nubis_march_segments(vec3 origin, vec3 dir)
   segments.count = 0;
   segments.thickest = 1.0;
   float t0, t1;
-  for (int k = 0; k < NUBIS_MAX_LAYERS; k++) {
+  for (int k = 0; k < NUBIS_MAX_CLOUD_LAYERS; k++) {
     segments.part[k] = vec4(0.0);
   }
 #if NUBIS_VDB
@@ -380,7 +380,7 @@ NubisSegments nubis_march_segments(vec3 origin, vec3 dir)
   }
   segments.thickest = P.shell_top - P.shell_bottom;
 #else
-  for (int i = 0; i < NUBIS_MAX_LAYERS; i++) {
+  for (int i = 0; i < NUBIS_MAX_CLOUD_LAYERS; i++) {
     if (i >= int(P.cloud_layer_count)) {
       break;
     }
@@ -432,7 +432,7 @@ NubisParts nubis_march_parts(vec3 origin, vec3 dir, vec2 pixel, float split)
   float depth_sum[2] = float[2](0.0, 0.0);
   vec4 flashes[2] = vec4[2](vec4(0.0), vec4(0.0));
   float transmittance = 1.0;
-  for (int segment = 0; segment < NUBIS_MAX_LAYERS; segment++) {
+  for (int segment = 0; segment < NUBIS_MAX_CLOUD_LAYERS; segment++) {
     if (segment >= segment_count || transmittance < NUBIS_OPAQUE_TRANSMITTANCE) {
       break;
     }

@@ -100,7 +100,7 @@ _FLOATS: tuple[tuple[str, str, Callable[[CloudState], float]], ...] = (
     ("max_view_steps", "most view steps within the shader loop limit", lambda st: float(state_max_steps(st))),
     ("vdb_count", "VDB clouds drawn (<= NUBIS_MAX_VDB)", lambda st: float(len(st.vdb_clouds))),
     ("vdb_step", "the view march's step through the VDB clouds (metres)", lambda st: _vdb_step(st)),
-    ("cloud_layer_count", "cloud layers drawn (<= NUBIS_MAX_LAYERS)", lambda st: float(len(st.drawn_layers()))),
+    ("cloud_layer_count", "cloud layers drawn (<= NUBIS_MAX_CLOUD_LAYERS)", lambda st: float(len(st.drawn_layers()))),
 )
 
 
@@ -203,13 +203,13 @@ def struct_source() -> str:
     lines.append(f"#define NUBIS_MAX_STORMS {MAX_STORMS}")
     lines.append(f"#define NUBIS_MAX_LIGHT_TAPS {march.MAX_LIGHT_TAPS}")
     lines.append(f"#define NUBIS_MAX_VDB {vdbcloud.MAX_CLOUDS}")
-    lines.append(f"#define NUBIS_MAX_LAYERS {cloudlayers.MAX_CLOUD_LAYERS}")
+    lines.append(f"#define NUBIS_MAX_CLOUD_LAYERS {cloudlayers.MAX_CLOUD_LAYERS}")
 
     def size_name(name: str) -> str:
         if name.startswith("vdb_"):
             return "NUBIS_MAX_VDB"
         if name.startswith("cloud_layer_"):
-            return "NUBIS_MAX_LAYERS"
+            return "NUBIS_MAX_CLOUD_LAYERS"
         return {"light_taps": "NUBIS_MAX_LIGHT_TAPS"}.get(name, "NUBIS_MAX_STORMS")
 
     lines.append("struct NubisParams {")
@@ -301,7 +301,7 @@ def _sigma_scale(c: _Layer) -> float:
 
 F = LayerField
 # A cloud layer on the GPU, stated once: its rows of the uniform block (vec4 arrays, one row a drawn layer,
-# NUBIS_MAX_LAYERS rows) and, in each, the fields they hold. The rows, their documentation, NubisLayer, its
+# NUBIS_MAX_CLOUD_LAYERS rows) and, in each, the fields they hold. The rows, their documentation, NubisLayer, its
 # accessors and nubis_layer() (layer_source) are all made from this table.
 _LAYER_ROWS: tuple[tuple[str, tuple[LayerField, ...]], ...] = (
     (
