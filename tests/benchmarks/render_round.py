@@ -33,30 +33,11 @@ TAG = "HR-RESULT "
 
 
 def _scene(engine: str = "CYCLES", size=(64, 36)):
-    """The default cloudscape, a camera 2 km up looking level into the layer, a small render."""
-    import bpy
+    """The suite's small cloudscape (tests/gpu/render_animation_child.py), one sample."""
+    sys.path.insert(0, str(ROOT / "tests" / "gpu"))
+    from render_animation_child import small_cloudscape
 
-    from nubis_addon.blender import ensure_registered
-
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    ensure_registered()
-    assert bpy.ops.nubis.new_cloudscape(preset="default") == {"FINISHED"}
-    scene = bpy.context.scene
-    cam = scene.camera
-    cam.location, cam.rotation_euler = (0.0, 0.0, 2000.0), (math.radians(90.0), 0.0, 0.0)
-    cam.data.lens, cam.data.clip_end = 30.0, 100000.0
-    r = scene.render
-    r.resolution_x, r.resolution_y, r.resolution_percentage = *size, 100
-    if engine == "EEVEE":
-        items = {e.identifier for e in bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items}
-        engine = "BLENDER_EEVEE_NEXT" if "BLENDER_EEVEE_NEXT" in items else "BLENDER_EEVEE"
-    r.engine = engine
-    r.image_settings.file_format = "PNG"
-    scene.cycles.device, scene.cycles.samples, scene.cycles.use_denoising = "CPU", 1, False
-    scene.eevee.taa_render_samples = 1
-    scene.nubis.sky_environment_width = 64
-    scene.nubis.sky_shadow_resolution = 64
-    return scene
+    return small_cloudscape(engine, size, samples=1)
 
 
 def _f12(scene, out: Path) -> dict:

@@ -29,7 +29,7 @@ import bpy  # noqa: E402
 from nubis_addon.blender import composition, ensure_registered, scene_render, shadows  # noqa: E402
 from nubis_addon.core import imageio  # noqa: E402
 
-ENGINE, OUT, RENDERS = sys.argv[-3], sys.argv[-2], sys.argv[-1].split(",")
+ENGINE, OUT, RENDERS = "", "", []  # from the command line (main)
 FRAMES: list[dict] = []
 
 
@@ -37,25 +37,36 @@ def report(name: str, **values) -> None:
     print("RESULT " + json.dumps({"render": name, **values}), flush=True)
 
 
-def scene_with_a_wall():
+def small_cloudscape(engine: str, size: tuple[int, int] = (64, 36), samples: int = 2):
+    """The default cloudscape, a camera 2 km up looking level into the layer, a small fast render in
+    `engine` (CYCLES, or EEVEE under the line's name for it). Also the render round's scene
+    (tests/benchmarks/render_round.py)."""
     bpy.ops.wm.read_factory_settings(use_empty=True)
     ensure_registered()
     assert bpy.ops.nubis.new_cloudscape(preset="default") == {"FINISHED"}
     scene = bpy.context.scene
-    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0.0, 3000.0, 2000.0), scale=(6000.0, 60.0, 400.0))
-    wall = bpy.context.object
     cam = scene.camera
     cam.location, cam.rotation_euler = (0.0, 0.0, 2000.0), (math.radians(90.0), 0.0, 0.0)
     cam.data.lens, cam.data.clip_end = 30.0, 100000.0
     r = scene.render
-    r.engine = ENGINE
+    r.resolution_x, r.resolution_y, r.resolution_percentage = *size, 100
+    if engine.startswith("BLENDER_EEVEE") or engine == "EEVEE":
+        items = {e.identifier for e in bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items}
+        engine = "BLENDER_EEVEE_NEXT" if "BLENDER_EEVEE_NEXT" in items else "BLENDER_EEVEE"
+    r.engine = engine
     r.image_settings.file_format = "PNG"
-    scene.cycles.device, scene.cycles.samples, scene.cycles.use_denoising = "CPU", 2, False
+    scene.cycles.device, scene.cycles.samples, scene.cycles.use_denoising = "CPU", samples, False
     scene.eevee.taa_render_samples = 1
     scene.eevee.shadow_resolution_scale = 0.25
     scene.nubis.sky_environment_width = 64
     scene.nubis.sky_shadow_resolution = 64
-    return scene, wall
+    return scene
+
+
+def scene_with_a_wall():
+    scene = small_cloudscape(ENGINE)
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0.0, 3000.0, 2000.0), scale=(6000.0, 60.0, 400.0))
+    return scene, bpy.context.object
 
 
 def add_vdb_cloud(scene) -> None:
@@ -102,6 +113,8 @@ def after(scene, world: str) -> dict:
 
 
 def main() -> None:
+    global ENGINE, OUT, RENDERS
+    ENGINE, OUT, RENDERS = sys.argv[-3], sys.argv[-2], sys.argv[-1].split(",")
     scene, wall = scene_with_a_wall()
     if "vdb" in RENDERS:  # a marked VDB cloud beside the wall: stepped aside for the whole render, and back
         add_vdb_cloud(scene)
@@ -142,4 +155,5 @@ def main() -> None:
     report("failing", refused=refused, frames=list(FRAMES), **after(scene, world))
 
 
-main()
+if __name__ == "__main__":
+    main()
