@@ -193,8 +193,9 @@ def place(scene, frame: composition.Frame, hits: np.ndarray, near: np.ndarray) -
     return obj
 
 
-def _veil_object(scene, image) -> bpy.types.Object:
-    obj = render_quad(scene, VEIL_NAME, _veil_material(image))
+def _veil_object(scene, image=None) -> bpy.types.Object:
+    """The veil, carrying `image` (None: no material yet, as ready() makes it)."""
+    obj = render_quad(scene, VEIL_NAME, _veil_material(image) if image is not None else None)
     for ray in ("diffuse", "glossy", "transmission", "volume_scatter", "shadow"):
         setattr(obj, f"visible_{ray}", False)
     obj.visible_camera = True
@@ -205,8 +206,8 @@ def _veil_object(scene, image) -> bpy.types.Object:
 
 
 def render_quad(scene, name: str, material) -> bpy.types.Object:
-    """A square (UVs 0-1 over its corners) of Nubis's own that only renders see, with `material`: the
-    veil, a shadow caster. Made once, then kept."""
+    """A square (UVs 0-1 over its corners) of Nubis's own that only renders see, with `material` (None:
+    as it is): the veil, a shadow caster. Made once, then kept."""
     obj = bpy.data.objects.get(name)
     if obj is None or obj.type != "MESH":
         mesh = bpy.data.meshes.new(name)
@@ -223,6 +224,8 @@ def render_quad(scene, name: str, material) -> bpy.types.Object:
     for key, value in (("hide_select", True), ("display_type", "WIRE"), ("hide_viewport", True)):
         if getattr(obj, key) != value:
             setattr(obj, key, value)  # hide_viewport: the viewport draws the clouds itself
+    if material is None:
+        return obj
     if not obj.data.materials:
         obj.data.materials.append(material)
     elif obj.data.materials[0] != material:
@@ -259,9 +262,15 @@ def stowed(obj) -> bool:
 
 
 def stow(obj) -> None:
-    """Out of this frame without a change of visibility: its corners at one point."""
-    if obj is not None and not stowed(obj):
+    """Out of this frame without a change of visibility: its corners at one point, and no material, so a
+    render that never needs it compiles no shader for it (EEVEE: seconds a material on llvmpipe). A frame
+    that places it gives the material back (render_quad)."""
+    if obj is None:
+        return
+    if not collapsed(obj):
         set_corners(obj, np.zeros((4, 3)))
+    if obj.data.materials:
+        obj.data.materials.clear()
 
 
 def show(obj) -> None:
@@ -343,9 +352,7 @@ def finished(mat, method: str) -> bpy.types.Material:
 def ready(scene) -> None:
     """When a render with the clouds starts: the veil made (empty) if need be, shown and stowed, so no
     frame changes its visibility."""
-    obj = scene.objects.get(VEIL_NAME)
-    if obj is None:
-        obj = _veil_object(scene, write_image(VEIL_IMAGE, np.zeros((1, 1, 4), np.float32)))
+    obj = scene.objects.get(VEIL_NAME) or _veil_object(scene)
     stow(obj)
     show(obj)
 
