@@ -157,3 +157,9 @@ def main() -> None:
 
 if __name__ == "__main__":
     main()
+    if bpy.app.version < (5, 0, 0):
+        # Blender 4.5 as a module ends a script that registered the extension in a crash or a hang of its
+        # own teardown (its draw handlers' arguments freed after Python, its GPU worker waited on):
+        # docs/limits.md. Such scripts end with os._exit there, as the command line does everywhere.
+        sys.stdout.flush()
+        os._exit(0)
