@@ -33,6 +33,7 @@ VISIBLE_ALPHA = 1.0 / 255.0
 # The widest band the shutter may add on each side, as a share of the frame's larger side.
 MAX_BLUR_SHARE = 0.5
 
+UNIT_SQUARE = ((-0.5, -0.5, 0.0), (0.5, -0.5, 0.0), (0.5, 0.5, 0.0), (-0.5, 0.5, 0.0))  # a render quad's corners
 OWN_KEY = "nubis_own"  # an ID property on the objects Nubis adds for a render (the veil, the shadow casters)
 # What the last frame's composition did, for the benchmark and the tests: whether it needed the veil, the
 # margin it widened the frame by (pixels) and the veil's distance (metres).
@@ -211,7 +212,7 @@ def render_quad(scene, name: str, material) -> bpy.types.Object:
     obj = bpy.data.objects.get(name)
     if obj is None or obj.type != "MESH":
         mesh = bpy.data.meshes.new(name)
-        mesh.from_pydata([(-0.5, -0.5, 0.0), (0.5, -0.5, 0.0), (0.5, 0.5, 0.0), (-0.5, 0.5, 0.0)], [], [(0, 1, 2, 3)])
+        mesh.from_pydata(list(UNIT_SQUARE), [], [(0, 1, 2, 3)])
         uv = mesh.uv_layers.new(name="UVMap")
         for loop, co in zip(uv.data, ((0, 0), (1, 0), (1, 1), (0, 1)), strict=True):
             loop.uv = co

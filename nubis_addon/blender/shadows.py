@@ -20,6 +20,7 @@ from .composition import (
     OWN_KEY,
     RECIPE_KEY,
     SOLID_TYPES,
+    UNIT_SQUARE,
     built,
     collapsed,
     finished,
@@ -131,13 +132,10 @@ def update_shadow(scene, state, clouds) -> bpy.types.Object:
             )
         )
         if stowed(caster):
-            set_corners(caster, _UNIT_SQUARE)
+            set_corners(caster, UNIT_SQUARE)
         show(caster)
     stow_casters(scene, first=len(centres))
     return scene.objects[CASTER_NAME]
-
-
-_UNIT_SQUARE = ((-0.5, -0.5, 0.0), (0.5, -0.5, 0.0), (0.5, 0.5, 0.0), (-0.5, 0.5, 0.0))
 
 
 def _casters(scene, first: int = 0):
