@@ -13,7 +13,9 @@ or a writer's failure; nothing is made again in its place.
 
 from __future__ import annotations
 
+import base64
 import contextlib
+import errno
 import os
 import re
 import tempfile
@@ -191,16 +193,54 @@ _held: dict[Path, int] = {}  # staging folder -> an open descriptor of it, to fi
 
 def _make_staging(folder: Path | str) -> Path:
     """A private staging folder in `folder`. Made and registered under the interrupt lock: a signal between
-    the two would leave it behind (the watcher removes only what is registered)."""
+    the two would leave it behind (the watcher removes only what is registered). Made and opened through a
+    descriptor of `folder` where the system allows, so a folder moved away the instant the staging folder
+    appeared (`mv out elsewhere`) still leaves the run a handle on it, and it is removed where it went."""
     with interrupt.deferred():
         try:
-            path = Path(tempfile.mkdtemp(prefix=_prefix(), dir=folder))
+            path, held = _made(Path(folder))
         except (FileNotFoundError, NotADirectoryError):
             raise FolderGone(folder) from None
         interrupt.register(path)
-    with contextlib.suppress(OSError):  # not every system opens folders
-        _held[path] = os.open(path, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    if held is not None:
+        _held[path] = held
     return path
+
+
+def _made(folder: Path) -> tuple[Path, int | None]:
+    """Make the staging folder; it and a descriptor of it (None where folders are not opened)."""
+    if not _BY_DESCRIPTOR:
+        path = Path(tempfile.mkdtemp(prefix=_prefix(), dir=folder))
+        try:
+            return path, os.open(path, os.O_RDONLY | _O_DIRECTORY) if _O_DIRECTORY else None
+        except OSError:
+            return path, None
+    parent = os.open(folder, os.O_RDONLY | _O_DIRECTORY)
+    try:
+        name = _new_folder(parent)
+        try:
+            return folder / name, os.open(name, os.O_RDONLY | _O_DIRECTORY, dir_fd=parent)
+        except OSError:
+            return folder / name, None
+    finally:
+        os.close(parent)
+
+
+_O_DIRECTORY = getattr(os, "O_DIRECTORY", 0)
+# Folders opened as descriptors, and made and opened relative to one (Linux, macOS; not Windows).
+_BY_DESCRIPTOR = bool(_O_DIRECTORY) and {os.mkdir, os.open} <= os.supports_dir_fd
+
+
+def _new_folder(parent: int) -> str:
+    """Make a private folder of a new name inside the folder open as `parent`; its name."""
+    for _ in range(100):
+        name = _prefix() + base64.b32encode(os.urandom(5)).decode("ascii").lower()
+        try:
+            os.mkdir(name, 0o700, dir_fd=parent)
+        except FileExistsError:
+            continue
+        return name
+    raise FileExistsError(errno.EEXIST, "no free name for a staging folder")
 
 
 def _remove_staging(path: Path) -> None:

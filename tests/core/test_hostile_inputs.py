@@ -114,6 +114,27 @@ def test_a_folder_under_an_output_name_stops_the_set_before_the_first_rename(tmp
         outputs.stage(tmp_path / "c.txt")  # there before: said at once, before any work
 
 
+def test_a_folder_moved_the_instant_its_staging_folder_appears_leaves_nothing_where_it_went(tmp_path, monkeypatch):
+    """`mv frames elsewhere` between the staging folder's making and its opening left the staging folder in
+    `elsewhere` (CI, loaded machine: bake --frames, the move the instant `.nubis-tmp-*` appeared): it is now
+    made and opened through a descriptor of its output folder, so the run still holds it where it went."""
+    folder, elsewhere = tmp_path / "frames", tmp_path / "elsewhere"
+    folder.mkdir()
+    made = staging._new_folder
+
+    def made_then_moved(parent):
+        name = made(parent)
+        folder.rename(elsewhere)  # the user's mv, between the mkdir and the open
+        return name
+
+    monkeypatch.setattr(staging, "_new_folder", made_then_moved)
+    with pytest.raises(staging.FolderGone, match="was removed"), staging.output_set() as outputs:
+        outputs.stage(folder / "clouds_0001.vdb")
+        assert len(list(elsewhere.iterdir())) == 1
+        outputs.check()
+    assert list(elsewhere.iterdir()) == []
+
+
 def test_names_no_file_can_have_are_said_not_raised(tmp_path):
     """An image layer's path with a NUL (a TOML string can hold one) was `internal error: ValueError`;
     a --preset path with a 300-byte folder name `internal error: OSError: [Errno 36]`; a non-UTF-8 --out
