@@ -69,6 +69,38 @@ const float NUBIS_LIGHT_COARSEST_LOD = 2.0;
 const float NUBIS_POWDER_GAIN = 2.0;
 const float NUBIS_POWDER_RATE = 2.0;
 
+/* The atmosphere's transmittance towards the sun from altitude `h` (metres) at the cosine `mu` of the sun's
+ * zenith angle there: the table core/sky.py air_table fills (sun_air), at the coordinates its
+ * air_table_coords gives; zero where the planet stands between the point and the sun (Earth's shadow).
+ * P.sun_air holds the radii of the ground and of the atmosphere's top, and the horizon's distance from
+ * the top. docs/sky.md#the-sun-each-cloud-sees. */
+vec3 nubis_air_transmittance(float h, float mu)
+{
+  float ground = P.sun_air.y, top = P.sun_air.z, span = P.sun_air.w;
+  float r = ground + clamp(h, 0.0, top - ground);
+  if (mu < 0.0 && r * r * (mu * mu - 1.0) + ground * ground >= 0.0) {
+    return vec3(0.0);
+  }
+  float rho = sqrt(max(r * r - ground * ground, 0.0));
+  float d = max(-r * mu + sqrt(max(r * r * (mu * mu - 1.0) + top * top, 0.0)), 0.0);
+  float d_min = top - r, d_max = rho + span;
+  float along = clamp((d - d_min) / max(d_max - d_min, 1e-3), 0.0, 1.0);
+  return texture(sun_air, vec2(1.0 - sqrt(1.0 - along), rho / span)).rgb;
+}
+
+/* The sun's light arriving at `p`: above the atmosphere, through the air along its own path to the sun
+ * (the altitude and the sun's angle over the planet's curve at p) when the sky has an atmosphere; the
+ * lamp's colour everywhere when it has none (a World not made by Nubis, or the Sun Color setting off). */
+vec3 nubis_sun_at(vec3 p)
+{
+  if (P.sun_air.x == 0.0) {
+    return P.sun_radiance.rgb;
+  }
+  vec3 up = normalize(p + vec3(0.0, 0.0, P.layer_planet_radius));
+  float h = nubis_altitude(p, P.layer_planet_radius);
+  return P.sun_radiance.rgb * nubis_air_transmittance(h, dot(P.sun_dir.xyz, up));
+}
+
 /* The World's radiance towards `dir` (a distant environment): the equirectangular capture of the World
  * (blender/sky.py), in the layout of Blender's Environment Texture (core/sky.py). */
 vec3 nubis_sky_radiance(vec3 dir)
@@ -663,7 +695,8 @@ vec3 nubis_in_scattering(
    * Cycles: a separate factor, so it neither hides the powder rim nor thins the octaves. */
   direct_energy *= exp(-nubis_cirrus_optical_depth(p, P.sun_dir.xyz, 0.0));
 #endif
-  vec3 direct = P.sun_radiance.rgb * direct_energy;
+  vec3 sun_here = nubis_sun_at(p);
+  vec3 direct = sun_here * direct_energy;
 #if NUBIS_REFERENCE == 1
   /* Single scattering's reference: the sky's visibility direction by direction. */
   vec3 sky_light = nubis_reference_sky_light(p, view_dir, pixel);
@@ -682,7 +715,7 @@ vec3 nubis_in_scattering(
   from_above = mix(P.ambient_below.rgb, P.ambient.rgb, overhead);
   if (mu_sun > 0.0 && tau_c > 0.0) {
     float mu0 = max(mu_sun, NUBIS_MIN_SLANT_COS);
-    from_above += P.sun_radiance.rgb * (mu0 * nubis_slab_diffuse_share(mu0, tau_c, true) / NUBIS_PI);
+    from_above += sun_here * (mu0 * nubis_slab_diffuse_share(mu0, tau_c, true) / NUBIS_PI);
   }
 #  endif
   vec3 sky_light;

@@ -137,7 +137,7 @@ vec4 nubis_cirrus(vec3 origin, vec3 dir, vec2 pixel)
   float tau = tau_view * max(abs(mu_v), NUBIS_MIN_SLANT_COS);
   float alpha = 1.0 - exp(-tau_view);
   float mu_sun = dot(P.sun_dir.xyz, up);
-  vec3 sun = P.sun_radiance.rgb * exp(-nubis_layer_sun_depth(origin + dir * t, pixel));
+  vec3 sun = nubis_sun_at(origin + dir * t) * exp(-nubis_layer_sun_depth(origin + dir * t, pixel));
   vec3 light = sun * nubis_phase(dot(dir, P.sun_dir.xyz), 1.0) * nubis_slab_scattering(mu_v, mu_sun, tau);
   /* The World's light scattered once, direction by direction (once per pixel, so the real-time view
    * affords the reference's directions): grazing views of thin cirrus see mostly the bright horizon

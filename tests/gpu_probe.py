@@ -28,6 +28,7 @@ _MODE_SLAB = 5.0
 _MODE_DIFFUSION = 6.0
 _MODE_SKY_WEIGHTS = 7.0
 _MODE_REACH = 8.0
+_MODE_SUN = 9.0
 NOISE_TEXTURES = {"lf": 0.0, "hf": 1.0, "curl": 2.0}
 
 
@@ -125,6 +126,13 @@ def probe_sky_weights(gpu_inputs: CloudGPU, args: np.ndarray) -> np.ndarray:
 def probe_reach(gpu_inputs: CloudGPU) -> np.ndarray:
     """The altitude at which the view march ends each of the four cloud layers (nubis_layer_reach): (4,)."""
     return _run(gpu_inputs, np.zeros((1, 4), np.float32), (_MODE_REACH, 0.0, 0.0, 0.0))[0]
+
+
+def probe_sun(gpu_inputs: CloudGPU, points: np.ndarray) -> np.ndarray:
+    """The sun's light arriving at `points` (N, 3) world metres (nubis_sun_at): (N, 3)."""
+    texels = np.zeros((len(points), 4), np.float32)
+    texels[:, :3] = np.asarray(points, np.float32)
+    return _run(gpu_inputs, texels, (_MODE_SUN, 0.0, 0.0, 0.0))[:, :3]
 
 
 def _run(gpu_inputs: CloudGPU, texels: np.ndarray, mode: tuple[float, float, float, float]) -> np.ndarray:

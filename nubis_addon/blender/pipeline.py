@@ -28,7 +28,7 @@ from ..core.jobs import BakeOptions, CompareOptions, RenderOptions
 from ..core.state import MAX_STORMS, CloudState
 from ..render import bake as gpu_bake
 from ..render import engine
-from . import cycles_setup, runtime, scene_io, sky, snapshot, vdbclouds
+from . import cycles_setup, runtime, scene_io, sky, snapshot, sun_air, vdbclouds
 from . import reference as cycles_reference
 from .snapshot import BakeSnapshot
 
@@ -448,7 +448,7 @@ def render_cycles(
         exr = Path(tmp) / "cycles.exr"
         cycles_setup.configure_render(scene, width, height, samples, bounces, exact_samples)
         scene.render.filepath = str(exr)
-        with runtime.own_render(), vdbclouds.native(scene):
+        with runtime.own_render(), vdbclouds.native(scene), sun_air.above_the_air(scene):
             bpy.ops.render.render(write_still=True, scene=scene.name)
         if not exr.is_file():
             raise NubisError("Cycles wrote no image: check the console for Cycles errors")

@@ -893,6 +893,9 @@ def state_from_scene(scene, camera_location=None, fields: tuple | None = None, w
         radiance = tuple(c * sun.data.energy for c in sun.data.color)
     else:
         direction, radiance = (0.0, 0.0, 1.0), (0.0, 0.0, 0.0)
+    air = sky.sun_air(scene)
+    if air is not None and sun is not None:  # the sun above the atmosphere; each sample takes its own air
+        radiance = (sun.data.energy,) * 3
     if camera_location is None:
         camera_location = evaluated_matrix(scene.camera).translation if scene.camera else (0.0, 0.0, 0.0)
     fps = scene_fps(scene)
@@ -906,6 +909,7 @@ def state_from_scene(scene, camera_location=None, fields: tuple | None = None, w
         field_c=fields[2],
         sun_direction=direction,
         sun_radiance=radiance,
+        sun_air=air,
         ambient=above,
         ambient_below=below,
         sky_env=env,

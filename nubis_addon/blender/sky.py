@@ -8,9 +8,11 @@ SINGLE_SCATTERING and MULTIPLE_SCATTERING and calls them `aerosol_density`. Both
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import math
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 import bpy
@@ -105,14 +107,17 @@ def build_world(scene, cfg: dict, sun) -> bpy.types.World:
     if bpy.context.view_layer is not None:
         bpy.context.view_layer.update()  # the lamp's matrix_world after a script turned it
     sync_sun(scene, sun, force=True)
-    # Calibrate the sky's strength once, at the preset's sun: its upper-hemisphere radiance then has
-    # the luminance of the preset's flat sky colour. Turning the sun later changes it physically.
+    # Calibrate the sky's strength once, with the sun at REFERENCE_SUN: its upper-hemisphere radiance then
+    # has the luminance of the preset's flat sky colour there. At any other sun, the preset's own
+    # included, the sky is as bright as the atmosphere makes it: a preset set at sunset gets twilight's
+    # sky, not a daytime-bright one (docs/sky.md#calibration).
     bg.inputs["Strength"].default_value = 1.0
     sync_ground(scene, sun)
+    reference = _hemisphere_at(scene, tex, REFERENCE_SUN)
     env = capture_world(scene, ENV_WIDTH)
     above, _below = skymath.hemisphere_radiance(env)
     target = float(metrics.luminance(np.array(cfg["color"], np.float32))) * cfg["strength"]
-    have = float(metrics.luminance(np.array(above, np.float32)))
+    have = float(metrics.luminance(np.array(reference, np.float32)))
     strength = float(target / have) if have > 1e-9 else cfg["strength"]
     bg.inputs["Strength"].default_value = strength
     # The sky's light is linear in its strength; the ground's sun term is not (sync_ground).
@@ -122,6 +127,22 @@ def build_world(scene, cfg: dict, sun) -> bpy.types.World:
         (env * np.float32(strength)).astype(np.float32), ground_radiance(scene, sun), HORIZON_BAND
     )
     return world
+
+
+# The sun's elevation at which a preset's [world] colour x strength is the sky's luminance from above.
+REFERENCE_SUN = math.radians(30.0)
+
+
+def _hemisphere_at(scene, tex, elevation: float) -> tuple[float, float, float]:
+    """The sky's radiance from above (E / pi) with its sun at `elevation`, at the World's strength now;
+    the sun is put back. The capture is cached like every other (capture_world)."""
+    own = tex.sun_elevation
+    tex.sun_elevation = elevation
+    try:
+        above, _below = skymath.hemisphere_radiance(capture_world(scene, ENV_WIDTH))
+    finally:
+        tex.sun_elevation = own
+    return above
 
 
 def find_sun(scene):
@@ -137,12 +158,40 @@ def find_sun(scene):
     return None
 
 
+def sun_air(scene) -> tuple[float, float, float] | None:
+    """The air the clouds see the sun through (air, aerosol and ozone densities): a Nubis sky's, when it
+    sets the Sun lamp's colour (Sun Color on; the lamp then has the ground's transmittance and the clouds
+    each their own, docs/sky.md#the-sun-each-cloud-sees). None: the lamp's colour lights every cloud."""
+    world = scene.world
+    if not is_nubis_sky(world) or not scene.nubis.sky_sun_color:
+        return None
+    tex = sky_node(world)
+    return (float(tex.air_density), float(getattr(tex, _aerosol_attr())), float(tex.ozone_density))
+
+
+_held: list = []  # lamps whose colour a Cycles render of the bake holds (blender/sun_air.py)
+
+
+@contextlib.contextmanager
+def lamp_colour_held(lamp, colour) -> Iterator[None]:
+    """The lamp in `colour` for the block (the sun above the air while Cycles renders the bake), not
+    recoloured by sync_sun meanwhile, and put back after."""
+    own = tuple(lamp.data.color)
+    lamp.data.color = colour
+    _held.append(lamp)
+    try:
+        yield
+    finally:
+        _held.remove(lamp)
+        lamp.data.color = own
+
+
 def sync_sun(scene, sun=None, force: bool = False) -> bool:
     """Keep a Nubis sky's sun where the Sun lamp points and the lamp's colour at the atmosphere's
     transmittance for that elevation. Returns whether anything changed. Only Worlds that Nubis built
     are touched; an artist's World is left alone."""
     world = scene.world
-    if not is_nubis_sky(world):
+    if not is_nubis_sky(world) or _held:  # (the lamp shines from above the air for a Cycles render)
         return False
     sun = sun if sun is not None else find_sun(scene)
     if sun is None:

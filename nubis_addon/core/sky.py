@@ -26,33 +26,118 @@ OZONE = np.array([0.650e-6, 1.881e-6, 0.085e-6])  # absorption at the layer's pe
 OZONE_PEAK, OZONE_WIDTH = 25e3, 15e3  # a tent from 10 to 40 km (Bruneton 2017)
 
 
+def _optical_depth(r0, mu, air: float, aerosol: float, ozone: float, n: int = 256) -> np.ndarray:
+    """Optical depths (..., 3) along rays from radius `r0` at the cosine `mu` of their zenith angle to
+    the top of the atmosphere (arrays of one shape; rays that meet the ground are not told apart here)."""
+    r0 = np.asarray(r0, np.float64)[..., None]
+    mu = np.asarray(mu, np.float64)[..., None]
+    top = np.maximum(ATMOSPHERE_TOP, r0)
+    length = -r0 * mu + np.sqrt(np.maximum(r0 * r0 * (mu * mu - 1.0) + top * top, 0.0))
+    # Samples crowd near the start, where the air is densest: t = length u^2.
+    u = (np.arange(n) + 0.5) / n
+    t = length * u * u
+    dt = 2.0 * length * u / n
+    h = np.sqrt(r0 * r0 + t * t + 2.0 * r0 * t * mu) - EARTH_RADIUS
+    rayleigh = air * np.sum(np.exp(-h / RAYLEIGH_HEIGHT) * dt, axis=-1)
+    mie = aerosol * np.sum(np.exp(-h / MIE_HEIGHT) * dt, axis=-1)
+    oz = ozone * np.sum(np.clip(1.0 - np.abs(h - OZONE_PEAK) / OZONE_WIDTH, 0.0, None) * dt, axis=-1)
+    return RAYLEIGH * rayleigh[..., None] + MIE_EXTINCTION * mie[..., None] + OZONE * oz[..., None]
+
+
+def _meets_ground(r0, mu):
+    """Whether rays from radius `r0` at zenith cosine `mu` meet the ground: Earth's shadow, for a ray to the sun."""
+    return (mu < 0.0) & (r0 * r0 * (mu * mu - 1.0) + EARTH_RADIUS**2 >= 0.0)
+
+
 def transmittance(
     elevation: float, altitude: float = 0.0, air: float = 1.0, aerosol: float = 1.0, ozone: float = 1.0
 ) -> tuple[float, float, float]:
     """RGB transmittance of the atmosphere along a ray leaving `altitude` (metres) at `elevation`
     (radians above the horizon) towards space: what is left of the sun's light when it arrives. The
     densities are multiples of the standard atmosphere, as the Sky Texture's air, dust (aerosol) and
-    ozone settings are. A ray that meets the ground gives zero."""
+    ozone settings are. A ray that meets the ground gives zero (Earth's shadow)."""
     r0 = EARTH_RADIUS + max(altitude, 0.0)
     mu = math.sin(elevation)
-    # Distance to the ground and to the top of the atmosphere (ray-sphere, stable forms).
-    disc_ground = r0 * r0 * (mu * mu - 1.0) + EARTH_RADIUS**2
-    if mu < 0.0 and disc_ground >= 0.0:
+    if _meets_ground(r0, mu):
         return (0.0, 0.0, 0.0)
-    top = ATMOSPHERE_TOP if r0 < ATMOSPHERE_TOP else r0
-    length = -r0 * mu + math.sqrt(max(r0 * r0 * (mu * mu - 1.0) + top * top, 0.0))
-    # Samples crowd near the start, where the air is densest: t = length u^2.
-    n = 256
-    u = (np.arange(n) + 0.5) / n
-    t = length * u * u
-    dt = 2.0 * length * u / n
-    r = np.sqrt(r0 * r0 + t * t + 2.0 * r0 * t * mu)
-    h = r - EARTH_RADIUS
-    rayleigh = air * np.sum(np.exp(-h / RAYLEIGH_HEIGHT) * dt)
-    mie = aerosol * np.sum(np.exp(-h / MIE_HEIGHT) * dt)
-    oz = ozone * np.sum(np.clip(1.0 - np.abs(h - OZONE_PEAK) / OZONE_WIDTH, 0.0, None) * dt)
-    tau = RAYLEIGH * rayleigh + MIE_EXTINCTION * mie + OZONE * oz
+    tau = _optical_depth(r0, mu, air, aerosol, ozone)
     return tuple(float(x) for x in np.exp(-tau))
+
+
+# ---- the sun each cloud sees (docs/sky.md#the-sun-each-cloud-sees) ---------------------------------------
+#
+# The transmittance towards the sun from every altitude at every sun angle, as one small table the shaders
+# read per sample (the idea of Bruneton and Neyret's transmittance table, 2008/2017): a column is the
+# distance to the top of the atmosphere along the ray, from the shortest (straight up) to the longest (the
+# ray grazing the ground), a row the radius, as the distance to the horizon over the greatest. Rays that meet
+# the ground are zero and are not in the table: the shader tells them by geometry. The mapping puts texels
+# where the transmittance changes (near the horizon, low down): 256 KB of texture.
+AIR_TABLE_SIZE = (256, 64)  # texels along the distance (the sun's angle) and along the altitude
+AIR_SPAN = math.sqrt(ATMOSPHERE_TOP**2 - EARTH_RADIUS**2)  # the horizon's distance from the top
+
+
+def air_table_coords(altitude, mu) -> tuple[np.ndarray, np.ndarray]:
+    """The table's unit coordinates (x along the distance, y along the altitude) of rays from `altitude`
+    (metres, clamped into the atmosphere) at zenith cosine `mu` (arrays)."""
+    r = EARTH_RADIUS + np.clip(np.asarray(altitude, np.float64), 0.0, ATMOSPHERE_TOP - EARTH_RADIUS)
+    mu = np.asarray(mu, np.float64)
+    rho = np.sqrt(np.maximum(r * r - EARTH_RADIUS**2, 0.0))
+    d = np.maximum(-r * mu + np.sqrt(np.maximum(r * r * (mu * mu - 1.0) + ATMOSPHERE_TOP**2, 0.0)), 0.0)
+    d_min, d_max = ATMOSPHERE_TOP - r, rho + AIR_SPAN
+    along = np.clip((d - d_min) / np.maximum(d_max - d_min, 1e-9), 0.0, 1.0)
+    return 1.0 - np.sqrt(1.0 - along), rho / AIR_SPAN  # more texels towards the horizon
+
+
+def _air_table_rays(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rays (radius, zenith cosine) at unit table coordinates: air_table_coords inverted."""
+    rho = y * AIR_SPAN
+    r = np.sqrt(rho * rho + EARTH_RADIUS**2)
+    d_min, d_max = ATMOSPHERE_TOP - r, rho + AIR_SPAN
+    d = d_min + (1.0 - (1.0 - x) ** 2) * (d_max - d_min)
+    mu = np.where(d > 0.0, (AIR_SPAN**2 - rho * rho - d * d) / np.maximum(2.0 * r * d, 1e-9), 1.0)
+    return r, np.clip(mu, -1.0, 1.0)
+
+
+_air_tables: dict[tuple, np.ndarray] = {}
+
+
+def air_table(air: float = 1.0, aerosol: float = 1.0, ozone: float = 1.0) -> np.ndarray:
+    """The transmittance table for these densities, (rows, columns, 4) float32, RGB and 1, each texel
+    the ray at its centre (a texture's linear filter then interpolates between them). Remembered per
+    densities: a redraw costs nothing, a new sky under half a second."""
+    key = (round(float(air), 9), round(float(aerosol), 9), round(float(ozone), 9))
+    table = _air_tables.get(key)
+    if table is None:
+        cols, rows = AIR_TABLE_SIZE
+        x = (np.arange(cols) + 0.5) / cols
+        y = (np.arange(rows) + 0.5) / rows
+        xx, yy = np.meshgrid(x, y)
+        r, mu = _air_table_rays(xx, yy)
+        tau = _optical_depth(r, mu, *key, n=96)
+        table = np.ones((rows, cols, 4), np.float32)
+        table[..., :3] = np.exp(-tau)
+        if len(_air_tables) > 16:
+            _air_tables.clear()
+        _air_tables[key] = table
+    return table
+
+
+def air_table_lookup(table: np.ndarray, altitude, mu) -> np.ndarray:
+    """What the shaders read (nubis_air_transmittance): the table bilinearly at the rays' coordinates,
+    zero for rays that meet the ground. Arrays of altitudes and zenith cosines; (..., 3)."""
+    x, y = air_table_coords(altitude, mu)
+    rows, cols = table.shape[:2]
+    fx = np.clip(x * cols - 0.5, 0.0, cols - 1.0)
+    fy = np.clip(y * rows - 0.5, 0.0, rows - 1.0)
+    x0 = np.minimum(np.floor(fx).astype(int), cols - 2)
+    y0 = np.minimum(np.floor(fy).astype(int), rows - 2)
+    ax, ay = (fx - x0)[..., None], (fy - y0)[..., None]
+    rgb = table[..., :3].astype(np.float64)
+    lo = rgb[y0, x0] * (1 - ax) + rgb[y0, x0 + 1] * ax
+    hi = rgb[y0 + 1, x0] * (1 - ax) + rgb[y0 + 1, x0 + 1] * ax
+    value = lo * (1 - ay) + hi * ay
+    r = EARTH_RADIUS + np.clip(np.asarray(altitude, np.float64), 0.0, None)
+    return np.where(_meets_ground(r, np.asarray(mu, np.float64))[..., None], 0.0, value)
 
 
 def elevation_azimuth(direction) -> tuple[float, float]:

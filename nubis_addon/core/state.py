@@ -51,6 +51,10 @@ class CloudState:
     field_c: np.ndarray | None = None  # cirrus coverage and type
     sun_direction: tuple[float, float, float] = (0.0, 0.0, 1.0)  # unit vector towards the sun
     sun_radiance: tuple[float, float, float] = (4.0, 4.0, 4.0)  # colour x strength
+    # The atmosphere the sun shines through (the Nubis sky's air, aerosol and ozone densities): with it,
+    # `sun_radiance` is the sun's above the atmosphere and each sample takes its own transmittance towards
+    # the sun (core/sky.py air_table, docs/sky.md#the-sun-each-cloud-sees); None: `sun_radiance` everywhere.
+    sun_air: tuple[float, float, float] | None = None
     ambient: tuple[float, float, float] = (0.35, 0.5, 0.8)  # the sky's radiance from above (E / pi)
     ambient_below: tuple[float, float, float] | None = None  # ... from below (None: the same as above)
     # The World's radiance in every direction, equirectangular (H, W, 3) bottom row first (core/sky.py),

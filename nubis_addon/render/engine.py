@@ -19,7 +19,7 @@ from ..core.state import CloudState
 from . import fieldpatch, uniforms, vdbclouds
 from .gpu_context import release_at_exit
 from .sources import CLOUD_LIBS, assemble, read_shader
-from .textures import NoiseTextures, field_stack_texture, field_texture, sky_texture
+from .textures import NoiseTextures, field_stack_texture, field_texture, sky_texture, texture_from_array
 
 CLOUD_SAMPLERS = (
     ("FLOAT_2D_ARRAY", "field_a"),
@@ -33,6 +33,7 @@ CLOUD_SAMPLERS = (
     ("FLOAT_2D", "noise_curl"),
     ("FLOAT_2D", "noise_cirrus"),
     ("FLOAT_2D", "sky_env"),
+    ("FLOAT_2D", "sun_air"),
     ("FLOAT_3D", "sun_volume"),
     ("FLOAT_3D", "sky_volume"),
 )
@@ -215,6 +216,8 @@ class CloudGPU:
         self._sky_key = None
         self._sky_array = None
         self.sky_env = None
+        self.sun_air = None  # the transmittance towards the sun (core/sky.py air_table)
+        self._air_key = None
         self.switches = dict.fromkeys(SWITCHES, 0)
         # The optical-depth volumes light the real-time march; 0 measures GPU Pro 7's long tap instead.
         self.switches["NUBIS_LIGHT_VOLUME"] = 1
@@ -248,6 +251,10 @@ class CloudGPU:
         if self.sky_env is None or sky_key != self._sky_key or (env is not None and env is not self._sky_array):
             self.sky_env = sky_texture(env if env is not None else sky.uniform(state.ambient))
             self._sky_key, self._sky_array = sky_key, env
+        air = state.sun_air or (1.0, 1.0, 1.0)  # without the air the shaders do not read it
+        if self.sun_air is None or air != self._air_key:
+            self.sun_air = texture_from_array(sky.air_table(*air), "RGBA16F")
+            self._air_key = air
         try:
             self.vdb.update(state.vdb_clouds, state.vdb_gpu_budget)
         except Exception:
@@ -392,6 +399,7 @@ class CloudGPU:
         if not cloud_inputs:
             return
         textures = {"field_a": self.field_a, "field_b": self.field_b, "field_c": self.field_c, "sky_env": self.sky_env}
+        textures["sun_air"] = self.sun_air
         for name in VOLUMES:
             textures[name] = self.volumes[name] if volumes and self.volumes[name] is not None else self._no_volume
         for _kind, name in CLOUD_SAMPLERS:

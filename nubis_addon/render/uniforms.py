@@ -16,7 +16,7 @@ from functools import cache
 
 import numpy as np
 
-from ..core import cloudlayers, lightvolume, march, schema, storms, vdbcloud
+from ..core import cloudlayers, lightvolume, march, schema, sky, storms, vdbcloud
 from ..core.errors import NubisError
 from ..core.state import MAX_STORMS, CloudState, wind_vector
 
@@ -34,6 +34,11 @@ def _vdb_atlas(st: CloudState) -> tuple:
 _VEC4: tuple[tuple[str, str, Callable[[CloudState], tuple]], ...] = (
     ("sun_dir", "unit vector towards the sun, -", lambda st: (*_normalized(st.sun_direction), 0.0)),
     ("sun_radiance", "sun color x strength (irradiance), -", lambda st: (*st.sun_radiance, 0.0)),
+    (
+        "sun_air",
+        "the sun through the air (1: sun_radiance is above the atmosphere), ground and top radii, horizon span",
+        lambda st: (float(st.sun_air is not None), sky.EARTH_RADIUS, sky.ATMOSPHERE_TOP, sky.AIR_SPAN),
+    ),
     (
         "ambient",
         "ambient sky color x strength x the ambient setting, -",

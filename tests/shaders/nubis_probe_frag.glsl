@@ -15,10 +15,15 @@
  *   6: vec4(nubis_slab_diffusion(t.x, t.y, t.z, t.w, probe_mode.y), nubis_absorbing_decay(t.x, t.y), 0, 0);
  *   7: vec4(nubis_slab_sky_weights(t.x, t.y, t.z, t.w), nubis_slab_leave_unscattered(t.y), 0): a slab's
  *      weights of the far and the near face's diffuse light at view cosine t.x, vertical optical depth t.y;
- *   8: vec4(nubis_layer_reach(0..3)): the altitude each cloud layer's view march ends at. */
+ *   8: vec4(nubis_layer_reach(0..3)): the altitude each cloud layer's view march ends at;
+ *   9: vec4(nubis_sun_at(t.xyz), 0): the sun's light arriving at the world point t.xyz. */
 void main()
 {
   vec4 t = texelFetch(probe_points, ivec2(gl_FragCoord.xy), 0);
+  if (probe_mode.x > 8.5) {
+    color = vec4(nubis_sun_at(t.xyz), 0.0);
+    return;
+  }
   if (probe_mode.x > 7.5) {
     color = vec4(nubis_layer_reach(0), nubis_layer_reach(1), nubis_layer_reach(2), nubis_layer_reach(3));
     return;
