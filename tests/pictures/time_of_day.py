@@ -1,7 +1,9 @@
-"""Make the time-of-day pictures of the README: one New Cloudscape (default preset, physically based
-sky), then only the Sun lamp is turned: sunrise, noon and sunset looking towards the sun, and the sun
-behind the camera. The sky, the lamp's colour (the atmosphere's transmittance) and the clouds' sky
-light follow the lamp by themselves (blender/sky.py); the camera turns to frame each shot.
+"""Make the time-of-day strip of the README: one New Cloudscape (default preset, physically based sky),
+then only the Sun lamp is turned through sunset, from 6 degrees above the horizon to 4 below it, seen
+towards the sun (top row) and away from it (bottom row). The sky, the lamp's colour (the atmosphere's
+transmittance at the ground), the sun each cloud sees at its own altitude (Earth's shadow included) and
+the clouds' sky light follow the lamp by themselves (blender/sky.py, docs/sky.md#the-sun-each-cloud-sees);
+the camera turns to frame each shot.
 
 Run from the repository root:  .venv-5.3/bin/python tests/pictures/time_of_day.py OUT.png
 """
@@ -17,12 +19,15 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-# label, sun elevation, sun azimuth (compass degrees), camera pitch, heading.
-SHOTS = (
-    ("sunrise, towards the sun", 4.0, 80.0, 116.0, -70.0),
-    ("noon", 70.0, 180.0, 116.0, 20.0),
-    ("sunset, towards the sun", 4.0, 250.0, 116.0, 100.0),
-    ("sun behind the camera", 20.0, 200.0, 116.0, 20.0),
+# The sun's elevations of the strip (degrees), its azimuth (compass degrees), and the camera's pitch and
+# headings towards the sun and away from it.
+ELEVATIONS = (6.0, 2.0, 0.0, -2.0, -4.0)
+AZIMUTH = 250.0
+PITCH, TOWARDS, AWAY = 112.0, 100.0, -80.0
+SHOTS = tuple(
+    (f"sun {e:+g} deg, {side}", e, AZIMUTH, PITCH, heading)
+    for side, heading in (("towards the sun", TOWARDS), ("away from it", AWAY))
+    for e in ELEVATIONS
 )
 
 
@@ -48,10 +53,11 @@ def main(out: str) -> None:
         sun.rotation_euler = Vector(sun_vector(elevation, azimuth)).to_track_quat("Z", "Y").to_euler()
         scene.camera.rotation_euler = Euler((math.radians(pitch), 0.0, math.radians(heading)), "XYZ")
         bpy.context.view_layer.update()  # the depsgraph handler moves the sky's sun and recolours the lamp
-        rgba = pipeline.render_viewport(scene, 400, 225, passes=2)
+        rgba = pipeline.render_viewport(scene, 320, 180, passes=4)
         images.append(pipeline.display_image(scene, rgba))
         print(f"{label}: lamp colour {tuple(round(c, 3) for c in sun.data.color)}")
-    grid = np.concatenate([np.concatenate(images[:2], 1), np.concatenate(images[2:], 1)], 0)
+    n = len(ELEVATIONS)
+    grid = np.concatenate([np.concatenate(images[:n], 1), np.concatenate(images[n:], 1)], 0)
     imageio.write_image(out, grid)
     print(f"wrote {out}: " + ", ".join(s[0] for s in SHOTS) + " (left to right, top to bottom)")
 
