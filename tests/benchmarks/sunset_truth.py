@@ -1,6 +1,7 @@
 """The light at the edges of the day against a path-traced truth (docs/sky.md#the-sun-each-cloud-sees).
 
-Each cell is `compare --mode full --noise-target T` (the reference-march diagnostic left out) with Cycles'
+Each cell is `compare --mode full --noise-target T` (the reference-march diagnostic left out, the bake's
+voxels no finer than `--voxel-floor`, 30 m as compare --draft's) with Cycles'
 shell replaced by the truth of tests/atmosphere_truth.py: every shadow ray towards the sun carries the
 standard atmosphere's transmittance along its own path, integrated in the shell's own nodes, not read from
 the table the viewport and the production shell share. So the viewport's luminance error, bias and alpha
@@ -61,6 +62,9 @@ def main() -> None:
     parser.add_argument("--size", default="160x90")
     parser.add_argument("--noise-target", type=float, default=5.0)
     parser.add_argument("--production", action="store_true")
+    parser.add_argument(
+        "--voxel-floor", type=float, default=30.0, help="the bake's coarsest voxels (compare --draft's)"
+    )
     args = parser.parse_args()
     width, height = (int(v) for v in args.size.split("x"))
     ensure_gpu_context()
@@ -68,13 +72,22 @@ def main() -> None:
 
     nubis_addon.register()
     print(f"truth's quadrature against a 20000-step integral: {atmosphere_truth.self_check() * 100:.2f} % at most")
-    options = CompareOptions(width=width, height=height, mode="full", noise_target=args.noise_target, reference=False)
+    options = CompareOptions(
+        width=width,
+        height=height,
+        mode="full",
+        noise_target=args.noise_target,
+        reference=False,
+        voxel_floor=args.voxel_floor,
+    )
     rows = []
     for cell in args.cells:
         out = Path(args.out) / cell.replace("@", "_")
         t = time.perf_counter()
         with atmosphere_truth.installed():
-            m = pipeline.compare(_scene(cell), out, options)
+            m = pipeline.compare(
+                _scene(cell), out, options, step=lambda text, c=cell: print(f"  {c}: {text}", flush=True)
+            )
         row = [
             cell,
             m["luminance_rel_error"],
