@@ -172,6 +172,9 @@ def key(scene, vdb_path: Path, width: int, height: int, bounces: int) -> str:
         "vdb": _digest_vdb(vdb_path),
         "material": material,
         "world": repr(sky.fingerprint(scene.world)),
+        # How the sun reaches the clouds: through the air (blender/sun_air.py), which a reference made
+        # before it did not do, or the lamp's colour.
+        "sun": ["through the air, per shadow ray", sky.sun_air(scene)],
         "objects": objects,
         "camera": scene.camera.name if scene.camera else "",
         "render": [width, height, bounces, scene.cycles.seed, scene.cycles.max_bounces, scene.frame_current],
