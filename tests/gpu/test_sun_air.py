@@ -3,6 +3,7 @@ through the probe stage (tests/gpu_probe.py), against core/sky.transmittance's o
 point's path to the sun; Earth's shadow where the planet's geometry puts it; the lamp's colour everywhere
 without a Nubis sky's air."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -161,3 +162,93 @@ def test_f12_at_minus_one_degree_shows_lit_clouds_over_an_unlit_ground(make_scen
     # (they light the scene as part of the sky), under 3 % of its own (1.3 % in EEVEE, 1.5 % in Cycles).
     ground = np.abs(gain[ground_rows]).mean()
     assert ground < 0.03 * images[0.0][ground_rows].mean(), (engine, ground, images[0.0][ground_rows].mean())
+
+
+@pytest.mark.parametrize("elevation", [4.0, -1.0])
+def test_cycles_lights_the_bake_through_the_same_air(make_scene, blender, elevation, tmp_path):
+    """What Cycles renders the bake with (blender/sun_air.py): the lamp's sun above the air, and a shell
+    only shadow rays see. Three white cards facing the sun at 0.3, 2.5 and 6 km, seen from the sun's side, lit by
+    the sun alone (the World black): each gets the sun times the air's
+    transmittance from where it stands (core/sky.transmittance) within 3 %, the card in Earth's shadow
+    nothing; and the lamp's colour is the ground's again afterwards."""
+    from bpy_extras.object_utils import world_to_camera_view
+    from mathutils import Vector
+
+    from nubis_addon.blender import scene_io, sky, sun_air
+    from nubis_addon.core import imageio
+
+    scene = make_scene("default", sun__elevation=elevation, sun__azimuth=90.0)
+    lamp = sky.find_sun(scene)
+    ground_colour = tuple(lamp.data.color)
+    state = scene_io.state_from_scene(scene)
+    sun = Vector(state.sun_direction).normalized()
+    centres = [Vector((0.0, y, z)) for y, z in ((-3000.0, 300.0), (0.0, 2500.0), (3000.0, 6000.0))]
+    white = blender.data.materials.new("white card")
+    if white.node_tree is None:
+        white.use_nodes = True
+    white.node_tree.nodes.clear()
+    diffuse = white.node_tree.nodes.new("ShaderNodeBsdfDiffuse")
+    diffuse.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    out = white.node_tree.nodes.new("ShaderNodeOutputMaterial")
+    white.node_tree.links.new(diffuse.outputs[0], out.inputs["Surface"])
+    for c in centres:
+        blender.ops.mesh.primitive_plane_add(size=1000.0, location=c)
+        blender.context.object.rotation_euler = sun.to_track_quat("Z", "Y").to_euler()
+        blender.context.object.data.materials.append(white)
+    # Seen from the sun's side, square on: y across the picture, the altitude up it (100 m a pixel).
+    cam = blender.data.objects.new("towards the cards", blender.data.cameras.new("towards the cards"))
+    cam.data.type, cam.data.ortho_scale, cam.data.clip_end = "ORTHO", 9000.0, 50000.0
+    cam.location = Vector((0.0, 0.0, 3000.0)) + sun * 20000.0
+    cam.rotation_euler = (-sun).to_track_quat("-Z", "Z").to_euler()
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    scene.render.engine = "CYCLES"
+    scene.cycles.device, scene.cycles.samples, scene.cycles.use_denoising = "CPU", 4, False
+    scene.cycles.max_bounces = 0
+    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 90, 90, 100
+    scene.render.image_settings.file_format = "OPEN_EXR"
+    scene.nubis.sky_render_clouds = False
+    scene.cycles.samples = 64  # Cycles picks one texel of the table per look-up (stochastic filtering)
+    for node in scene.world.node_tree.nodes:  # a black World: the sun's light alone, no sky noise
+        if node.bl_idname == "ShaderNodeBackground":
+            node.inputs["Strength"].default_value = 0.0
+    lamp.data.energy = 5.0
+    # A point sun, as the march's: the lamp's 0.53-degree disc averages the transmittance over half a
+    # degree, which near the shadow line is not its value at the disc's centre.
+    lamp.data.angle = 0.0
+    scene.render.filepath = str(tmp_path / "cards.exr")
+    with sun_air.above_the_air(scene) as through:
+        assert through and lamp.data.color[:] == (1.0, 1.0, 1.0)
+        blender.ops.render.render(write_still=True)
+    lit = imageio.read_image(scene.render.filepath)[..., :3].astype(np.float64)
+    assert tuple(lamp.data.color) == pytest.approx(ground_colour)
+    assert _shell_gone(blender)
+    blender.context.view_layer.update()
+    seen = [world_to_camera_view(scene, cam, c) for c in centres]  # from the bottom left; images: top row first
+    cells = [(int((1.0 - v.y) * 90), int(v.x * 90)) for v in seen]
+    got = np.array([lit[row - 2 : row + 2, col - 2 : col + 2].mean(axis=(0, 1)) for row, col in cells])
+    # Each 4x4-pixel window is 400 m of card across the altitudes it spans (steep near the shadow line):
+    # what the shell gave is compared with the transmittance's mean over the window's pixels, each where
+    # its camera ray meets the card.
+    right, up = (cam.matrix_world.to_3x3() @ Vector(axis) for axis in ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0)))
+    lit_state = dataclasses.replace(state, sun_radiance=(5.0,) * 3)
+    want = []
+    for (row, col), c in zip(cells, centres, strict=True):
+        hits = []
+        for i in range(row - 2, row + 2):
+            for j in range(col - 2, col + 2):
+                o = cam.location + ((j + 0.5) / 90 - 0.5) * 9000.0 * right + (0.5 - (i + 0.5) / 90) * 9000.0 * up
+                hits.append(tuple(o - sun * (o - c).dot(sun)))
+        want.append(_expected(lit_state, np.array(hits, np.float32)).mean(axis=0) / math.pi)
+    want = np.array(want)
+    np.testing.assert_allclose(got, want, rtol=0.03, atol=2e-3 * want.max())
+    if elevation < 0.0:
+        assert np.all(want[0] == 0.0) and want[2, 0] > 0.0  # the low card in Earth's shadow, the high one lit
+
+
+def _shell_gone(blender) -> bool:
+    from nubis_addon.blender import sun_air
+
+    return (
+        blender.data.objects.get(sun_air.SHELL_NAME) is None and blender.data.materials.get(sun_air.SHELL_NAME) is None
+    )
