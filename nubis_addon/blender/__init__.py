@@ -17,6 +17,7 @@ after it.
   of its own;
 - scene_io: Blender data to and from the plain data core/ and render/ work on; reference: Cycles' noise
   and its reuse;
+- sun_air: Cycles rendering the bake lit by the sun through the air (a shell only shadow rays see);
 - sky: the physical sky World and its captures;
 - vdbclouds: Volume objects drawn as Nubis clouds; mainthread: work a render thread hands to the main
   thread; presetlist: the presets the sidebar lists; preferences: the add-on's preferences (the cache, the

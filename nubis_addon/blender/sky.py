@@ -110,7 +110,7 @@ def build_world(scene, cfg: dict, sun) -> bpy.types.World:
     # Calibrate the sky's strength once, with the sun at REFERENCE_SUN: its upper-hemisphere radiance then
     # has the luminance of the preset's flat sky colour there. At any other sun, the preset's own
     # included, the sky is as bright as the atmosphere makes it: a preset set at sunset gets twilight's
-    # sky, not a daytime-bright one (docs/sky.md#calibration).
+    # sky, not a daytime-bright one (docs/sky.md#the-sun-each-cloud-sees).
     bg.inputs["Strength"].default_value = 1.0
     sync_ground(scene, sun)
     reference = _hemisphere_at(scene, tex, REFERENCE_SUN)
