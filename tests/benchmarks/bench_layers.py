@@ -16,11 +16,11 @@ from __future__ import annotations
 
 import statistics
 import sys
-import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 PRESET = "altocumulus_over_stratocumulus"
 DRAWN = ("no layer", "the deck alone", "the altocumulus alone", "both")
@@ -36,11 +36,12 @@ def main() -> None:
     import bpy
     import mathutils
     import numpy as np
+    from redraws import alternating_redraws
 
     from nubis_addon.blender import preview, runtime, scene_io
     from nubis_addon.blender.commands import load_scene
     from nubis_addon.core import camera
-    from nubis_addon.render import engine, temporal
+    from nubis_addon.render import engine
     from nubis_addon.render.gpu_context import ensure_gpu_context, renderer_name
 
     width, height, rounds = (int(a) for a in (sys.argv[1:4] if len(sys.argv) > 3 else (320, 180, 3)))
@@ -60,23 +61,7 @@ def main() -> None:
         clouds.update(state)
         samples = engine.render_offscreen(clouds, inv, view.eye, width, height, NUBIS_FETCH_STATS=1)[..., 1]
         rows[which] = {"above": float(samples[: height // 2].mean()), "below": float(samples[height // 2 :].mean())}
-    tv = temporal.TemporalViewport()
-    times: dict[str, list[float]] = {which: [] for which in DRAWN}
-    try:
-        for which in DRAWN:  # compiles and allocates
-            clouds.update(states[which])
-            tv.redraw(clouds, states[which], view, s.viewport_resolution, 64)
-        for _ in range(rounds):
-            for which in DRAWN:
-                clouds.update(states[which])
-                tv.restart()
-                for _ in range(temporal.REDRAWS_PER_SAMPLE):
-                    t = time.perf_counter()
-                    tv.redraw(clouds, states[which], view, s.viewport_resolution, 64)
-                    tv.sync()
-                    times[which].append((time.perf_counter() - t) * 1000.0)
-    finally:
-        tv.free()
+    times = alternating_redraws(clouds, {which: states[which] for which in DRAWN}, view, s.viewport_resolution, rounds)
     deck = statistics.median(times["the deck alone"])
     print(f"{PRESET} at {width}x{height}, {rounds} rounds, {renderer_name()}, Blender {bpy.app.version_string}")
     print(f"{'drawn':<24}{'redraw (median)':>17}{'/ the deck':>12}{'samples above':>15}{'samples below':>15}")

@@ -16,11 +16,11 @@ from __future__ import annotations
 import dataclasses
 import statistics
 import sys
-import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 WAYS = ("the lamp's colour", "the sun through the air")
 
@@ -28,12 +28,12 @@ WAYS = ("the lamp's colour", "the sun through the air")
 def main() -> None:
     import bpy
     import numpy as np
+    from redraws import alternating_redraws
 
     import nubis_addon
     from nubis_addon.blender import ensure_registered, preview, runtime, scene_io, sky
     from nubis_addon.core import camera
     from nubis_addon.core.presets import load_preset
-    from nubis_addon.render import temporal
     from nubis_addon.render.gpu_context import ensure_gpu_context, renderer_name
 
     width, height, rounds = (int(a) for a in (sys.argv[1:4] if len(sys.argv) > 3 else (320, 180, 3)))
@@ -53,23 +53,7 @@ def main() -> None:
     plain = dataclasses.replace(air, sun_air=None, sun_radiance=tuple(c * lamp.data.energy for c in lamp.data.color))
     states = dict(zip(WAYS, (plain, air), strict=True))
     clouds = runtime.cloud_gpu(s.noise_seed)
-    tv = temporal.TemporalViewport()
-    times: dict[str, list[float]] = {way: [] for way in WAYS}
-    try:
-        for way in WAYS:  # compiles and allocates
-            clouds.update(states[way])
-            tv.redraw(clouds, states[way], view, s.viewport_resolution, 64)
-        for _ in range(rounds):
-            for way in WAYS:
-                clouds.update(states[way])
-                tv.restart()
-                for _ in range(temporal.REDRAWS_PER_SAMPLE):
-                    t = time.perf_counter()
-                    tv.redraw(clouds, states[way], view, s.viewport_resolution, 64)
-                    tv.sync()
-                    times[way].append((time.perf_counter() - t) * 1000.0)
-    finally:
-        tv.free()
+    times = alternating_redraws(clouds, states, view, s.viewport_resolution, rounds)
     base = statistics.median(times[WAYS[0]])
     print(
         f"default, sun 4 deg, at {width}x{height}, {rounds} rounds, {renderer_name()}, Blender {bpy.app.version_string}"
