@@ -77,12 +77,15 @@ const float NUBIS_POWDER_RATE = 2.0;
 vec3 nubis_air_transmittance(float h, float mu)
 {
   float ground = P.sun_air.y, top = P.sun_air.z, span = P.sun_air.w;
-  float r = ground + clamp(h, 0.0, top - ground);
-  if (mu < 0.0 && r * r * (mu * mu - 1.0) + ground * ground >= 0.0) {
+  float above = clamp(h, 0.0, top - ground);
+  float r = ground + above;
+  /* r^2 - R^2 and top^2 - r^2 as products: float32 keeps them where the squares' difference would not. */
+  float rho2 = above * (r + ground), r2mu2 = r * r * mu * mu;
+  if (mu < 0.0 && r2mu2 >= rho2) {
     return vec3(0.0);
   }
-  float rho = sqrt(max(r * r - ground * ground, 0.0));
-  float d = max(-r * mu + sqrt(max(r * r * (mu * mu - 1.0) + top * top, 0.0)), 0.0);
+  float rho = sqrt(rho2);
+  float d = max(sqrt(max(r2mu2 + (top - r) * (top + r), 0.0)) - r * mu, 0.0);
   float d_min = top - r, d_max = rho + span;
   float along = clamp((d - d_min) / max(d_max - d_min, 1e-3), 0.0, 1.0);
   return texture(sun_air, vec2(1.0 - sqrt(1.0 - along), rho / span)).rgb;

@@ -61,13 +61,11 @@ class _Nodes:
         else:
             socket.default_value = value
 
-    def math(self, op: str, a, b=0.0, c=None):
+    def math(self, op: str, a, b=0.0):
         node = self.nt.nodes.new("ShaderNodeMath")
         node.operation = op
         self._link(a, node.inputs[0])
         self._link(b, node.inputs[1])
-        if c is not None:
-            self._link(c, node.inputs[2])
         return node.outputs[0]
 
     def vector(self, op: str, a, b=None, scale=None):
@@ -108,7 +106,7 @@ def build_shell_material(air, planet: float, sun_dir, gate_cos: float) -> bpy.ty
     r = n.math("ADD", h, ground)
     r2mu2 = n.math("MULTIPLY", n.math("MULTIPLY", r, r), n.math("MULTIPLY", mu, mu))
     rho2 = n.math("MULTIPLY", h, n.math("ADD", r, ground))  # r^2 - R^2
-    # The ray meets the ground when mu < 0 and R^2 - r^2 (1 - mu^2) >= 0.
+    # The ray meets the ground when mu < 0 and r^2 mu^2 >= r^2 - R^2 (as nubis_air_transmittance).
     below = n.math("LESS_THAN", mu, 0.0)
     meets = n.math("MULTIPLY", below, n.math("GREATER_THAN", n.math("SUBTRACT", r2mu2, rho2), -1e-3))
     rho = n.math("SQRT", n.math("MAXIMUM", rho2, 0.0))
