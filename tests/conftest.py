@@ -125,6 +125,85 @@ LONGEST_FIRST = (
 )
 
 
+# The tests CI runs on the older Blender lines too (`-m lines`; 5.3 runs every test): each surface of
+# Blender's own API the extension uses, once, where the lines differ (docs/measurements.md#ci). The rest
+# measure the project's own GLSL, numpy and command line, the same code on every line, on 5.3 only; the
+# whole suite runs on every line before a change lands. By file: "*" is every test in it, else test names
+# (every case of a parametrized test). A name that matches nothing fails the collection, so a renamed test
+# cannot fall out of the lines unnoticed.
+EVERY_LINE = {
+    # the GPU module: a context in background mode, shader compiles, offscreen draws, the 3D view's handler
+    "gpu/test_gpu_render.py": "*",
+    "gpu/test_density.py": ("test_gpu_density_matches_oracle", "test_oracle_sampler_reproduces_the_gpu_filter"),
+    "gpu/test_temporal.py": (
+        "test_a_3d_view_region_draws_converges_and_culls",
+        "test_viewport_reads_the_depth_once_per_change",
+    ),
+    # properties, panels, poll messages, operators, handlers, undo, save and reload
+    "gpu/test_panels.py": "*",
+    "gpu/test_live_edits.py": "*",
+    "gpu/test_blend_file.py": "*",
+    "gpu/test_authoring.py": "*",
+    "gpu/test_bake_ui.py": "*",
+    "gpu/test_snapshot.py": ("test_every_operator_that_changes_data_is_one_undo_step",),
+    "gpu/test_paint.py": (
+        "test_a_stroke_raises_the_cover_under_it_and_leaves_the_rest_exactly",
+        "test_the_modifier_keys_pick_the_brush_mode",
+    ),
+    "gpu/test_layered_sky.py": ("test_a_layer_added_in_the_sidebar_is_saved_and_read_back",),
+    "gpu/test_superstorm.py": ("test_lightning_keyframe_lights_its_frame_only",),
+    "gpu/test_noise_and_presets.py": ("test_clear_cache_empties_it_and_the_preferences_show_it",),
+    # the World's Sky Texture, F12 in EEVEE and Cycles with objects in the clouds, Render Animation
+    "gpu/test_sky.py": (
+        "test_new_cloudscape_builds_a_sky_tied_to_the_sun",
+        "test_final_render_shows_clouds_behind_the_cube_and_their_moving_shadows",
+    ),
+    "gpu/test_objects_in_clouds.py": ("test_without_an_object_in_the_clouds_the_render_keeps_its_background",),
+    "gpu/test_render_animation.py": "*",
+    "gpu/test_sun_air.py": ("test_f12_at_minus_one_degree_shows_lit_clouds_over_an_unlit_ground",),
+    # OpenVDB and Volume objects: the bake written and rendered by Cycles, marked VDB clouds, sequences
+    "gpu/test_bake_cycles.py": ("test_vdb_has_density_grid_transform_and_voxels", "test_cycles_renders_the_bake"),
+    "gpu/test_vdb_clouds.py": (
+        "test_the_shader_reads_the_grid_where_its_object_puts_it",
+        "test_a_vdb_sequence_follows_the_timeline_as_blender_reads_it",
+    ),
+    # the command line: OpenImageIO's images, `blender --command`, the extension built and installed
+    "cli/test_cli.py": (
+        "test_render_default_png_and_exr",
+        "test_bake_and_cycles_commands",
+        "test_openvdb_10_reads_the_bake_of_this_line",
+        "test_blender_command_is_registered_and_runs",
+    ),
+    "cli/test_extension.py": "*",
+    "cli/test_realtime_cli.py": ("test_preview_writes_each_frame_and_its_redraw_times",),
+    "cli/test_robustness.py": ("test_interrupt_ends_with_one_line_its_exit_code_and_no_temp_files",),
+}
+
+
+def _on_every_line(items) -> None:
+    """Mark EVERY_LINE's tests `lines`, and tests/core's `core`; refuse a name that matches no test."""
+    found = set()
+    for item in items:
+        path = item.nodeid.split("::")[0].removeprefix("tests/")
+        if path.startswith("core/"):
+            item.add_marker(pytest.mark.core)
+        names = EVERY_LINE.get(path)
+        name = getattr(item, "originalname", item.name)
+        if names == "*" or (names and name in names):
+            item.add_marker(pytest.mark.lines)
+            found.add((path, "*" if names == "*" else name))
+    collected = {item.nodeid.split("::")[0].removeprefix("tests/") for item in items}
+    missing = [
+        (path, name)
+        for path, names in EVERY_LINE.items()
+        if path in collected
+        for name in (("*",) if names == "*" else names)
+        if (path, name) not in found
+    ]
+    if missing:
+        raise pytest.UsageError(f"tests/conftest.py EVERY_LINE names tests that do not exist: {missing}")
+
+
 def pytest_collection_modifyitems(config, items):
     """Longest files first, every file's tests together and in their own order (a stable sort)."""
 
@@ -132,4 +211,5 @@ def pytest_collection_modifyitems(config, items):
         path = item.nodeid.split("::")[0].removeprefix("tests/")
         return LONGEST_FIRST.index(path) if path in LONGEST_FIRST else len(LONGEST_FIRST)
 
+    _on_every_line(items)
     items.sort(key=rank)
