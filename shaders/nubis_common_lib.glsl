@@ -139,6 +139,28 @@ vec2 nubis_tile_uv(vec2 uv, vec2 padded_size)
   return (fract(uv) * n + 0.5) / padded_size;
 }
 
+/* The scene's depth in the viewport (docs/viewport.md#clouds-in-front-of-the-scene). `depth_map` is the view's
+ * projection of view-space z, (A, B, 1 = perspective, -): z_ndc = (A z + B) / -z in perspective, A z + B
+ * orthographic, as Blender's window matrix has it. Returns how far in front of the camera, along its axis,
+ * the surface drawn at window depth `d` (0-1) stands, and 0 where nothing was drawn (d = 1). */
+float nubis_axial_depth(float d, vec4 depth_map)
+{
+  if (d >= 1.0) {
+    return 0.0;
+  }
+  float z_ndc = 2.0 * d - 1.0;
+  float z = depth_map.z > 0.5 ? -depth_map.y / min(z_ndc + depth_map.x, -1e-12) : (z_ndc - depth_map.y) / depth_map.x;
+  return max(-z, 1e-3);
+}
+
+/* How far along the view ray (origin, dir) a point at axial distance `axial` lies; `axis` is the view's
+ * forward direction and the axial distance's offset: axial(p) = dot(p, axis.xyz) - axis.w. */
+float nubis_axial_to_ray(float axial, vec3 origin, vec3 dir, vec4 axis)
+{
+  float along = max(dot(dir, axis.xyz), 1e-6);
+  return max((axial - (dot(origin, axis.xyz) - axis.w)) / along, 0.0);
+}
+
 /* The world-space ray through a screen position (uv in [0, 1]). A perspective view passes its eye
  * (eye.w = 1): unprojecting the near plane through a frustum kilometres deep loses metres to float
  * cancellation, which shifts every ray sideways and moves cloud edges. Orthographic views (eye.w = 0)

@@ -403,7 +403,7 @@ NubisSegments nubis_march_segments(vec3 origin, vec3 dir)
   return segments;
 }
 
-NubisParts nubis_march_parts(vec3 origin, vec3 dir, vec2 pixel, float split)
+NubisParts nubis_march_parts(vec3 origin, vec3 dir, vec2 pixel, float split, float stop)
 {
   NubisParts parts;
   parts.near = vec4(0.0);
@@ -437,6 +437,12 @@ NubisParts nubis_march_parts(vec3 origin, vec3 dir, vec2 pixel, float split)
       break;
     }
     float t0 = segments.part[segment].x;
+    /* A ray that only needs what lies in front of a surface (the viewport over the scene's objects) ends
+     * there, on the steps the whole ray takes, so its near part is F12's to the sample; the segments come
+     * nearest first. */
+    if (t0 >= stop) {
+      break;
+    }
     float t1 = segments.part[segment].y;
     /* GPU Pro 7, S15: 64 steps looking up, up to 128 towards the horizon (P.march.xy), by the segment's
      * length against its layer's thickness (docs/sources.md#view-steps). */
@@ -471,6 +477,9 @@ NubisParts nubis_march_parts(vec3 origin, vec3 dir, vec2 pixel, float split)
       float step_dt = dt;
       float t = t0 + (float(i) + jitter) * dt;
 #endif
+      if (t - 0.5 * step_dt >= stop) {
+        break;
+      }
       vec3 p = origin + dir * t;
       float lod = nubis_view_lod(t, dither, segments.part[segment].w);
 #if NUBIS_FETCH_STATS
@@ -546,10 +555,30 @@ NubisParts nubis_march_parts(vec3 origin, vec3 dir, vec2 pixel, float split)
   return parts;
 }
 
+/* The clouds in front of a surface `split` along the ray, and nothing behind it (the viewport over the scene's
+ * objects, as F12's near part; docs/viewport.md#clouds-in-front-of-the-scene): the march ends at the surface.
+ * The cirrus layer is in front when the eye or the surface is above its altitude. */
+vec4 nubis_march_in_front(vec3 origin, vec3 dir, vec2 pixel, float split, out float cloud_depth, out vec4 flash_mask)
+{
+  NubisParts parts = nubis_march_parts(origin, dir, pixel, split, split);
+  cloud_depth = parts.cloud_depth;
+  flash_mask = parts.flash_near;
+  vec4 near = parts.near;
+#if NUBIS_CIRRUS
+  float R = P.layer_planet_radius;
+  if (nubis_altitude(origin, R) > P.cirrus_altitude || nubis_altitude(origin + dir * split, R) > P.cirrus_altitude) {
+    float behind;
+    near = nubis_with_cirrus(near, origin, dir, pixel, behind);
+    flash_mask *= behind;
+  }
+#endif
+  return near;
+}
+
 /* The whole view ray (no split): what the viewport, the panorama and the offline stages march. */
 vec4 nubis_march(vec3 origin, vec3 dir, vec2 pixel, out float cloud_depth, out vec4 flash_mask)
 {
-  NubisParts parts = nubis_march_parts(origin, dir, pixel, NUBIS_NO_SPLIT);
+  NubisParts parts = nubis_march_parts(origin, dir, pixel, NUBIS_NO_SPLIT, NUBIS_NO_SPLIT);
   cloud_depth = parts.cloud_depth;
   flash_mask = parts.flash_near;
   return parts.near;
@@ -576,7 +605,7 @@ vec4 nubis_shade_ray(vec3 origin, vec3 dir, vec2 pixel)
  * the eye or the surface is above its altitude, behind otherwise. */
 vec4 nubis_shade_ray_parts(vec3 origin, vec3 dir, vec2 pixel, float split, out vec4 far)
 {
-  NubisParts parts = nubis_march_parts(origin, dir, pixel, split);
+  NubisParts parts = nubis_march_parts(origin, dir, pixel, split, NUBIS_NO_SPLIT);
   vec4 near = parts.near;
   far = parts.far;
   near.rgb += NUBIS_FLASH_COLOUR * dot(parts.flash_near, nubis_flash_intensities());

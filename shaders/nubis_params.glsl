@@ -9,6 +9,10 @@ struct NubisTemporal {
   vec4 size;           /* history width, height, working-buffer width, height */
   vec4 frame;          /* Bayer index marched now, redraws since the last change, weight of the new sample, dt */
   vec4 flags;          /* history valid (0/1), -, the pixel of each 4x4 block marched now (x, y) */
+  vec4 scene;          /* a scene depth bound (0/1), view pixels per history pixel (x, y), - */
+  vec4 depth_map;      /* the view's projection of its depth (nubis_axial_depth) */
+  vec4 view_axis;      /* this redraw's axis (nubis_axial_to_ray) */
+  vec4 prev_axis;      /* the previous redraw's */
 };
 
 /* The motion stage's cameras: now and one timestep earlier (the same for a still camera). */

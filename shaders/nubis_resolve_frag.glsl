@@ -9,7 +9,13 @@
  *     new samples around it, which removes ghosts. Pixels that come from off screen, or whose history
  *     is not valid, take the working buffer upscaled (S15: "substitute the result from one of the low
  *     res buffers"), so a pan shows no black or stale edges.
- * Outputs: colour, (cloud distance, valid, -, -), flash mask, as the march's. */
+ *   - Where the scene's depth is bound (T.scene.x), a pixel holds the clouds in front of its surface, or the
+ *     whole sky where there is none, and remembers that surface's distance along the view's axis: history
+ *     is reprojected from the surface itself, and only from a pixel that saw the same surface (or the sky,
+ *     for a pixel of sky), so no veil is left behind at a silhouette when the view or an object moves
+ *     (docs/viewport.md#clouds-in-front-of-the-scene); the neighbourhood and the fill take only the new
+ *     samples of the same kind.
+ * Outputs: colour, (cloud distance, the surface's axial distance or 0, -, -), flash mask, as the march's. */
 
 /* A reprojected pixel that saw no cloud is reprojected as a direction this far away (metres). */
 const float NUBIS_FAR_DEPTH = 1e6;
@@ -60,6 +66,25 @@ vec4 nubis_history_cubic(sampler2D tex, vec2 uv, vec2 size)
   return c / weight;
 }
 
+/* Whether two surface distances along the view's axis (0 = the sky) are the same surface: both sky, or
+ * both surfaces within 5 % of each other. */
+bool nubis_same_surface(float a, float b)
+{
+  if (a <= 0.0 || b <= 0.0) {
+    return a <= 0.0 && b <= 0.0;
+  }
+  return abs(a - b) <= 0.05 * max(a, b);
+}
+
+/* The scene's surface at history pixel q (its axial distance, 0 = the sky or no depth bound). */
+float nubis_surface_at(ivec2 q)
+{
+  if (T.scene.x < 0.5) {
+    return 0.0;
+  }
+  return nubis_axial_depth(texelFetch(scene_depth, ivec2(vec2(q) * T.scene.yz), 0).r, T.depth_map);
+}
+
 void main()
 {
   ivec2 q = ivec2(gl_FragCoord.xy);
@@ -78,7 +103,7 @@ void main()
     float w = (valid && since_change >= NUBIS_BLOCK_PIXELS) ? T.frame.z : 1.0;
     color = mix(hist_c, new_c, w);
     flash = mix(hist_f, new_f, w);
-    attr = vec4(new_a.x, 1.0, 0.0, 0.0);
+    attr = vec4(new_a.x, new_a.y, 0.0, 0.0);
     return;
   }
   if (valid && since_change > 0) {
@@ -87,41 +112,74 @@ void main()
     flash = hist_f;
     return;
   }
+  float surface = nubis_surface_at(q);
   /* Reproject. The neighbourhood: the 3x3 new samples nearest this pixel (centred on it, so the
-   * clamp changes from pixel to pixel rather than block by block). */
+   * clamp changes from pixel to pixel rather than block by block), of the same surface as this pixel
+   * (all of them where none is). */
   vec4 lo = vec4(1e30), hi = vec4(-1e30);
   vec4 lo_f = vec4(1e30), hi_f = vec4(-1e30);
+  vec4 same_c = vec4(0.0), same_f = vec4(0.0), wide_c = vec4(0.0), wide_f = vec4(0.0);
+  float same_w = 0.0, wide_w = 0.0;
+  bool mixed = false; /* some sample nearby saw another surface: this pixel is at a silhouette */
   float near_depth = 0.0;
   ivec2 last = ivec2(nubis_work_last());
-  ivec2 nearest = ivec2(floor(nubis_work_position(vec2(q) + 0.5) + 0.5));
-  for (int dy = -1; dy <= 1; dy++) {
-    for (int dx = -1; dx <= 1; dx++) {
-      ivec2 b = clamp(nearest + ivec2(dx, dy), ivec2(0), last);
-      vec4 c = texelFetch(work_color, b, 0);
-      vec4 f = texelFetch(work_flash, b, 0);
-      lo = min(lo, c);
-      hi = max(hi, c);
-      lo_f = min(lo_f, f);
-      hi_f = max(hi_f, f);
-      float d = texelFetch(work_attr, b, 0).x;
-      if (d > 0.0 && (near_depth <= 0.0 || (dx == 0 && dy == 0))) {
-        near_depth = d;
+  vec2 at = nubis_work_position(vec2(q) + 0.5);
+  ivec2 nearest = ivec2(floor(at + 0.5));
+  vec2 at_clamped = clamp(at, vec2(0.0), vec2(last));
+  for (int pass = 0; pass < 2 && wide_w <= 0.0; pass++) {
+    for (int dy = -1; dy <= 1; dy++) {
+      for (int dx = -1; dx <= 1; dx++) {
+        ivec2 b = clamp(nearest + ivec2(dx, dy), ivec2(0), last);
+        vec4 a = texelFetch(work_attr, b, 0);
+        if (pass == 0 && !nubis_same_surface(a.y, surface)) {
+          mixed = true;
+          continue;
+        }
+        vec4 c = texelFetch(work_color, b, 0);
+        vec4 f = texelFetch(work_flash, b, 0);
+        lo = min(lo, c);
+        hi = max(hi, c);
+        lo_f = min(lo_f, f);
+        hi_f = max(hi_f, f);
+        /* The fill: the bilinear weights of the new samples of this surface (the bilinear fill itself
+         * where all are), or, where none of the four nearest is, the nearest weighing most. */
+        vec2 off = vec2(b) - at_clamped;
+        float tent = max(1.0 - abs(off.x), 0.0) * max(1.0 - abs(off.y), 0.0);
+        same_c += c * tent;
+        same_f += f * tent;
+        same_w += tent;
+        float w = 1.0 / (1.0 + dot(off, off));
+        wide_c += c * w;
+        wide_f += f * w;
+        wide_w += w;
+        if (a.x > 0.0 && (near_depth <= 0.0 || (dx == 0 && dy == 0))) {
+          near_depth = a.x;
+        }
       }
     }
   }
   vec2 centre = vec2(q) + 0.5;
   vec4 fill_c = nubis_work_bilinear(work_color, centre);
   vec4 fill_f = nubis_work_bilinear(work_flash, centre);
+  if (mixed) {
+    /* At a silhouette the bilinear fill would mix the two sides: this side's samples instead. */
+    fill_c = same_w > 1e-4 ? same_c / same_w : wide_c / wide_w;
+    fill_f = same_w > 1e-4 ? same_f / same_w : wide_f / wide_w;
+  }
   if (!valid) {
     color = fill_c;
     flash = fill_f;
-    attr = vec4(0.0);
+    attr = vec4(0.0, surface, 0.0, 0.0);
     return;
   }
   vec3 origin, dir;
   nubis_view_ray(centre / T.size.xy, T.inv_view_proj, T.eye, origin, dir);
   float depth = near_depth > 0.0 ? near_depth : hist_a.x;
-  if (depth <= 0.0) {
+  if (surface > 0.0) {
+    /* A surface's pixel moves with the surface. */
+    depth = nubis_axial_to_ray(surface, origin, dir, T.view_axis);
+  }
+  else if (depth <= 0.0) {
     /* No cloud seen here: reproject at the middle of the cloud layer, or as a direction far away. */
     vec2 mid = nubis_ray_sphere(origin, dir, P.layer_planet_radius, 0.5 * (P.shell_bottom + P.shell_top));
     depth = mid.y > 0.0 ? (mid.x > 0.0 ? mid.x : mid.y) : NUBIS_FAR_DEPTH;
@@ -129,15 +187,24 @@ void main()
   vec3 world = origin + dir * depth;
   vec4 before = T.prev_view_proj * vec4(nubis_previous_position(world, T.frame.w), 1.0);
   vec2 prev_uv = before.xy / before.w * 0.5 + 0.5;
-  if (before.w <= 0.0 || any(lessThan(prev_uv, vec2(0.0))) || any(greaterThan(prev_uv, vec2(1.0)))) {
+  bool outside = before.w <= 0.0 || any(lessThan(prev_uv, vec2(0.0))) || any(greaterThan(prev_uv, vec2(1.0)));
+  if (!outside && T.scene.x > 0.5) {
+    /* History only from a pixel that saw this surface then (its axial distance from the previous camera),
+     * or the sky for a pixel of sky. */
+    float then = texelFetch(hist_attr, ivec2(prev_uv * T.size.xy), 0).y;
+    float expected = surface > 0.0 ? dot(world, T.prev_axis.xyz) - T.prev_axis.w : 0.0;
+    outside = !nubis_same_surface(then, expected);
+  }
+  if (outside) {
     color = fill_c;
     flash = fill_f;
-    attr = vec4(depth, 0.0, 0.0, 0.0);
+    attr = vec4(depth, surface, 0.0, 0.0);
     return;
   }
-  vec4 prev_c = nubis_history_cubic(hist_color, prev_uv, T.size.xy);
-  vec4 prev_f = nubis_history_cubic(hist_flash, prev_uv, T.size.xy);
+  /* At a silhouette the cubic filter's taps would reach across it: the one history texel instead. */
+  vec4 prev_c = mixed ? texelFetch(hist_color, ivec2(prev_uv * T.size.xy), 0) : nubis_history_cubic(hist_color, prev_uv, T.size.xy);
+  vec4 prev_f = mixed ? texelFetch(hist_flash, ivec2(prev_uv * T.size.xy), 0) : nubis_history_cubic(hist_flash, prev_uv, T.size.xy);
   color = clamp(prev_c, lo, hi);
   flash = clamp(prev_f, lo_f, hi_f);
-  attr = vec4(depth, 0.0, 0.0, 0.0);
+  attr = vec4(depth, surface, 0.0, 0.0);
 }

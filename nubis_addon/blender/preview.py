@@ -13,6 +13,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import bpy
+import gpu
 import mathutils
 import numpy as np
 
@@ -21,7 +22,7 @@ from ..core.bakeplan import comparison_voxel_size, view_footprint
 from ..core.errors import NubisError
 from ..core.fsutil import check_output_dir
 from ..core.jobs import BakeOptions, BenchmarkOptions, PreviewOptions
-from ..render import engine, temporal
+from ..render import depthpass, engine, temporal
 from ..render.gpu_context import renderer_name
 from . import cycles_setup, pipeline, runtime, scene_io
 
@@ -54,6 +55,25 @@ def apply_quality(scene, name: str | None) -> str:
 def camera_view(scene, width: int, height: int) -> temporal.View:
     inv = scene_io.camera_inv_view_proj(scene, width, height)
     return temporal.View.of(np.array(inv), scene_io.camera_eye(scene), width, height)
+
+
+@contextlib.contextmanager
+def scene_depth(scene, view: temporal.View):
+    """The scene's depth from the camera of `view` as the 3D viewport has it (a float texture of window
+    depths, 1 where nothing is drawn), drawn by F12's depth pre-pass; yields the view with its depth
+    mapping and the texture, for `TemporalViewport.redraw(..., depth=...)`."""
+    from . import composition
+
+    window, view_matrix = scene_io.camera_matrices(scene, view.width, view.height)
+    mapping = camera.depth_mapping(window, view_matrix)
+    forward = np.array(window, np.float64) @ np.array(view_matrix, np.float64)
+    with depthpass.scene_hits(composition.surfaces(scene), forward, view.width, view.height) as (_tex, hits):
+        drawn = hits[..., 3] > 0.5
+        depth = np.where(drawn, camera.window_depth(hits[..., :3], window, view_matrix), 1.0).astype(np.float32)
+    texture = gpu.types.GPUTexture(
+        (view.width, view.height), format="R32F", data=gpu.types.Buffer("FLOAT", depth.size, depth.ravel())
+    )
+    yield temporal.View.of(np.array(view.inv_view_proj), view.eye, view.width, view.height, mapping), texture
 
 
 def orbit_camera(scene, degrees: float) -> None:

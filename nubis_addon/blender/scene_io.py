@@ -923,14 +923,21 @@ def state_from_scene(scene, camera_location=None, fields: tuple | None = None, w
     )
 
 
-def camera_inv_view_proj(scene, width: int, height: int):
-    """Inverse view-projection of the scene camera at this resolution, as a mathutils Matrix."""
+def camera_matrices(scene, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+    """The scene camera's projection (its clipping planes included) at this resolution and its view matrix,
+    float64."""
     cam = scene.camera
     if cam is None:
         raise NubisError("the scene has no camera: add one or use New Cloudscape")
     depsgraph = bpy.context.evaluated_depsgraph_get()
     proj = cam.evaluated_get(depsgraph).calc_matrix_camera(depsgraph, x=width, y=height, scale_x=1.0, scale_y=1.0)
     view = np.linalg.inv(np.array(evaluated_matrix(cam).normalized(), dtype=np.float64))
+    return np.array(proj, dtype=np.float64), view
+
+
+def camera_inv_view_proj(scene, width: int, height: int):
+    """Inverse view-projection of the scene camera at this resolution, as a mathutils Matrix."""
+    proj, view = camera_matrices(scene, width, height)
     return Matrix(camera.ray_inverse_view_projection(proj, view).tolist())
 
 

@@ -90,7 +90,8 @@ def temporal_view(key) -> temporal.TemporalViewport:
 class ViewDraw:
     """One view to draw: its inverse view-projection and origin (the eye of a perspective view), its size,
     the temporal viewport it accumulates in (`key`), the scene's depth as a float texture with the key of
-    what it shows, and whether the World's sky goes behind the clouds (Solid shading)."""
+    what it shows and how it reads as distances (`mapping`, camera.depth_mapping), and whether the World's
+    sky goes behind the clouds (Solid shading)."""
 
     inv_view_proj: object
     view_origin: object
@@ -101,12 +102,14 @@ class ViewDraw:
     depth: object = None
     depth_key: object = None
     sky: bool = False
+    mapping: object = None
 
 
 def draw_view(scene, request: ViewDraw, wait_for_noise: bool | None = None) -> temporal.TemporalViewport | None:
     """One redraw of the temporal viewport (render/temporal.py) over the bound framebuffer: march one
-    pixel in 16 and resolve the history, unless it has converged, then upscale it behind the scene's
-    objects. The request's `depth` lets the march skip what geometry hides.
+    pixel in 16 and resolve the history, unless it has converged, then upscale it. With the request's
+    `depth` (and its `mapping`) each pixel the scene's geometry covers holds the clouds in front of that
+    surface, laid over it as F12 lays them (docs/viewport.md#clouds-in-front-of-the-scene).
 
     Noise for a new seed is made synchronously headless, and in the interface (`wait_for_noise` False)
     on a worker thread: meanwhile the previous seed's clouds are drawn, or nothing (None is returned),
@@ -127,15 +130,19 @@ def draw_view(scene, request: ViewDraw, wait_for_noise: bool | None = None) -> t
     r = request
     state = _state(scene, r.view_origin)
     eye = (*r.view_origin[:3], 1.0) if r.perspective else (0.0, 0.0, 0.0, 0.0)
-    view = temporal.View.of(np.array(r.inv_view_proj), eye, r.width, r.height)
+    mapping = r.mapping if r.depth is not None else None
+    view = temporal.View.of(np.array(r.inv_view_proj), eye, r.width, r.height, mapping)
     tv = temporal_view(r.key)
     tv.redraw(clouds, state, view, settings.viewport_resolution, settings.viewport_samples, r.depth, r.depth_key)
     with target.bind():
-        gpu.state.depth_test_set("LESS_EQUAL")
         gpu.state.depth_mask_set(False)
         if r.sky:
+            gpu.state.depth_test_set("LESS_EQUAL")  # the sky behind the objects
             gpu.state.blend_set("NONE")
             engine.draw_stage("sky", clouds, {"inv_view_proj": Matrix(view.inv_view_proj), "eye": view.eye})
+        # The clouds over everything: each pixel holds what stands in front of its surface. Without the
+        # scene's depth, only behind the objects (on the far plane).
+        gpu.state.depth_test_set("NONE" if mapping is not None else "LESS_EQUAL")
         gpu.state.blend_set("ALPHA_PREMULT")
         tv.upscale(clouds, settings.viewport_blur)
     # Leave Blender's default state behind: a disabled depth mask would also stop later depth clears.
@@ -281,6 +288,7 @@ def draw_region(scene, region, rv3d, sky: bool = False) -> temporal.TemporalView
         depth=depth,
         depth_key=_geometry[0],
         sky=sky,
+        mapping=camera.depth_mapping(rv3d.window_matrix, rv3d.view_matrix),
     )
     tv = draw_view(scene, request)
     if tv is not None and not tv.converged:

@@ -27,6 +27,27 @@ def ray_inverse_view_projection(window_matrix, view_matrix) -> np.ndarray:
     return np.linalg.inv(proj @ view)
 
 
+def depth_mapping(window_matrix, view_matrix) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """How a view's depth buffer reads as distances (shaders/nubis_common_lib.glsl nubis_axial_depth and
+    nubis_axial_to_ray): ((A, B, 1 = perspective, 0), (the view's forward axis, offset)), A and B the window
+    matrix's depth row, so that a point p stands dot(p, axis) - offset in front of the camera."""
+    proj = np.array(window_matrix, dtype=np.float64).reshape(4, 4)
+    view = np.array(view_matrix, dtype=np.float64).reshape(4, 4)
+    perspective = abs(proj[3, 3]) < 1e-9
+    depth = (float(proj[2, 2]), float(proj[2, 3]), 1.0 if perspective else 0.0, 0.0)
+    return depth, (*(float(-v) for v in view[2, :3]), float(view[2, 3]))
+
+
+def window_depth(points: np.ndarray, window_matrix, view_matrix) -> np.ndarray:
+    """The window depth (0-1, as a depth buffer holds it) of world points (..., 3); NaN points read 1."""
+    m = np.array(window_matrix, dtype=np.float64).reshape(4, 4) @ np.array(view_matrix, dtype=np.float64).reshape(4, 4)
+    pts = np.asarray(points, dtype=np.float64)
+    z, w = pts @ m[2, :3] + m[2, 3], pts @ m[3, :3] + m[3, 3]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        d = (z / w) * 0.5 + 0.5
+    return np.where(np.isfinite(d), np.clip(d, 0.0, 1.0), 1.0)
+
+
 def _unproject(inv: np.ndarray, ndc_x: float, ndc_y: float, depth: float) -> np.ndarray:
     h = inv @ np.array([ndc_x, ndc_y, depth, 1.0])
     return h[:3] / h[3]

@@ -73,7 +73,10 @@ _VIEW = (("MAT4", "inv_view_proj"), ("VEC4", "eye"))
 # The temporal resolve reads the working buffer and the previous history, and writes the new history.
 _TEMPORAL_TARGETS = ("color", "attr", "flash")
 _RESOLVE = {
-    "samplers": tuple(("FLOAT_2D", f"{src}_{t}") for src in ("work", "hist") for t in _TEMPORAL_TARGETS),
+    "samplers": (
+        *(("FLOAT_2D", f"{src}_{t}") for src in ("work", "hist") for t in _TEMPORAL_TARGETS),
+        ("FLOAT_2D", "scene_depth"),
+    ),
     "libs": ("nubis_common_lib.glsl", "nubis_motion_lib.glsl"),
     "cloud_inputs": False,
     "outputs": _TEMPORAL_TARGETS,
@@ -93,18 +96,23 @@ STAGES: dict[str, Stage] = {
     "motion": Stage(_VIEW, blocks=(("NubisMotionCameras", "C"),)),
     # The temporal viewport (render/temporal.py): one pixel of every 4x4 block into the working buffer,
     # the resolve into the full-resolution history, and the upscale onto the view.
+    # Where the scene's depth is bound, the march ends at its surfaces (T: the view's depth mapping).
     "temporal_march": Stage(
         (*_VIEW, ("VEC4", "block"), ("VEC4", "cull")),
         (("FLOAT_2D", "scene_depth"),),
         outputs=_TEMPORAL_TARGETS,
+        blocks=(("NubisTemporal", "T"),),
     ),
     "resolve": Stage(**_RESOLVE),
-    # The World's sky behind the clouds in Solid shading, on the far plane like the upscale.
+    # The World's sky behind the clouds in Solid shading, on the far plane: a LESS_EQUAL depth test keeps
+    # it behind the scene's objects.
     "sky": Stage(_VIEW, far_plane=True),
-    # Drawn on the far plane, so a LESS_EQUAL depth test keeps the clouds behind the scene's objects.
+    # On the far plane: with the scene's depth it is drawn without a depth test, each pixel holding the
+    # clouds in front of what it shows (docs/viewport.md#clouds-in-front-of-the-scene); without, a
+    # LESS_EQUAL test keeps the clouds behind the objects.
     "upscale": Stage(
-        (("VEC4", "filter_size"),),
-        (("FLOAT_2D", "hist_color"), ("FLOAT_2D", "hist_flash")),
+        (("VEC4", "filter_size"), ("VEC4", "scene"), ("VEC4", "depth_map")),
+        tuple(("FLOAT_2D", name) for name in ("hist_color", "hist_flash", "hist_attr", "scene_depth")),
         libs=("nubis_common_lib.glsl",),
         cloud_inputs=False,
         far_plane=True,

@@ -33,17 +33,28 @@ REDRAWS_PER_SAMPLE = BLOCK * BLOCK
 @dataclass(frozen=True)
 class View:
     """A view to draw: the ray matrix (camera.ray_inverse_view_projection), the eye (w = 1 for a
-    perspective view, 0 for orthographic) and the size in pixels."""
+    perspective view, 0 for orthographic), the size in pixels, and how its depth buffer reads as distances
+    (camera.depth_mapping; needed with a scene depth)."""
 
     inv_view_proj: tuple  # 4x4 rows
     eye: tuple[float, float, float, float]
     width: int
     height: int
+    depth_map: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    axis: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
 
     @classmethod
-    def of(cls, inv_view_proj, eye, width: int, height: int) -> View:
+    def of(cls, inv_view_proj, eye, width: int, height: int, mapping=None) -> View:
         rows = tuple(tuple(float(x) for x in row) for row in np.asarray(inv_view_proj, dtype=np.float64))
-        return cls(rows, tuple(float(e) for e in eye), int(width), int(height))
+        depth_map, axis = mapping if mapping is not None else ((0.0,) * 4, (0.0,) * 4)
+        return cls(
+            rows,
+            tuple(float(e) for e in eye),
+            int(width),
+            int(height),
+            tuple(float(v) for v in depth_map),
+            tuple(float(v) for v in axis),
+        )
 
 
 def _matrix_block(m) -> np.ndarray:
@@ -72,7 +83,9 @@ class TemporalViewport:
         self._key = None
         self._time = None
         self._view_proj = None
+        self._axis = (0.0, 0.0, 0.0, 0.0)  # the previous redraw's view axis (View.axis)
         self._dummy_depth = None
+        self._scene = None  # the scene depth of the last redraw and its view, for the upscale
         self.last_restart_reason = ""
 
     # ---- buffers ------------------------------------------------------------------------------------------
@@ -126,6 +139,7 @@ class TemporalViewport:
         self._history = []
         self._work = {}
         self._dummy_depth = None
+        self._scene = None
         self._sizes = None
         self._valid = False
         self._key = None
@@ -177,6 +191,9 @@ class TemporalViewport:
         angle, size = camera.pixel_footprint(inv, history_size[0], history_size[1])
         state = dataclasses.replace(state, pixel_angle=angle, pixel_size=size)
         dt, prev_view_proj = self._follow(view, inv, state, clouds, depth_key)
+        prev_axis, self._axis = self._axis if self._valid else view.axis, view.axis
+        depth_tex = depth if depth is not None else self._no_depth()
+        self._scene = (depth_tex, view) if depth is not None else None
         if self.converged:
             clouds.update(state)  # the upscale reads this frame's flash intensities from the block
             return False
@@ -186,7 +203,7 @@ class TemporalViewport:
         bayer = self.redraw_index % REDRAWS_PER_SAMPLE
         offset = march.bayer_offset(bayer)
         defines = clouds.defines()
-        self._march(clouds, view, defines, offset, depth)
+        scale = (view.width / history_size[0], view.height / history_size[1])
         block = np.concatenate(
             [
                 _matrix_block(view.inv_view_proj),
@@ -195,9 +212,15 @@ class TemporalViewport:
                 np.array([*history_size, *work_size], np.float32),
                 np.array([bayer, min(self.since_change, 1 << 20), 1.0 / (sample_pass + 1), dt], np.float32),
                 np.array([1.0 if self._valid else 0.0, 0.0, *offset], np.float32),
+                np.array([1.0 if depth is not None else 0.0, *scale, 0.0], np.float32),
+                np.asarray(view.depth_map, np.float32),
+                np.asarray(view.axis, np.float32),
+                np.asarray(prev_axis, np.float32),
             ]
         ).astype(np.float32)
-        self._resolve(clouds, defines, block)
+        temporal_ubo = gpu.types.GPUUniformBuf(block.tobytes())
+        self._march(clouds, view, defines, offset, depth_tex if depth is not None else None, temporal_ubo)
+        self._resolve(clouds, defines, temporal_ubo, depth_tex)
         self.redraw_index += 1
         self.since_change += 1
         self._valid = True
@@ -228,14 +251,19 @@ class TemporalViewport:
         self._view_proj = view_proj
         return dt, (view_proj if prev_view_proj is None else prev_view_proj)
 
-    def _march(self, clouds, view: View, defines, offset: tuple[float, float], depth) -> None:
-        """Step 1: march one pixel of every block into the working buffer, culled by the scene's depth."""
+    def _no_depth(self):
+        """A 1x1 depth of nothing drawn, bound where no scene depth is."""
+        if self._dummy_depth is None:
+            nothing = gpu.types.Buffer("FLOAT", 1, [1.0])
+            self._dummy_depth = gpu.types.GPUTexture((1, 1), format="R32F", data=nothing)
+        return self._dummy_depth
+
+    def _march(self, clouds, view: View, defines, offset: tuple[float, float], depth, temporal_ubo) -> None:
+        """Step 1: march one pixel of every block into the working buffer, each up to the scene's surface
+        where its depth is bound."""
         history_size, work_size = self._sizes
         if depth is None:
-            if self._dummy_depth is None:
-                nothing = gpu.types.Buffer("FLOAT", 1, [1.0])
-                self._dummy_depth = gpu.types.GPUTexture((1, 1), format="R32F", data=nothing)
-            depth_tex, cull = self._dummy_depth, (0.0, 0.0, 0.0, 0.0)
+            depth_tex, cull = self._no_depth(), (0.0, 0.0, 0.0, 0.0)
         else:
             depth_tex = depth
             cull = (1.0, view.width / history_size[0], view.height / history_size[1], 0.0)
@@ -251,14 +279,14 @@ class TemporalViewport:
             sh.uniform_float("block", block)
             sh.uniform_float("cull", cull)
             sh.uniform_sampler("scene_depth", depth_tex)
+            sh.uniform_block("T", temporal_ubo)
             engine.fullscreen_batch("temporal_march", defines).draw(sh)
 
-    def _resolve(self, clouds, defines, block: np.ndarray) -> None:
-        """Step 2: resolve the new history from the working buffer and the previous history (`block`: the
-        resolve's uniform block, shaders' T)."""
+    def _resolve(self, clouds, defines, temporal_ubo, depth_tex) -> None:
+        """Step 2: resolve the new history from the working buffer and the previous history (`temporal_ubo`:
+        the redraw's uniform block, shaders' T; `depth_tex` the scene's depth, or the 1x1 of nothing)."""
         history_size, _work_size = self._sizes
         src, dst = self._history
-        temporal_ubo = gpu.types.GPUUniformBuf(block.tobytes())
         with dst["fb"].bind():
             gpu.state.blend_set("NONE")
             gpu.state.viewport_set(0, 0, *history_size)
@@ -268,12 +296,14 @@ class TemporalViewport:
             for name in ("color", "attr", "flash"):
                 sh.uniform_sampler(f"work_{name}", self._work[name])
                 sh.uniform_sampler(f"hist_{name}", src[name])
+            sh.uniform_sampler("scene_depth", depth_tex)
             engine.fullscreen_batch("resolve", defines).draw(sh)
         self._history = [dst, src]
 
     # ---- showing it ---------------------------------------------------------------------------------------
     def upscale(self, clouds: engine.CloudGPU, blur: float = 1.0) -> None:
-        """Draw the history over the bound framebuffer's viewport (premultiplied), flashes added."""
+        """Draw the history over the bound framebuffer's viewport (premultiplied), flashes added: with the
+        last redraw's scene depth, each pixel the clouds in front of what it shows."""
         if not self._history:
             return
         hist = self._history[0]
@@ -282,8 +312,13 @@ class TemporalViewport:
         sh = engine.shader("upscale", defines)
         clouds.bind(sh, cloud_inputs=False)
         sh.uniform_float("filter_size", (float(blur), 0.0, 1.0 / hw, 1.0 / hh))
+        depth_tex, view = self._scene if self._scene is not None else (self._no_depth(), None)
+        sh.uniform_float("scene", (1.0 if view is not None else 0.0, 0.0, 0.0, 0.0))
+        sh.uniform_float("depth_map", view.depth_map if view is not None else (0.0, 0.0, 0.0, 0.0))
         sh.uniform_sampler("hist_color", hist["color"])
         sh.uniform_sampler("hist_flash", hist["flash"])
+        sh.uniform_sampler("hist_attr", hist["attr"])
+        sh.uniform_sampler("scene_depth", depth_tex)
         engine.fullscreen_batch("upscale", defines).draw(sh)
 
     def read_history(self) -> np.ndarray:

@@ -10,9 +10,11 @@ also renders compare's own Cycles (the production shell) for each cell and print
 
 Run from the repository root:
     .venv-5.3/bin/python tests/benchmarks/sunset_truth.py OUT [--size 160x90] [--noise-target 5]
-        [--production] [CELL ...]
+        [--production] [--light sun|sky] [CELL ...]
 a CELL is PRESET[@ELEVATION[@AZIMUTH]] (degrees), e.g. default@4 or altocumulus_over_stratocumulus@2;
-without cells, the issue's: the default at 4, 1 and -1 degrees and the layered preset at 2.
+without cells, the issue's: the default at 4, 1 and -1 degrees and the layered preset at 2. `--light sun`
+lights each cell by the sun alone (the World's strength 0), `--light sky` by the World alone (the sun's 0),
+on both sides, to tell which light's model an error comes from (docs/viewport.md#one-light-at-a-time).
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 CELLS = ("default@4", "default@1", "default@-1", "altocumulus_over_stratocumulus@2")
 
 
-def _scene(cell: str):
+def _scene(cell: str, light: str = ""):
     import bpy
 
     from nubis_addon.blender import ensure_registered, scene_io
@@ -41,6 +43,8 @@ def _scene(cell: str):
         preset.extra["sun"]["elevation"] = float(sun[0])
     if len(sun) > 1:
         preset.extra["sun"]["azimuth"] = float(sun[1])
+    if light:
+        preset.extra.setdefault("world" if light == "sun" else "sun", {})["strength"] = 0.0
     bpy.ops.wm.read_factory_settings(use_empty=True)
     ensure_registered()
     scene = bpy.context.scene
@@ -62,6 +66,7 @@ def main() -> None:
     parser.add_argument("--size", default="160x90")
     parser.add_argument("--noise-target", type=float, default=5.0)
     parser.add_argument("--production", action="store_true")
+    parser.add_argument("--light", choices=("sun", "sky"), default="", help="one light alone (both by default)")
     parser.add_argument(
         "--voxel-floor", type=float, default=30.0, help="the bake's coarsest voxels (compare --draft's)"
     )
@@ -82,11 +87,11 @@ def main() -> None:
     )
     rows = []
     for cell in args.cells:
-        out = Path(args.out) / cell.replace("@", "_")
+        out = Path(args.out) / (cell.replace("@", "_") + (f"_{args.light}" if args.light else ""))
         t = time.perf_counter()
         with atmosphere_truth.installed():
             m = pipeline.compare(
-                _scene(cell), out, options, step=lambda text, c=cell: print(f"  {c}: {text}", flush=True)
+                _scene(cell, args.light), out, options, step=lambda text, c=cell: print(f"  {c}: {text}", flush=True)
             )
         row = [
             cell,
@@ -98,7 +103,7 @@ def main() -> None:
         ]
         if args.production:
             own = Path(args.out) / (cell.replace("@", "_") + "_production")
-            pipeline.compare(_scene(cell), own, options)
+            pipeline.compare(_scene(cell, args.light), own, options)
             truth = imageio.read_image(out / "cycles.exr")
             mine = imageio.read_image(own / "cycles.exr")
             row.append(metrics.compare(mine, truth)["luminance_bias"])

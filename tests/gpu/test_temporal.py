@@ -181,31 +181,77 @@ def test_sidebar_quality_and_benchmark(make_scene, blender):
     assert scene.render.engine == "CYCLES" and (scene.render.resolution_x, scene.render.resolution_y) == (1234, 567)
 
 
-def test_no_march_where_geometry_hides_the_sky(shot):
-    """With the scene's depth bound (the 3D view reads it back), pixels that geometry covers are not
-    marched (GDC22: "if objects render in front of the clouds, we do not march from those pixels")."""
+def _camera_matrices(blender, scene, w: int, h: int):
+    from nubis_addon.blender import scene_io
+
+    depsgraph = blender.context.evaluated_depsgraph_get()
+    cam = scene.camera.evaluated_get(depsgraph)
+    window = np.array(cam.calc_matrix_camera(depsgraph, x=w, y=h, scale_x=1.0, scale_y=1.0))
+    return window, np.array(scene_io.evaluated_matrix(scene.camera).inverted())
+
+
+def _rays(inv_view_proj, eye, w: int, h: int) -> np.ndarray:
+    """Unit view rays through the pixel centres (h, w, 3), bottom row first, as nubis_view_ray makes them."""
+    ys, xs = np.mgrid[0:h, 0:w]
+    ndc = np.stack(
+        [(xs + 0.5) / w * 2 - 1, (ys + 0.5) / h * 2 - 1, np.ones_like(xs, float), np.ones_like(xs, float)], -1
+    )
+    far = ndc @ np.asarray(inv_view_proj, np.float64).T
+    d = far[..., :3] / far[..., 3:] - np.asarray(eye[:3])
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def _same_image(got: np.ndarray, want: np.ndarray) -> None:
+    """Pixel for pixel within 0.5 %, but for at most one pixel in 200, and within 0.002 on average."""
+    close = np.isclose(got, want, rtol=5e-3, atol=5e-3).all(axis=-1)
+    assert close.mean() >= 0.995, np.argwhere(~close)
+    assert np.abs(got - want).mean() < 2e-3, np.abs(got - want).mean()
+
+
+def test_a_pixel_geometry_covers_holds_the_clouds_in_front_of_it_as_f12s_near_part(shot, blender):
+    """With the scene's depth bound (the 3D view reads it back), a pixel that geometry covers is marched up
+    to its surface and holds the clouds in front of it, sample for sample F12's near part
+    (shaders/nubis_split_frag.glsl); a pixel of sky holds the whole march
+    (docs/viewport.md#clouds-in-front-of-the-scene)."""
     import gpu
 
     from nubis_addon.blender import pipeline, runtime
-    from nubis_addon.render import temporal
+    from nubis_addon.core import camera
+    from nubis_addon.render import engine, temporal
 
     scene, s = shot()
+    w, h, half = s.width, s.height, s.width // 2
+    window, view_matrix = _camera_matrices(blender, scene, w, h)
     full = pipeline.render_shot(s)
-    depth = np.ones((s.height, s.width), np.float32)
-    depth[:, : s.width // 2] = 0.5  # an object over the left half (rows bottom first, as GL reads them)
-    tex = gpu.types.GPUTexture(
-        (s.width, s.height), format="R32F", data=gpu.types.Buffer("FLOAT", depth.size, depth.ravel())
-    )
+    # A wall across the left half, 9 km in front of the camera along its axis: clouds before and behind it.
+    axis_depth, axis = camera.depth_mapping(window, view_matrix)
+    rays = _rays(s.inv_view_proj, s.eye, w, h)
+    t = (9000.0 - (np.dot(s.eye[:3], axis[:3]) - axis[3])) / (rays @ np.asarray(axis[:3]))
+    hit = np.asarray(s.eye[:3]) + rays * t[..., None]
+    covered = np.zeros((h, w), bool)
+    covered[:, :half] = True
+    depth = np.where(covered, camera.window_depth(hit, window, view_matrix), 1.0).astype(np.float32)
+    hits = np.concatenate([hit, covered[..., None]], -1).astype(np.float32)
+    depth_tex = gpu.types.GPUTexture((w, h), format="R32F", data=gpu.types.Buffer("FLOAT", depth.size, depth.ravel()))
+    hit_tex = gpu.types.GPUTexture((w, h), format="RGBA32F", data=gpu.types.Buffer("FLOAT", hits.size, hits.ravel()))
     clouds = runtime.cloud_gpu(s.noise_seed)
+    near, _far = engine.render_split(clouds, s.inv_view_proj, s.eye, hit_tex, w, h)
+    near = near[::-1]
+    view = temporal.View.of(np.array(s.inv_view_proj), s.eye, w, h, (axis_depth, axis))
     tv = temporal.TemporalViewport()
-    _redraws(tv, clouds, s.state, _view(s), 16)
     for _ in range(16):
-        tv.redraw(clouds, s.state, _view(s), depth=tex, depth_key=1)
+        tv.redraw(clouds, s.state, view, samples=1, depth=depth_tex, depth_key=1)
     got = tv.read_history()
-    half = s.width // 2
-    assert full[:, :half, 3].max() > 0.3, "the test needs clouds behind the object"
-    assert got[:, :half].max() == 0.0
-    np.testing.assert_allclose(got[:, half:], full[:, half:], rtol=2e-3, atol=2e-3)
+    assert full[:, :half, 3].max() > 0.3, "the test needs clouds in the left half"
+    assert 0.05 < near[:, :half, 3].mean() < 0.95 * full[:, :half, 3].mean(), "... in front of the wall and behind"
+    # The same march, but not the same float operations (the surface's distance comes from the depth
+    # buffer here, from the pre-pass's positions in F12): a ray that crosses a branch's threshold at a
+    # sample (the cheap light samples past alpha 0.8) takes the other branch in one of the two.
+    _same_image(got[:, :half], near[:, :half])
+    _same_image(got[:, half:], full[:, half:])
+    # The view shows the clouds over the wall: the upscale draws them without a depth test.
+    shown = temporal.render_view(tv, clouds, view)
+    _same_image(shown[:, :half], near[:, :half])
     tv.free()
 
 
