@@ -788,7 +788,74 @@ def s_peak(step: Step):
             got = _veiled_share(path, clear, mask)
             step.check(abs(got - want) <= 0.3 * want, f"{engine}: F12 veils {got:.1%} of the peak (bake {want:.1%})")
     _PEAK.update(peak=peak, keep=keep, mask=mask)  # s_peak_animation renders it again, then removes it
+    if renders.get(eevee()) and os.path.exists(renders[eevee()]):
+        yield from _peak_in_the_view(step, peak, _veiled_share(renders[eevee()], clear, mask), mask)
     yield 1.0
+
+
+def _camera_frame(area) -> tuple[int, int, int, int]:
+    """The camera's frame in the 3D view's camera view: (left, top, width, height) in the view's crop."""
+    from bpy_extras.view3d_utils import location_3d_to_region_2d
+
+    scene = bpy.context.scene
+    cam = scene.camera
+    r, rv3d = region(area), area.spaces.active.region_3d
+    corners = [location_3d_to_region_2d(r, rv3d, cam.matrix_world @ c) for c in cam.data.view_frame(scene=scene)]
+    xs, ys = [c.x for c in corners], [c.y for c in corners]
+    left, right, bottom, top = round(min(xs)), round(max(xs)), round(min(ys)), round(max(ys))
+    return left, r.height - top, right - left, top - bottom
+
+
+def _view_pixels(png: str, frame, size):
+    """Display-referred luminance of the camera frame's part of a view crop, sampled to `size`, bottom row first."""
+    import numpy as np
+
+    left, top, w, h = frame
+    lum = _luminance(png)[::-1]  # top row first, as the crop's coordinates
+    part = lum[top : top + h, left : left + w]
+    ys = (np.arange(size[1]) + 0.5) * part.shape[0] / size[1]
+    xs = (np.arange(size[0]) + 0.5) * part.shape[1] / size[0]
+    return part[ys.astype(int)][:, xs.astype(int)][::-1]  # bottom row first, as _luminance gives a render
+
+
+def _peak_in_the_view(step: Step, peak, f12_share: float, mask):
+    """The camera view of the peak in the 3D view (Solid, its material's flat colour, no overlays) with the
+    clouds shown and hidden: the clouds in front of its flanks are drawn over it, on as much of it as F12
+    veils (docs/viewport.md#clouds-in-front-of-the-scene)."""
+    area = view3d_area()
+    space = area.spaces.active
+    shading, overlays = space.shading, space.overlay.show_overlays
+    keep = (shading.type, shading.light, shading.color_type, space.region_3d.view_perspective)
+    peak.active_material.diffuse_color = (0.3, 0.15, 0.08, 1.0)
+    shading.type, shading.light, shading.color_type = "SOLID", "FLAT", "MATERIAL"
+    space.overlay.show_overlays = False
+    _check_samples(step)
+    try:
+        with override():
+            if space.region_3d.view_perspective != "CAMERA":
+                bpy.ops.view3d.view_camera()
+            bpy.ops.view3d.view_center_camera()
+        yield 2.0
+        took = yield from _converge()
+        shown = shot(step, "07_peak_view_clouds", "view")
+        with override():
+            bpy.ops.nubis.view_toggle()
+        yield 3.0
+        hidden = shot(step, "07_peak_view_hidden", "view")
+        with override():
+            bpy.ops.nubis.view_toggle()
+        frame = _camera_frame(area)
+        size = (RENDER_W, RENDER_H)
+        a, b = _view_pixels(shown, frame, size), _view_pixels(hidden, frame, size)
+        share = float((abs(a - b)[mask] > 0.05).mean())
+        step.check(
+            0.7 * f12_share <= share <= 1.43 * f12_share,
+            f"the 3D view veils {share:.1%} of the peak (F12 {f12_share:.1%}; converged in {took:.0f} s)",
+        )
+    finally:
+        shading.type, shading.light, shading.color_type, perspective = keep
+        space.overlay.show_overlays = overlays
+        space.region_3d.view_perspective = perspective
 
 
 _PEAK: dict = {}  # the peak s_peak made, the camera it changed and the peak's pixels, for s_peak_animation

@@ -414,23 +414,23 @@ def _silhouette_band(covered: np.ndarray, reach: int = 2) -> np.ndarray:
 
 
 def test_a_panning_viewport_leaves_no_veil_behind_at_the_peaks_silhouette(blender):
-    """The viewport's history while the view pans across the peak (16 frames, 1.5 degrees apart, 4
-    redraws each, as a moving view redraws): on the peak's pixels at its silhouette the clouds are no
+    """The viewport's history while the view pans across the peak (24 frames, a degree apart, 4 redraws
+    each, as a moving view redraws): on the peak's pixels at its silhouette the clouds are no
     more opaque than the frame's own march says (the history of the sky beside it is not reprojected onto
-    it), and no more of them are off by 0.1 than of the peak's inner pixels. Measured at 96x54: a bias of
-    -0.006 and 3.4 % off against 11 % inside; reprojecting across the silhouette as before read +0.007
-    and 5.6 % (docs/viewport.md#clouds-in-front-of-the-scene)."""
+    it), and fewer of them are off by 0.1 than half the share of the peak's inner pixels, at most 3.5 %.
+    Measured at 96x54: a bias of -0.016 and 2.8 % off against 8.1 % inside; reprojecting across the
+    silhouette as before read 4.3 % (docs/viewport.md#clouds-in-front-of-the-scene)."""
     from nubis_addon.blender import preview, runtime, scene_io
     from nubis_addon.render import temporal
 
     scene, _obj = _scene(blender, "below")
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
     moving = temporal.TemporalViewport()
-    preview.orbit_camera(scene, -18.0)
+    preview.orbit_camera(scene, -12.0)
     sums = np.zeros(5)
-    for frame in range(16):
+    for frame in range(24):
         if frame:
-            preview.orbit_camera(scene, 1.5)
+            preview.orbit_camera(scene, 1.0)
         view = preview.camera_view(scene, W, H)
         state = scene_io.state_from_scene(scene)
         with preview.scene_depth(scene, view) as (deep, depth):
@@ -452,4 +452,4 @@ def test_a_panning_viewport_leaves_no_veil_behind_at_the_peaks_silhouette(blende
     print(f"silhouette: bias {bias:+.4f}, {off:.1%} off by 0.1 (inside {off_inside:.1%})")
     assert sums[1] > 1000 and sums[4] > 1000, sums
     assert bias <= 0.003, bias
-    assert off <= 0.045 and off <= off_inside, (off, off_inside)
+    assert off <= 0.035 and off <= 0.5 * off_inside, (off, off_inside)
