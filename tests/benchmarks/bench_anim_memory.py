@@ -15,7 +15,6 @@ of growth after frame 10 over 250 frames at 160 x 90.
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import sys
 import tempfile
@@ -23,6 +22,7 @@ import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 sys.path.insert(0, ROOT)
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # peak.py
 
 
 def rss_mb() -> float:
@@ -38,17 +38,9 @@ def main() -> int:
     ap.add_argument("--out", default="")
     args = ap.parse_args()
     import bpy
+    from peak import peak_scene
 
-    from nubis_addon.blender import ensure_registered
-
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    ensure_registered()
-    bpy.ops.nubis.new_cloudscape(preset="default")
-    scene = bpy.context.scene
-    bpy.ops.mesh.primitive_cone_add(vertices=64, radius1=6000.0, depth=5000.0, location=(0, 16000, 2500))
-    cam = scene.camera
-    cam.location, cam.rotation_euler = (0.0, 0.0, 1000.0), (math.radians(92.0), 0.0, 0.0)
-    cam.data.lens, cam.data.clip_end = 30.0, 100000.0
+    scene = peak_scene()
     w, h = (int(v) for v in args.size.split("x"))
     r = scene.render
     r.resolution_x, r.resolution_y, r.resolution_percentage = w, h, 100

@@ -25,22 +25,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
-
-
-def _peak_scene():
-    import bpy
-
-    from nubis_addon.blender import ensure_registered
-
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    ensure_registered()
-    bpy.ops.nubis.new_cloudscape(preset="default")
-    scene = bpy.context.scene
-    bpy.ops.mesh.primitive_cone_add(vertices=64, radius1=6000.0, depth=5000.0, location=(0, 16000, 2500))
-    cam = scene.camera
-    cam.location, cam.rotation_euler = (0.0, 0.0, 1000.0), (math.radians(92.0), 0.0, 0.0)
-    cam.data.lens, cam.data.clip_end = 30.0, 100000.0
-    return scene
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 
 def _timed(tv, clouds, state, view, depth) -> float:
@@ -55,6 +40,7 @@ def main() -> None:
     import bpy  # noqa: F401 - Blender's modules (gpu) come with it
     import gpu
     import numpy as np
+    from peak import peak_scene
 
     import nubis_addon
     from nubis_addon.blender import preview, runtime, scene_io, viewport
@@ -64,7 +50,7 @@ def main() -> None:
     width, height = (int(a) for a in (sys.argv[1:3] if len(sys.argv) > 2 else (640, 360)))
     nubis_addon.register()
     ensure_gpu_context()
-    scene = _peak_scene()
+    scene = peak_scene()
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
     state = scene_io.state_from_scene(scene)
     view = preview.camera_view(scene, width, height)

@@ -70,7 +70,7 @@ def main() -> None:
     parser.add_argument(
         "--voxel-floor", type=float, default=30.0, help="the bake's coarsest voxels (compare --draft's)"
     )
-    args = parser.parse_args()
+    args = parser.parse_intermixed_args()
     width, height = (int(v) for v in args.size.split("x"))
     ensure_gpu_context()
     import nubis_addon
