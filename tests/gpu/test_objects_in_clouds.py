@@ -413,24 +413,34 @@ def _silhouette_band(covered: np.ndarray, reach: int = 2) -> np.ndarray:
     return band
 
 
-def test_a_panning_viewport_leaves_no_veil_behind_at_the_peaks_silhouette(blender):
-    """The viewport's history while the view pans across the peak (24 frames, a degree apart, 4 redraws
-    each, as a moving view redraws): on the peak's pixels at its silhouette the clouds are no
-    more opaque than the frame's own march says (the history of the sky beside it is not reprojected onto
-    it), and fewer of them are off by 0.1 than half the share of the peak's inner pixels, at most 3.5 %.
-    Measured at 96x54: a bias of -0.016 and 2.8 % off against 8.1 % inside; reprojecting across the
-    silhouette as before read 4.3 % (docs/viewport.md#clouds-in-front-of-the-scene)."""
+def _orbit(blender, scene, degrees: float, centre=(0.0, 16000.0)) -> None:
+    """Move the camera about the vertical through `centre` (x, y), turning it with its path."""
+    from mathutils import Matrix
+
+    c = Matrix.Translation((*centre, 0.0))
+    turn = c @ Matrix.Rotation(math.radians(degrees), 4, "Z") @ c.inverted()
+    scene.camera.matrix_world = turn @ scene.camera.matrix_world
+    blender.context.view_layer.update()
+
+
+def test_an_orbit_around_the_peak_leaves_no_veil_behind_at_its_silhouette(blender):
+    """The viewport's history while the camera orbits the peak (24 frames half a degree of arc apart, 140 m
+    each, 4 redraws a frame, as a moving view redraws): on the peak's pixels at its silhouette the clouds
+    are no more opaque than the frame's own march says on average (the history of the sky beside it is not
+    reprojected onto it), and at most 6 % of them are off by 0.1. Measured at 96x54: a bias of -0.003 and
+    4.6 % off (7.6 % of the peak's inner pixels, 12 % of the sky's); reprojecting across the silhouette as
+    before read +0.004 and 4.5 % (docs/viewport.md#clouds-in-front-of-the-scene)."""
     from nubis_addon.blender import preview, runtime, scene_io
     from nubis_addon.render import temporal
 
     scene, _obj = _scene(blender, "below")
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
     moving = temporal.TemporalViewport()
-    preview.orbit_camera(scene, -12.0)
+    _orbit(blender, scene, -6.0)
     sums = np.zeros(5)
     for frame in range(24):
         if frame:
-            preview.orbit_camera(scene, 1.0)
+            _orbit(blender, scene, 0.5)
         view = preview.camera_view(scene, W, H)
         state = scene_io.state_from_scene(scene)
         with preview.scene_depth(scene, view) as (deep, depth):
@@ -451,5 +461,5 @@ def test_a_panning_viewport_leaves_no_veil_behind_at_the_peaks_silhouette(blende
     bias, off, off_inside = sums[0] / sums[1], sums[2] / sums[1], sums[3] / sums[4]
     print(f"silhouette: bias {bias:+.4f}, {off:.1%} off by 0.1 (inside {off_inside:.1%})")
     assert sums[1] > 1000 and sums[4] > 1000, sums
-    assert bias <= 0.003, bias
-    assert off <= 0.035 and off <= 0.5 * off_inside, (off, off_inside)
+    assert bias <= 0.0, bias
+    assert off <= 0.06, (off, off_inside)
