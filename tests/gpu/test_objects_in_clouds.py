@@ -452,7 +452,8 @@ def test_an_orbit_around_the_peak_leaves_no_veil_behind_at_its_silhouette(blende
                 still.redraw(clouds, state, deep, 1.0, 1, depth=depth, depth_key=frame)
             march = still.read_history()[..., 3]
             still.free()
-            covered = np.asarray(depth.read(), np.float32).reshape(H, W)[::-1] < 1.0
+            # Through a list: the buffer's own strides differ between Blender's lines.
+            covered = np.array(depth.read().to_list(), np.float32).reshape(H, W)[::-1] < 1.0
         band = _silhouette_band(covered)
         edge, inner = band & covered, covered & ~band
         diff = shown - march
