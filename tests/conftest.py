@@ -127,10 +127,10 @@ LONGEST_FIRST = (
 
 # The tests CI runs on the older Blender lines too (`-m lines`; 5.3 runs every test): each surface of
 # Blender's own API the extension uses, once, where the lines differ (docs/measurements.md#ci). The rest
-# measure the project's own GLSL, numpy and command line, the same code on every line, on 5.3 only; the
-# whole suite runs on every line before a change lands. By file: "*" is every test in it, else test names
-# (every case of a parametrized test). A name that matches nothing fails the collection, so a renamed test
-# cannot fall out of the lines unnoticed.
+# measure the project's own GLSL, numpy and command line, the same code on every line, on 5.3 only (the
+# whole suite on an older line, `.venv-4.5/bin/python -m pytest -q`, is run by hand). By file: "*" is every
+# test in it, else test names (every case of a parametrized test). A name that matches nothing fails the
+# collection, so a renamed test cannot fall out of the lines unnoticed.
 EVERY_LINE = {
     # the GPU module: a context in background mode, shader compiles, offscreen draws, the 3D view's handler
     "gpu/test_gpu_render.py": "*",
