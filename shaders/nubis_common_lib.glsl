@@ -161,6 +161,16 @@ float nubis_axial_to_ray(float axial, vec3 origin, vec3 dir, vec4 axis)
   return max((axial - (dot(origin, axis.xyz) - axis.w)) / along, 0.0);
 }
 
+/* Whether two surface distances along the view's axis (0 = the sky) are the same surface: both sky, or
+ * both surfaces within 5 % of each other (the viewport's history and upscale). */
+bool nubis_same_surface(float a, float b)
+{
+  if (a <= 0.0 || b <= 0.0) {
+    return a <= 0.0 && b <= 0.0;
+  }
+  return abs(a - b) <= 0.05 * max(a, b);
+}
+
 /* The world-space ray through a screen position (uv in [0, 1]). A perspective view passes its eye
  * (eye.w = 1): unprojecting the near plane through a frustum kilometres deep loses metres to float
  * cancellation, which shifts every ray sideways and moves cloud edges. Orthographic views (eye.w = 0)

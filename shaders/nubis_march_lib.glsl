@@ -555,6 +555,16 @@ NubisParts nubis_march_parts(vec3 origin, vec3 dir, vec2 pixel, float split, flo
   return parts;
 }
 
+#if NUBIS_CIRRUS
+/* Whether the cirrus layer lies in front of a surface `split` along the ray: the eye or the surface is
+ * above its altitude. */
+bool nubis_cirrus_in_front(vec3 origin, vec3 dir, float split)
+{
+  float R = P.layer_planet_radius;
+  return nubis_altitude(origin, R) > P.cirrus_altitude || nubis_altitude(origin + dir * split, R) > P.cirrus_altitude;
+}
+#endif
+
 /* The clouds in front of a surface `split` along the ray, and nothing behind it (the viewport over the scene's
  * objects, as F12's near part; docs/viewport.md#clouds-in-front-of-the-scene): the march ends at the surface.
  * The cirrus layer is in front when the eye or the surface is above its altitude. */
@@ -565,8 +575,7 @@ vec4 nubis_march_in_front(vec3 origin, vec3 dir, vec2 pixel, float split, out fl
   flash_mask = parts.flash_near;
   vec4 near = parts.near;
 #if NUBIS_CIRRUS
-  float R = P.layer_planet_radius;
-  if (nubis_altitude(origin, R) > P.cirrus_altitude || nubis_altitude(origin + dir * split, R) > P.cirrus_altitude) {
+  if (nubis_cirrus_in_front(origin, dir, split)) {
     float behind;
     near = nubis_with_cirrus(near, origin, dir, pixel, behind);
     flash_mask *= behind;
@@ -611,11 +620,8 @@ vec4 nubis_shade_ray_parts(vec3 origin, vec3 dir, vec2 pixel, float split, out v
   near.rgb += NUBIS_FLASH_COLOUR * dot(parts.flash_near, nubis_flash_intensities());
   far.rgb += NUBIS_FLASH_COLOUR * dot(parts.flash_far, nubis_flash_intensities());
 #if NUBIS_CIRRUS
-  float R = P.layer_planet_radius;
-  bool cirrus_near = split >= NUBIS_NO_SPLIT || nubis_altitude(origin, R) > P.cirrus_altitude ||
-                     nubis_altitude(origin + dir * split, R) > P.cirrus_altitude;
   float behind;
-  if (cirrus_near) {
+  if (split >= NUBIS_NO_SPLIT || nubis_cirrus_in_front(origin, dir, split)) {
     near = nubis_with_cirrus(near, origin, dir, pixel, behind);
   }
   else {

@@ -66,16 +66,6 @@ vec4 nubis_history_cubic(sampler2D tex, vec2 uv, vec2 size)
   return c / weight;
 }
 
-/* Whether two surface distances along the view's axis (0 = the sky) are the same surface: both sky, or
- * both surfaces within 5 % of each other. */
-bool nubis_same_surface(float a, float b)
-{
-  if (a <= 0.0 || b <= 0.0) {
-    return a <= 0.0 && b <= 0.0;
-  }
-  return abs(a - b) <= 0.05 * max(a, b);
-}
-
 /* The scene's surface at history pixel q (its axial distance, 0 = the sky or no depth bound). */
 float nubis_surface_at(ivec2 q)
 {

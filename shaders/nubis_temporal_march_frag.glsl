@@ -3,8 +3,8 @@
  * pixel is marched exactly as the full-resolution march would march it (same ray, same jitter), so a
  * still view converges to that image. Outputs: the clouds and cirrus without the lightning flashes,
  * (cloud distance, the scene's surface's distance along the view's axis or 0, -, -), and the per-storm
- * flash mask (nubis_march). Where the scene's geometry stands (cull.x = 1 when its depth is bound; cull.yz
- * scale history pixels to its pixels), the march ends at its surface (GDC22: the march stops at the depth
+ * flash mask (nubis_march). Where the scene's geometry stands (T.scene.x = 1 when its depth is bound;
+ * T.scene.yz scale history pixels to its pixels), the march ends at its surface (GDC22: the march stops at the depth
  * of what the scene draws) and holds the clouds in front of it, which the upscale lays over the object
  * (docs/viewport.md#clouds-in-front-of-the-scene); T carries the view's depth mapping. */
 void main()
@@ -17,8 +17,8 @@ void main()
     return;
   }
   float surface = 0.0;
-  if (cull.x > 0.5) {
-    surface = nubis_axial_depth(texelFetch(scene_depth, ivec2(vec2(pixel) * cull.yz), 0).r, T.depth_map);
+  if (T.scene.x > 0.5) {
+    surface = nubis_axial_depth(texelFetch(scene_depth, ivec2(vec2(pixel) * T.scene.yz), 0).r, T.depth_map);
   }
   vec2 centre = vec2(pixel) + 0.5;
   vec3 origin, dir;

@@ -5,15 +5,6 @@
  * (or the sky, for a pixel of sky) where its taps straddle a silhouette, so an object's edge is neither
  * veiled by the sky's clouds nor left clear by its own (docs/viewport.md#clouds-in-front-of-the-scene). */
 
-/* Whether the surfaces at two axial distances (0 = the sky) are the same (nubis_resolve_frag.glsl's rule). */
-bool nubis_upscale_same(float a, float b)
-{
-  if (a <= 0.0 || b <= 0.0) {
-    return a <= 0.0 && b <= 0.0;
-  }
-  return abs(a - b) <= 0.05 * max(a, b);
-}
-
 void main()
 {
   vec2 texel = filter_size.zw;
@@ -41,7 +32,7 @@ void main()
   }
   if (scene.x > 0.5) {
     float surface = nubis_axial_depth(texelFetch(scene_depth, ivec2(gl_FragCoord.xy), 0).r, depth_map);
-    if (!nubis_upscale_same(seen, surface)) {
+    if (!nubis_same_surface(seen, surface)) {
       /* The taps mix surfaces: the history texels around this pixel that saw its own, nearest first. */
       vec2 size = 1.0 / texel;
       vec2 p = uv * size - 0.5;
@@ -52,7 +43,7 @@ void main()
       for (int dy = -1; dy <= 1; dy++) {
         for (int dx = -1; dx <= 1; dx++) {
           ivec2 t = clamp(centre + ivec2(dx, dy), ivec2(0), last);
-          if (!nubis_upscale_same(texelFetch(hist_attr, t, 0).y, surface)) {
+          if (!nubis_same_surface(texelFetch(hist_attr, t, 0).y, surface)) {
             continue;
           }
           vec2 d = vec2(t) - p;

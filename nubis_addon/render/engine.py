@@ -98,7 +98,7 @@ STAGES: dict[str, Stage] = {
     # the resolve into the full-resolution history, and the upscale onto the view.
     # Where the scene's depth is bound, the march ends at its surfaces (T: the view's depth mapping).
     "temporal_march": Stage(
-        (*_VIEW, ("VEC4", "block"), ("VEC4", "cull")),
+        (*_VIEW, ("VEC4", "block")),
         (("FLOAT_2D", "scene_depth"),),
         outputs=_TEMPORAL_TARGETS,
         blocks=(("NubisTemporal", "T"),),

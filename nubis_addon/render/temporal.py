@@ -219,7 +219,7 @@ class TemporalViewport:
             ]
         ).astype(np.float32)
         temporal_ubo = gpu.types.GPUUniformBuf(block.tobytes())
-        self._march(clouds, view, defines, offset, depth_tex if depth is not None else None, temporal_ubo)
+        self._march(clouds, view, defines, offset, depth_tex, temporal_ubo)
         self._resolve(clouds, defines, temporal_ubo, depth_tex)
         self.redraw_index += 1
         self.since_change += 1
@@ -258,15 +258,10 @@ class TemporalViewport:
             self._dummy_depth = gpu.types.GPUTexture((1, 1), format="R32F", data=nothing)
         return self._dummy_depth
 
-    def _march(self, clouds, view: View, defines, offset: tuple[float, float], depth, temporal_ubo) -> None:
+    def _march(self, clouds, view: View, defines, offset: tuple[float, float], depth_tex, temporal_ubo) -> None:
         """Step 1: march one pixel of every block into the working buffer, each up to the scene's surface
-        where its depth is bound."""
+        where its depth is bound (T.scene says whether, and how its pixels scale to the history's)."""
         history_size, work_size = self._sizes
-        if depth is None:
-            depth_tex, cull = self._no_depth(), (0.0, 0.0, 0.0, 0.0)
-        else:
-            depth_tex = depth
-            cull = (1.0, view.width / history_size[0], view.height / history_size[1], 0.0)
         with self._work["fb"].bind():
             gpu.state.blend_set("NONE")
             gpu.state.depth_test_set("NONE")
@@ -277,7 +272,6 @@ class TemporalViewport:
             sh.uniform_float("eye", view.eye)
             block = (float(offset[0]), float(offset[1]), float(history_size[0]), float(history_size[1]))
             sh.uniform_float("block", block)
-            sh.uniform_float("cull", cull)
             sh.uniform_sampler("scene_depth", depth_tex)
             sh.uniform_block("T", temporal_ubo)
             engine.fullscreen_batch("temporal_march", defines).draw(sh)
