@@ -736,6 +736,9 @@ vec3 nubis_in_scattering(
     float above = l.above;
     if (P.lighting_side_light > 0.0 && l.side > 0.0) {
       above = l.above * l.side / (l.side + P.lighting_side_light * l.above);
+      /* What comes in through the flank is what an upright surface receives, the horizon's light most
+       * (core/sky.py flank_radiance): the flank's share of the light is its share of the inverse depths. */
+      from_above = mix(from_above, P.ambient_flank.rgb, 1.0 - above / max(l.above, 1e-6));
     }
     sky_light = from_above * nubis_slab_diffusion(above, l.below, k, e, kappa) +
                 P.ambient_below.rgb * nubis_slab_diffusion(l.below, l.above, k, e, kappa);

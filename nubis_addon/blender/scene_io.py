@@ -901,7 +901,7 @@ def state_from_scene(scene, camera_location=None, fields: tuple | None = None, w
     fps = scene_fps(scene)
     time = (scene.frame_current + scene.frame_subframe) / fps * params["wind_time_scale"] + params["wind_time_offset"]
     env = sky.environment(scene, wait)
-    above, below = skymath.hemisphere_radiance_cached(env)
+    above, below, flank = skymath.hemisphere_radiance_cached(env)
     return CloudState(
         params=params,
         field_a=fields[0],
@@ -912,6 +912,7 @@ def state_from_scene(scene, camera_location=None, fields: tuple | None = None, w
         sun_air=air,
         ambient=above,
         ambient_below=below,
+        ambient_flank=sky.flank_light(scene, above, flank),
         sky_env=env,
         draw_center=(float(camera_location[0]), float(camera_location[1])),
         time=time,

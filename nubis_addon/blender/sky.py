@@ -42,6 +42,9 @@ def sky_type() -> str:
 
 
 STRENGTH_KEY = "nubis_sky_strength"
+# The flank light's balance at REFERENCE_SUN (core/sky.py flank_balance), kept on the World with its
+# calibration so a saved file keeps it.
+FLANK_KEY = "nubis_flank_balance"
 
 
 def atmosphere(world) -> dict:
@@ -113,13 +116,14 @@ def build_world(scene, cfg: dict, sun) -> bpy.types.World:
     # sky, not a daytime-bright one (docs/sky.md#the-sun-each-cloud-sees).
     bg.inputs["Strength"].default_value = 1.0
     sync_ground(scene, sun)
-    reference = _hemisphere_at(scene, tex, REFERENCE_SUN)
+    reference, ref_env = _hemisphere_at(scene, tex, REFERENCE_SUN)
     env = capture_world(scene, ENV_WIDTH)
     above, _below = skymath.hemisphere_radiance(env)
     target = float(metrics.luminance(np.array(cfg["color"], np.float32))) * cfg["strength"]
     have = float(metrics.luminance(np.array(reference, np.float32)))
     strength = float(target / have) if have > 1e-9 else cfg["strength"]
     bg.inputs["Strength"].default_value = strength
+    world[FLANK_KEY] = _flank_balance_at_reference(scene, tex, sun, ref_env * np.float32(strength))
     # The sky's light is linear in its strength; the ground's sun term is not (sync_ground).
     _sky_irradiance[world.name] = np.array(above, np.float64) * strength
     sync_ground(scene, sun)
@@ -133,16 +137,45 @@ def build_world(scene, cfg: dict, sun) -> bpy.types.World:
 REFERENCE_SUN = math.radians(30.0)
 
 
-def _hemisphere_at(scene, tex, elevation: float) -> tuple[float, float, float]:
-    """The sky's radiance from above (E / pi) with its sun at `elevation`, at the World's strength now;
-    the sun is put back. The capture is cached like every other (capture_world)."""
+def _hemisphere_at(scene, tex, elevation: float) -> tuple[tuple, np.ndarray]:
+    """The sky's radiance from above (E / pi) with its sun at `elevation`, at the World's strength now,
+    and the capture it came from; the sun is put back. The capture is cached like every other
+    (capture_world)."""
     own = tex.sun_elevation
     tex.sun_elevation = elevation
     try:
-        above, _below = skymath.hemisphere_radiance(capture_world(scene, ENV_WIDTH))
+        env = capture_world(scene, ENV_WIDTH)
+        above, _below = skymath.hemisphere_radiance(env)
     finally:
         tex.sun_elevation = own
-    return above
+    return above, env
+
+
+def _flank_balance_at_reference(scene, tex, sun, env: np.ndarray) -> float:
+    """core/sky.py flank_balance of the sky at REFERENCE_SUN (`env`: its capture at the calibrated
+    strength), the ground below it lit as that sun and that sky would light it."""
+    light = skymath.hemisphere_radiance(env)[0]
+    if sun is not None and not sun.hide_render:
+        air = (tex.altitude, tex.air_density, getattr(tex, _aerosol_attr()), tex.ozone_density)
+        colour = np.array(skymath.transmittance(REFERENCE_SUN, *air), np.float64)
+        light = np.array(light) + colour * sun.data.energy * math.sin(REFERENCE_SUN) / math.pi
+    ground = tuple(float(c) for c in np.array(scene.nubis.sky_ground) * np.asarray(light, np.float64))
+    env = skymath.with_ground(env, ground, HORIZON_BAND)
+    top, _below = skymath.hemisphere_radiance(env)
+    return skymath.flank_balance(top, skymath.flank_radiance(env))
+
+
+def flank_light(scene, above, flank) -> tuple[float, float, float]:
+    """The light through a cloud's flank the clouds take: the environment's own (core/sky.py
+    flank_radiance) at the balance a Nubis sky measured at its calibration's sun; a World of any other
+    kind (or an ambient colour) keeps the luminance from above and takes the flank's colour."""
+    world = scene.world
+    balance = None
+    if scene.nubis.ambient_source != "COLOR" and is_nubis_sky(world):
+        balance = world.get(FLANK_KEY)
+    if balance is None:
+        balance = skymath.flank_balance(above, flank)
+    return tuple(float(c) * float(balance) for c in flank)
 
 
 def find_sun(scene):

@@ -218,18 +218,43 @@ def hemisphere_radiance(env: np.ndarray) -> tuple[tuple[float, float, float], tu
     return tuple(float(c) for c in above), tuple(float(c) for c in below)
 
 
+def flank_radiance(env: np.ndarray) -> tuple[float, float, float]:
+    """What an upright surface receives from the environment (E / pi), averaged over the directions it
+    can face: the light entering a cloud through its flank. Each direction weighs with the sine of its
+    angle from the zenith (the mean over azimuth of a vertical surface's cosine), the sky above the
+    horizon and the ground below it alike; so the horizon, which a surface facing up barely sees, counts
+    most. A uniform environment returns its own radiance (docs/viewport.md#light-model)."""
+    h, w = env.shape[:2]
+    dirs = directions(w, h)
+    weight = solid_angles(w, h) * np.sqrt(np.clip(1.0 - dirs[..., 2] ** 2, 0.0, None))
+    rgb = env[..., :3].astype(np.float64)
+    total = (rgb * weight[..., None]).sum(axis=(0, 1)) / max(float(weight.sum()), 1e-12)
+    return tuple(float(c) for c in total)
+
+
+def flank_balance(above, flank) -> float:
+    """The factor that gives the flank's light the luminance of the light from above: the sky light's
+    strength (the Ambient setting) was fitted with every cloud lit by the light from above, so a sky
+    whose flank light is weighed at its fitting sun keeps the fit's balance there and takes the flank's
+    own colour and its change with the sun (docs/viewport.md#light-model)."""
+    weights = (0.2126, 0.7152, 0.0722)  # Rec. 709 luminance, as core/metrics.py
+    top = sum(w * c for w, c in zip(weights, above, strict=True))
+    side = sum(w * c for w, c in zip(weights, flank, strict=True))
+    return float(top / side) if side > 1e-12 and top > 0.0 else 1.0
+
+
 _hemispheres: dict[int, tuple] = {}
 
 
 def hemisphere_radiance_cached(env: np.ndarray) -> tuple:
-    """hemisphere_radiance of an environment array, remembered per array (callers replace arrays, they
-    never edit one in place), so a redraw costs nothing."""
+    """hemisphere_radiance and flank_radiance of an environment array (above, below, flank), remembered
+    per array (callers replace arrays, they never edit one in place), so a redraw costs nothing."""
     hit = _hemispheres.get(id(env))
     if hit is not None and hit[0] is env:
         return hit[1]
     if len(_hemispheres) > 32:
         _hemispheres.clear()
-    result = hemisphere_radiance(env)
+    result = (*hemisphere_radiance(env), flank_radiance(env))
     _hemispheres[id(env)] = (env, result)
     return result
 

@@ -57,6 +57,7 @@ class CloudState:
     sun_air: tuple[float, float, float] | None = None
     ambient: tuple[float, float, float] = (0.35, 0.5, 0.8)  # the sky's radiance from above (E / pi)
     ambient_below: tuple[float, float, float] | None = None  # ... from below (None: the same as above)
+    ambient_flank: tuple[float, float, float] | None = None  # ... through an upright flank (None: above's)
     # The World's radiance in every direction, equirectangular (H, W, 3) bottom row first (core/sky.py),
     # for the reference sky light and the aerial perspective; None: `ambient` everywhere.
     sky_env: np.ndarray | None = None

@@ -350,6 +350,7 @@ class CloudGPU:
             sun_radiance=(1.0, 1.0, 1.0),
             ambient=(1.0, 1.0, 1.0),
             ambient_below=None,
+            ambient_flank=None,
             jitter=True,
             jitter_pass=0,
             pixel_angle=0.0,

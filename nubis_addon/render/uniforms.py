@@ -49,6 +49,11 @@ _VEC4: tuple[tuple[str, str, Callable[[CloudState], tuple]], ...] = (
         "sky light from below (the ground) x the ambient setting, -",
         lambda st: (*(c * st.params["lighting_ambient"] for c in (st.ambient_below or st.ambient)), 0.0),
     ),
+    (
+        "ambient_flank",
+        "sky and ground light through an upright flank (core/sky.py flank_radiance) x the ambient setting, -",
+        lambda st: (*(c * st.params["lighting_ambient"] for c in (st.ambient_flank or st.ambient)), 0.0),
+    ),
     *(
         (f"{name}_volume_{axis}", f"unit coordinate {axis} in the {name}'s optical-depth volume: dot(xyz, p) + w", fn)
         for name, volume in (("sun", lightvolume.sun_volume), ("sky", lightvolume.sky_volume))

@@ -252,3 +252,29 @@ def _shell_gone(blender) -> bool:
     return (
         blender.data.objects.get(sun_air.SHELL_NAME) is None and blender.data.materials.get(sun_air.SHELL_NAME) is None
     )
+
+
+def test_a_cloud_s_flank_takes_the_horizon_s_light_at_the_luminance_its_calibration_fixed(make_scene):
+    """docs/viewport.md#light-model: at the sun a Nubis sky is calibrated at (30°) the flank's light has
+    the luminance of the light from above; at 4° it is brighter than that and far warmer (the glow
+    along the horizon against the blue overhead); the march's clouds take its colour."""
+    from nubis_addon.blender import pipeline
+    from nubis_addon.core import metrics
+
+    def lum(c):
+        return float(metrics.luminance(np.array(c, np.float32)))
+
+    _scene, day, _gpu = _sun_scene(make_scene, 30.0)
+    assert lum(day.ambient_flank) == pytest.approx(lum(day.ambient), rel=0.01)
+    scene, low, _gpu = _sun_scene(make_scene, 4.0)
+    assert 1.02 < lum(low.ambient_flank) / lum(low.ambient) < 1.3
+    warmth = (low.ambient_flank[0] / low.ambient_flank[2]) / (low.ambient[0] / low.ambient[2])
+    assert warmth > 1.5
+    shot = pipeline.viewport_shot(scene, 96, 54, 0, "full")
+    flank = pipeline.render_shot(shot, 2)
+    shot.state = dataclasses.replace(shot.state, ambient_flank=shot.state.ambient)
+    above = pipeline.render_shot(shot, 2)
+    cloud = (flank[..., 3] > 0.5) & (above[..., 3] > 0.5)
+    assert cloud.sum() > 200
+    red_blue = [img[cloud][:, 0].sum() / img[cloud][:, 2].sum() for img in (flank, above)]
+    assert red_blue[0] > 1.03 * red_blue[1], red_blue
