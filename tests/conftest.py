@@ -41,7 +41,7 @@ def blender(cache_dir):
 @pytest.fixture
 def make_scene(blender):
     """A fresh factory scene turned into a preset's cloudscape; `overrides` edit the preset first."""
-    from nubis_addon.blender import ensure_registered, scene_io
+    from nubis_addon.blender import ensure_registered, scenepresets
     from nubis_addon.core.presets import load_preset
 
     def make(name: str = "default", **overrides):
@@ -55,7 +55,7 @@ def make_scene(blender):
         blender.ops.wm.read_factory_settings(use_empty=True)
         ensure_registered()
         scene = blender.context.scene
-        scene_io.apply_preset(scene, preset)
+        scenepresets.apply_preset(scene, preset)
         return scene
 
     return make

@@ -6,7 +6,7 @@ import numpy as np
 def split_coverage_scene(make_scene, **overrides):
     """Coverage 1 on the -X half of the field and 0 on the +X half, tall cumulus, no cirrus, a camera
     12 km up looking straight down at the split."""
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import datafield
 
     scene = make_scene(
         "default",
@@ -19,8 +19,8 @@ def split_coverage_scene(make_scene, **overrides):
     a = np.zeros((res, res, 4), np.float32)
     a[:, : res // 2, 0] = 1.0
     a[..., 2] = 1.0
-    scene_io.write_field_image(scene.nubis, "a", a)
-    scene_io.write_field_image(scene.nubis, "cirrus", np.zeros((res, res, 4), np.float32))
+    datafield.write_field_image(scene.nubis, "a", a)
+    datafield.write_field_image(scene.nubis, "cirrus", np.zeros((res, res, 4), np.float32))
     return scene
 
 
@@ -48,12 +48,12 @@ def camera_view(bpy, scene, width: int, height: int):
     """A 3D view's region-data stand-in looking through the scene camera at width x height."""
     from types import SimpleNamespace
 
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import sceneparams
 
     depsgraph = bpy.context.evaluated_depsgraph_get()
     cam = scene.camera.evaluated_get(depsgraph)
     return SimpleNamespace(
         window_matrix=cam.calc_matrix_camera(depsgraph, x=width, y=height, scale_x=1.0, scale_y=1.0),
-        view_matrix=scene_io.evaluated_matrix(scene.camera).inverted(),
+        view_matrix=sceneparams.evaluated_matrix(scene.camera).inverted(),
         is_perspective=True,
     )

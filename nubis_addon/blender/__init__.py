@@ -15,8 +15,12 @@ after it.
   the clouds in front of the objects;
 - viewport: the 3D view's draw; snapshot: what a bake reads from the scene when it starts, with GPU inputs
   of its own;
-- scene_io: Blender data to and from the plain data core/ and render/ work on; reference: Cycles' noise
-  and its reuse;
+- scenepresets: a preset into a scene and a scene back into a preset; scene_io: the scene as one
+  CloudState, what core/ and render/ draw from;
+- datafield: the data field in the scene (its field layers, images, strokes and composite, for every cloud
+  layer); superstorms: the storms' Empties, stencils and lights; sceneparams: the scene's settings as plain
+  values, their animation, and what the session remembers of each scene; reference: Cycles' noise and its
+  reuse;
 - sun_air: Cycles rendering the bake lit by the sun through the air (a shell only shadow rays see);
 - sky: the physical sky World and its captures;
 - vdbclouds: Volume objects drawn as Nubis clouds; mainthread: work a render thread hands to the main

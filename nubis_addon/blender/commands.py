@@ -17,7 +17,18 @@ from ..core.fsutil import check_output_dir, not_a_file
 from ..core.jobs import BakeOptions, BenchmarkOptions, CompareOptions, PreviewOptions, RenderOptions
 from ..core.presets import load_preset
 from ..render.gpu_context import ensure_gpu_context
-from . import farm, pipeline, preview, registration, scene_io, scene_render, snapshot, ui, vdbclouds
+from . import (
+    datafield,
+    farm,
+    pipeline,
+    preview,
+    registration,
+    scene_render,
+    scenepresets,
+    snapshot,
+    ui,
+    vdbclouds,
+)
 
 PROG = "nubis"
 # compare --draft bakes voxels no finer than this (metres): at half the scene's size the camera-footprint
@@ -64,7 +75,7 @@ def load_scene(args, in_blender: bool):
     interrupt.track_blender_tempdir()  # factory settings start a new session folder
     registration.ensure_registered()
     scene = bpy.context.scene
-    scene_io.apply_preset(scene, preset, progress=_composite_progress(preset))
+    scenepresets.apply_preset(scene, preset, progress=_composite_progress(preset))
     return scene
 
 
@@ -77,7 +88,7 @@ def _add_vdb_clouds(scene, paths, with_cloudscape: bool) -> None:
         s.density_cover = 0.0
         s.cirrus_coverage = 0.0
         s.storms.clear()
-        scene_io.generate_fields(scene)
+        datafield.generate_fields(scene)
 
 
 @dataclass(frozen=True)

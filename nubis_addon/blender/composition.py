@@ -21,7 +21,7 @@ from mathutils import Matrix
 
 from ..core import composition
 from ..render import depthpass, engine
-from . import scene_io
+from . import scene_io, sceneparams
 
 VEIL_NAME = "Nubis Cloud Veil"
 VEIL_IMAGE = "Nubis Veil Clouds"
@@ -118,7 +118,7 @@ def _forward_matrix(scene, frame: composition.Frame) -> np.ndarray:
     proj = cam.evaluated_get(depsgraph).calc_matrix_camera(
         depsgraph, x=frame.width, y=frame.height, scale_x=1.0, scale_y=1.0
     )
-    view = np.linalg.inv(np.array(scene_io.evaluated_matrix(cam).normalized(), np.float64))
+    view = np.linalg.inv(np.array(sceneparams.evaluated_matrix(cam).normalized(), np.float64))
     w, h = frame.size
     widen = np.diag([frame.width / w, frame.height / h, 1.0, 1.0])
     return widen @ np.array(proj, np.float64) @ view
@@ -180,7 +180,7 @@ def split_clouds(scene, shot, clouds) -> np.ndarray:
 def place(scene, frame: composition.Frame, hits: np.ndarray, near: np.ndarray) -> bpy.types.Object:
     """The veil in front of the nearest surface the widened frame shows, carrying `near`."""
     cam = scene.camera
-    m = scene_io.evaluated_matrix(cam).normalized()
+    m = sceneparams.evaluated_matrix(cam).normalized()
     eye = np.array(m.translation, np.float64)
     forward = -np.array(m.to_3x3().col[2], np.float64)
     distance = composition.veil_distance(hits, eye, forward, cam.data.clip_start, cam.data.clip_end)

@@ -15,7 +15,7 @@ import bpy
 
 from ..core import schema
 from ..core.errors import NubisError
-from . import handlers, mainthread, scene_io, status, ui, viewport
+from . import datafield, handlers, mainthread, sceneparams, status, superstorms, ui, viewport
 
 # Seconds of quiet after the last edit before the field is composited again.
 DEBOUNCE_S = 0.15
@@ -24,7 +24,7 @@ DEBOUNCE_S = 0.15
 def changed(scene, trigger: str, key: str = "") -> None:
     """Apply what a change of `key` with this trigger needs; errors go to the sidebar, never raise into
     Blender."""
-    if trigger == "none" or scene_io.in_batch_edit() or scene is None:
+    if trigger == "none" or sceneparams.in_batch_edit() or scene is None:
         return
     if key:
         enforce_limits(scene.nubis, key)
@@ -50,7 +50,7 @@ def cloud_layer_callback(trigger: str, key: str = ""):
 
     def update(layer, context) -> None:
         scene = getattr(context, "scene", None)
-        if scene is None or scene_io.in_batch_edit():
+        if scene is None or sceneparams.in_batch_edit():
             return
         if key:
             enforce_limits(layer, key)
@@ -69,7 +69,7 @@ def enforce_limits(settings, key: str) -> None:
         low, high = getattr(settings, rule.low), getattr(settings, rule.high)
         if high - low >= rule.gap:
             continue
-        with scene_io.batch_edit():
+        with sceneparams.batch_edit():
             if key == rule.low:
                 setattr(settings, rule.high, type(high)(low + rule.gap))
             else:
@@ -78,7 +78,7 @@ def enforce_limits(settings, key: str) -> None:
 
 def request_composite(scene) -> None:
     """The field owes a composite: made after DEBOUNCE_S of quiet, or by the next render that reads it."""
-    scene_io.mark_field_stale(scene)
+    sceneparams.mark_field_stale(scene)
     if bpy.app.background:
         return  # no timers run without the interface: readers composite when they need the field
     if bpy.app.timers.is_registered(composite_stale):
@@ -88,14 +88,14 @@ def request_composite(scene) -> None:
 
 def composite_stale():
     """Composite every scene that owes one (what the debounce timer runs)."""
-    for scene in scene_io.stale_scenes():
+    for scene in sceneparams.stale_scenes():
         if not ui.has_cloudscape(scene):
             continue
         try:
-            scene_io.generate_fields(scene)
+            datafield.generate_fields(scene)
             status.clear_error()
         except NubisError as err:
-            scene_io.forget_stale()
+            sceneparams.forget_stale()
             status.set_error(str(err))
     viewport.invalidate()
     ui.redraw_views()
@@ -109,7 +109,7 @@ _scene_updates = [0]  # counts depsgraph updates: the scene's geometry (and so i
 def on_load(*_args) -> None:
     """A new file: forget cached pixels and any composite owed by the old one."""
     viewport.invalidate()
-    scene_io.forget_stale()
+    sceneparams.forget_stale()
     if bpy.app.timers.is_registered(composite_stale):
         bpy.app.timers.unregister(composite_stale)
 
@@ -121,10 +121,10 @@ def on_frame_change(scene, _depsgraph=None) -> None:
     sets the frame again on the main thread, which composites then: blender/scene_render.py.)"""
     if not mainthread.on_main_thread():
         return
-    if not ui.has_cloudscape(scene) or not scene_io.field_animated(scene.nubis):
+    if not ui.has_cloudscape(scene) or not sceneparams.field_animated(scene.nubis):
         return
     try:
-        scene_io.generate_fields(scene)
+        datafield.generate_fields(scene)
         status.clear_error()
     except NubisError as err:
         status.set_error(str(err))
@@ -139,12 +139,12 @@ def on_depsgraph_update(scene, depsgraph) -> None:
     if not ui.has_cloudscape(scene):
         return
     settings = scene.nubis
-    used = scene_io.layer_images(settings)
+    used = datafield.layer_images(settings)
     for u in depsgraph.updates:
         if isinstance(u.id, bpy.types.Image) and u.id.name in used:
             request_composite(scene)
         elif isinstance(u.id, bpy.types.Object) and getattr(u, "is_updated_transform", True):
-            if scene_io.storm_of_object(settings, u.id) is not None:
+            if superstorms.storm_of_object(settings, u.id) is not None:
                 request_composite(scene)
 
 
@@ -153,14 +153,14 @@ def on_save_pre(*_args) -> None:
     """Pack the field images into the file being saved (composites leave them unpacked)."""
     for scene in bpy.data.scenes:
         if ui.has_cloudscape(scene):
-            if scene_io.field_stale(scene):
+            if sceneparams.field_stale(scene):
                 try:
-                    scene_io.generate_fields(scene)
+                    datafield.generate_fields(scene)
                 except NubisError as err:
                     status.set_error(str(err))
-            with scene_io.batch_edit():  # the file keeps the multiplier its Coverage gives
-                scene.nubis.density_coverage = scene_io.coverage_multiplier(scene)
-            scene_io.pack_fields(scene.nubis)
+            with sceneparams.batch_edit():  # the file keeps the multiplier its Coverage gives
+                scene.nubis.density_coverage = datafield.coverage_multiplier(scene)
+            datafield.pack_fields(scene.nubis)
 
 
 @bpy.app.handlers.persistent
@@ -188,6 +188,6 @@ def register() -> None:
 
 def unregister() -> None:
     handlers.remove(_HANDLERS)
-    scene_io.forget_stale()
+    sceneparams.forget_stale()
     if bpy.app.timers.is_registered(composite_stale):
         bpy.app.timers.unregister(composite_stale)

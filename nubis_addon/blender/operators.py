@@ -14,7 +14,20 @@ from ..core.errors import NubisError
 from ..core.jobs import BenchmarkOptions
 from ..core.limits import MAX_LAYERS
 from ..core.state import MAX_STORMS
-from . import cycles_setup, preview, runtime, scene_io, sky, status, ui, viewport, work
+from . import (
+    cycles_setup,
+    datafield,
+    preview,
+    runtime,
+    sceneparams,
+    scenepresets,
+    sky,
+    status,
+    superstorms,
+    ui,
+    viewport,
+    work,
+)
 from .presetlist import active_preset, find_preset_entry, preset_entries
 from .ui import NeedsCloudscape
 
@@ -58,7 +71,7 @@ class NubisOperator:
 
 
 class KeepOptions:
-    """What New Cloudscape and Load Preset leave as the artist had it (scene_io.Keep)."""
+    """What New Cloudscape and Load Preset leave as the artist had it (scenepresets.Keep)."""
 
     keep_camera: BoolProperty(
         name="Keep Scene Camera", default=False, description="Render from the scene's camera, unmoved and unchanged"
@@ -80,7 +93,7 @@ class KeepOptions:
     )
 
     def keep(self):
-        return scene_io.Keep(self.keep_camera, self.keep_world, self.keep_render, self.keep_sun, self.build_sky)
+        return scenepresets.Keep(self.keep_camera, self.keep_world, self.keep_render, self.keep_sun, self.build_sky)
 
 
 class NUBIS_OT_new_cloudscape(KeepOptions, NubisOperator, bpy.types.Operator):
@@ -95,9 +108,11 @@ class NUBIS_OT_new_cloudscape(KeepOptions, NubisOperator, bpy.types.Operator):
     def invoke(self, context, _event):
         """In a scene that already has a camera, World or Sun of the artist's, ask what to keep."""
         scene = context.scene
-        own_camera = scene.camera is not None and scene.camera.name != scene_io.CAMERA_NAME
-        own_world = scene.world is not None and scene.world.name != scene_io.WORLD_NAME
-        own_sun = any(o.type == "LIGHT" and o.data.type == "SUN" and o.name != scene_io.SUN_NAME for o in scene.objects)
+        own_camera = scene.camera is not None and scene.camera.name != scenepresets.CAMERA_NAME
+        own_world = scene.world is not None and scene.world.name != scenepresets.WORLD_NAME
+        own_sun = any(
+            o.type == "LIGHT" and o.data.type == "SUN" and o.name != scenepresets.SUN_NAME for o in scene.objects
+        )
         if not (own_camera or own_world or own_sun):
             return self.execute(context)
         self.keep_camera, self.keep_world, self.keep_render, self.keep_sun = own_camera, own_world, True, own_sun
@@ -108,7 +123,7 @@ class NUBIS_OT_new_cloudscape(KeepOptions, NubisOperator, bpy.types.Operator):
         preset = presets.load_preset(str(entry.path) if entry else self.preset)
         keep = self.keep()
         with _field_progress(context) as progress:
-            scene_io.apply_preset(context.scene, preset, progress, keep)
+            scenepresets.apply_preset(context.scene, preset, progress, keep)
         return f"Cloudscape '{preset.name}' created"
 
 
@@ -144,7 +159,7 @@ class NUBIS_OT_generate_field(NeedsCloudscape, NubisOperator, bpy.types.Operator
 
     def run(self, context):
         with _field_progress(context) as progress:
-            scene_io.generate_fields(context.scene, progress)
+            datafield.generate_fields(context.scene, progress)
         return "Data field generated"
 
 
@@ -210,7 +225,7 @@ class NUBIS_OT_layer_remove(ActsOnFieldLayer, NubisOperator, bpy.types.Operator)
         _active_layer(s, "remove")
         s.layers.remove(s.active_layer)
         s.active_layer = max(0, min(s.active_layer, len(s.layers) - 1))
-        scene_io.generate_fields(context.scene)
+        datafield.generate_fields(context.scene)
         return None
 
 
@@ -231,7 +246,7 @@ class NUBIS_OT_layer_move(ActsOnFieldLayer, NubisOperator, bpy.types.Operator):
         if 0 <= target < len(s.layers):
             s.layers.move(s.active_layer, target)
             s.active_layer = target
-            scene_io.generate_fields(context.scene)
+            datafield.generate_fields(context.scene)
         return None
 
 
@@ -246,19 +261,19 @@ class NUBIS_OT_layer_duplicate(ActsOnFieldLayer, NubisOperator, bpy.types.Operat
 
     def run(self, context):
         s = ui.active_cloud_layer(context.scene)
-        data = scene_io.layer_to_dict(_active_layer(s, "duplicate"))
+        data = datafield.layer_to_dict(_active_layer(s, "duplicate"))
         data["name"] += " copy"
-        with scene_io.batch_edit():
+        with sceneparams.batch_edit():
             copy = s.layers.add()
             try:
-                scene_io.layer_from_dict(copy, data)
-                scene_io.copy_dabs(s.layers[s.active_layer], copy)
+                datafield.layer_from_dict(copy, data)
+                datafield.copy_dabs(s.layers[s.active_layer], copy)
             except NubisError:  # a copy refused (a paint layer on a channel no brush paints) leaves none
                 s.layers.remove(len(s.layers) - 1)
                 raise
         s.layers.move(len(s.layers) - 1, s.active_layer + 1)
         s.active_layer += 1
-        scene_io.generate_fields(context.scene)
+        datafield.generate_fields(context.scene)
         return None
 
 
@@ -275,9 +290,9 @@ class NUBIS_OT_apply_weather_rules(NeedsCloudscape, NubisOperator, bpy.types.Ope
 
     def run(self, context):
         s = context.scene.nubis
-        with scene_io.batch_edit():
+        with sceneparams.batch_edit():
             s.rule_rain, s.rule_horizon = self.rain, self.horizon
-        scene_io.generate_fields(context.scene)
+        datafield.generate_fields(context.scene)
         rules = [name for name, on in (("rain", self.rain), ("horizon", self.horizon)) if on]
         return f"Weather rules applied: {', '.join(rules) or 'none'}"
 
@@ -299,9 +314,9 @@ class NUBIS_OT_storm_add(NeedsCloudscape, NubisOperator, bpy.types.Operator):
         self.refuse_if_unavailable(context.scene)
         s = context.scene.nubis
         cursor = context.scene.cursor.location
-        scene_io.add_storm(context.scene, {"name": "Superstorm", "x": cursor.x, "y": cursor.y})
+        superstorms.add_storm(context.scene, {"name": "Superstorm", "x": cursor.x, "y": cursor.y})
         s.active_storm = len(s.storms) - 1
-        scene_io.generate_fields(context.scene)
+        datafield.generate_fields(context.scene)
         return "Superstorm added: move its Empty to place it"
 
 
@@ -322,10 +337,10 @@ class NUBIS_OT_storm_remove(NeedsCloudscape, NubisOperator, bpy.types.Operator):
         storm = s.storms[min(s.active_storm, len(s.storms) - 1)]
         if storm.empty is not None:
             bpy.data.objects.remove(storm.empty)
-        scene_io.remove_storm_animation(context.scene, s.active_storm)
+        superstorms.remove_storm_animation(context.scene, s.active_storm)
         s.storms.remove(s.active_storm)
         s.active_storm = max(0, min(s.active_storm, len(s.storms) - 1))
-        scene_io.generate_fields(context.scene)
+        datafield.generate_fields(context.scene)
         return None
 
 
@@ -342,7 +357,7 @@ def _insert_keys(scene, storm, prop: str, keys, interpolation: str = "LINEAR") -
     the already keyed value back before keyframe_insert reads it."""
     storm.keyframe_insert(prop, frame=keys[0][0])
     path = storm.path_from_id(prop)
-    curve = next(fc for fc in scene_io.fcurves(scene) if fc.data_path == path)
+    curve = next(fc for fc in sceneparams.fcurves(scene) if fc.data_path == path)
     for frame, value in keys:
         curve.keyframe_points.insert(frame, value, options={"FAST"}).interpolation = interpolation
     curve.update()
@@ -362,7 +377,7 @@ class NUBIS_OT_storm_lifecycle(NeedsCloudscape, NubisOperator, bpy.types.Operato
     def run(self, context):
         scene = context.scene
         storm = _active_storm(context)
-        fps = scene_io.scene_fps(scene)
+        fps = sceneparams.scene_fps(scene)
         keys = storms.lifecycle_keys(scene.frame_current, fps, self.ramp_in, self.hold, self.ramp_out)
         _insert_keys(context.scene, storm, "blend", keys)
         return f"Lifecycle keyed over frames {keys[0][0]}-{keys[-1][0]}"
@@ -384,7 +399,7 @@ class NUBIS_OT_lightning_sequence(NeedsCloudscape, NubisOperator, bpy.types.Oper
     def run(self, context):
         scene = context.scene
         storm = _active_storm(context)
-        fps = scene_io.scene_fps(scene)
+        fps = sceneparams.scene_fps(scene)
         keys = storms.lightning_keys(scene.frame_current, fps, self.flashes, self.discharges, self.peak, self.seed)
         frames = [int(k["frame"]) for k in keys]
         _insert_keys(scene, storm, "flash", list(zip(frames, (k["flash"] for k in keys), strict=True)))
@@ -723,7 +738,7 @@ class NUBIS_OT_preset_load(KeepOptions, NubisOperator, bpy.types.Operator):
         preset = presets.load_preset(self.filepath)
         keep = self.keep()
         with _field_progress(context) as progress:
-            scene_io.apply_preset(context.scene, preset, progress, keep)
+            scenepresets.apply_preset(context.scene, preset, progress, keep)
         return f"Preset '{preset.name}' loaded"
 
 
@@ -747,7 +762,7 @@ class NUBIS_OT_preset_add(NeedsCloudscape, NubisOperator, bpy.types.Operator):
 
     def run(self, context):
         scene = context.scene
-        preset = scene_io.preset_from_scene(scene, self.name.strip(), self.preset_description.strip())
+        preset = scenepresets.preset_from_scene(scene, self.name.strip(), self.preset_description.strip())
         path = userpresets.save_user_preset(runtime.user_preset_dir(), preset)
         scene.nubis.preset = path.stem
         transform = scene.view_settings.view_transform

@@ -21,7 +21,7 @@ from gpu_extras.batch import batch_for_shader
 
 from ..core import fieldstats, paint
 from ..core.errors import NubisError
-from . import events, runtime, scene_io, ui, viewport
+from . import datafield, events, runtime, sceneparams, ui, viewport
 from .ui import NeedsCloudscape, SidebarPanel
 
 TOOL_ID = "nubis.paint_sky"
@@ -97,7 +97,7 @@ def paint_layer(settings, channel: str, name: str = ""):
         else:
             layer = next((x for x in reversed(settings.layers) if x.kind == "PAINT" and x.channel == channel), None)
     if layer is None:
-        with scene_io.batch_edit():
+        with sceneparams.batch_edit():
             layer = settings.layers.add()
             layer.name = name or f"Paint {channel.replace('_', ' ').title()}"
             layer.kind = "PAINT"
@@ -109,7 +109,7 @@ def paint_layer(settings, channel: str, name: str = ""):
 
 def append_dabs(layer, dabs: np.ndarray) -> None:
     paint.check_room(len(layer.dabs), len(dabs), layer.name)
-    scene_io.add_dabs(layer, dabs)
+    datafield.add_dabs(layer, dabs)
 
 
 def composite_notice(owner, layer, dabs: np.ndarray, grid: paint.Grid) -> str | None:
@@ -120,8 +120,8 @@ def composite_notice(owner, layer, dabs: np.ndarray, grid: paint.Grid) -> str | 
     for other in owner.layers:
         if other.kind != "PAINT" or not other.enabled or (other != layer and not len(other.dabs)):
             continue
-        held = scene_io.paint_dabs(other)
-        todo.append((scene_io.raster_key(other), np.vstack([held, dabs]) if other == layer else held))
+        held = datafield.paint_dabs(other)
+        todo.append((datafield.raster_key(other), np.vstack([held, dabs]) if other == layer else held))
     cost = paint.composite_cost(todo, grid)
     paint.check_cost(cost)
     return paint.notice(cost)
@@ -160,7 +160,7 @@ class LiveStroke:
         self.live = live
         settings = scene.nubis
         brush = brush_mode(mode)
-        self.grid = paint.Grid.of(scene_io.params_from_scene(settings))
+        self.grid = paint.Grid.of(sceneparams.params_from_scene(settings))
         self.spacer = paint.Spacer(radius, brush.sign * strength, falloff.lower(), brush.dab_mode, grid=self.grid)
         self.layer_name = layer.name
         self.held = len(layer.dabs)
@@ -173,15 +173,15 @@ class LiveStroke:
     def _start_live(self, layer) -> None:
         """The rasters and planes a live drag re-composites its rectangles from."""
         scene, settings = self.scene, self.scene.nubis
-        self.layer_key = scene_io.raster_key(layer)
-        if scene_io.field_stale(scene) or scene_io.pre_paint(scene) is None:
-            scene_io.generate_fields(scene)
-        self.pre, self.multiplier = scene_io.pre_paint(scene)
+        self.layer_key = datafield.raster_key(layer)
+        if sceneparams.field_stale(scene) or datafield.pre_paint(scene) is None:
+            datafield.generate_fields(scene)
+        self.pre, self.multiplier = datafield.pre_paint(scene)
         self.channel = layer.channel.lower()
         self.image, self.plane = paint.PAINT_CHANNELS[self.channel]
-        self.which = tuple(scene_io.FIELD_IMAGES).index(self.image)  # the viewport's arrays are in this order
+        self.which = tuple(datafield.FIELD_IMAGES).index(self.image)  # the viewport's arrays are in this order
         # The layer's raster as it stands, copied: a cancelled drag leaves the cached one untouched.
-        base = paint.raster(self.layer_key, scene_io.paint_dabs(layer), self.grid)
+        base = paint.raster(self.layer_key, datafield.paint_dabs(layer), self.grid)
         self.raster = paint.Raster(self.grid)
         self.raster.values = base.values.copy()
         self.raster.count = base.count
@@ -192,7 +192,7 @@ class LiveStroke:
             values = (
                 self.raster.values
                 if other == layer
-                else paint.raster(scene_io.raster_key(other), scene_io.paint_dabs(other), self.grid).values
+                else paint.raster(datafield.raster_key(other), datafield.paint_dabs(other), self.grid).values
             )
             self.layers.append(paint.PaintLayer(other.channel.lower(), float(other.opacity), values))
 
@@ -236,7 +236,7 @@ class LiveStroke:
         dabs = np.concatenate(self.dabs) if self.dabs else paint.as_dabs([])
         append_dabs(layer, dabs)
         if self.live:
-            paint.remember(scene_io.raster_key(layer), scene_io.paint_dabs(layer), self.raster)
+            paint.remember(datafield.raster_key(layer), datafield.paint_dabs(layer), self.raster)
         return len(dabs)
 
 
@@ -291,7 +291,7 @@ class NUBIS_OT_paint_field(NeedsCloudscape, bpy.types.Operator):
     def _checked(self, context):
         settings = context.scene.nubis
         check_channel(context.scene, self.channel)
-        grid = paint.Grid.of(scene_io.params_from_scene(settings))
+        grid = paint.Grid.of(sceneparams.params_from_scene(settings))
         paint.check_brush(grid, self.radius, self.strength)
         return grid
 
@@ -314,7 +314,7 @@ class NUBIS_OT_paint_field(NeedsCloudscape, bpy.types.Operator):
             append_dabs(layer, dabs)
             if line:  # the console has it now, from core/paint.py's raster; the Info log gets it here
                 self.report({"INFO"}, line)
-            scene_io.generate_fields(scene)
+            datafield.generate_fields(scene)
         except NubisError as err:
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}
@@ -460,7 +460,7 @@ class NUBIS_OT_paint_layer_clear(NeedsCloudscape, bpy.types.Operator):
             return {"CANCELLED"}
         s.layers[s.active_layer].dabs.clear()
         try:
-            scene_io.generate_fields(context.scene)
+            datafield.generate_fields(context.scene)
         except NubisError as err:
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}

@@ -28,7 +28,7 @@ from ..core.jobs import BakeOptions, CompareOptions, RenderOptions
 from ..core.state import MAX_STORMS, CloudState
 from ..render import bake as gpu_bake
 from ..render import engine
-from . import cycles_setup, runtime, scene_io, sky, snapshot, sun_air, vdbclouds
+from . import cycles_setup, datafield, runtime, scene_io, sceneparams, sky, snapshot, sun_air, superstorms, vdbclouds
 from . import reference as cycles_reference
 from .snapshot import BakeSnapshot
 
@@ -80,13 +80,15 @@ def check_scene(scene) -> None:
     if scene.camera is not None:
         limits.check_position(
             f"the camera '{scene.camera.name}'",
-            scene_io.evaluated_matrix(scene.camera).translation,
+            sceneparams.evaluated_matrix(scene.camera).translation,
             "move it closer to the clouds",
         )
     for storm in settings.storms:
         if storm.empty is not None:
             limits.check_position(
-                f"the storm '{storm.empty.name}'", scene_io.evaluated_matrix(storm.empty).translation, "move it closer"
+                f"the storm '{storm.empty.name}'",
+                sceneparams.evaluated_matrix(storm.empty).translation,
+                "move it closer",
             )
     # The marked VDB clouds read (and cached) now: a damaged or oversized file is refused before any work.
     vdbclouds.placements(scene, strict=True)
@@ -235,7 +237,7 @@ def render_files(scene, out: str | os.PathLike, options: RenderOptions, progress
 def render_motion(scene, width: int, height: int) -> np.ndarray:
     """Motion vectors of the scene camera's view for one frame step: dx, dy (pixels), cloud distance, alpha."""
     state = scene_io.state_from_scene(scene)
-    fps = scene_io.scene_fps(scene)
+    fps = sceneparams.scene_fps(scene)
     state.motion_dt = scene.nubis.wind_time_scale / fps
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
     clouds.update(state)
@@ -344,12 +346,12 @@ def bake_estimate(scene, voxel_size: float | None = None) -> tuple[int, int]:
     cam = scene.camera
     key = (
         scene.as_pointer(),
-        scene_io.field_generation(),
+        datafield.field_generation(),
         voxel_size or s.bake_voxel_size,
         s.bake_camera_only,
         s.bake_velocity,
         tuple(map(tuple, cam.matrix_world)) if cam else None,
-        tuple((k, tuple(v) if isinstance(v, list) else v) for k, v in scene_io.params_from_scene(s).items()),
+        tuple((k, tuple(v) if isinstance(v, list) else v) for k, v in sceneparams.params_from_scene(s).items()),
     )
     if key not in _estimates:
         _estimates.clear()
@@ -690,7 +692,7 @@ def _describe(run: _CompareRun, result: dict, baked: BakeResult, clip, ss: int) 
     scene, o = run.scene, run.options
     # The reference march keeps within the shader loop limit by taking longer steps (core/march.py).
     steps_max = scene.nubis.march_steps_max
-    storms = len(scene_io.storm_lights(scene.nubis))
+    storms = len(superstorms.storm_lights(scene.nubis))
     result["reference_view_steps"] = min(
         steps_max, march.max_steps(scene.nubis.march_light_samples, storms, 2 if o.mode == "full" else 1)
     )

@@ -24,7 +24,7 @@ from ..core.fsutil import check_output_dir
 from ..core.jobs import BakeOptions, BenchmarkOptions, PreviewOptions
 from ..render import depthpass, engine, temporal
 from ..render.gpu_context import renderer_name
-from . import cycles_setup, pipeline, runtime, scene_io
+from . import cycles_setup, pipeline, runtime, scene_io, sceneparams
 
 Progress = Callable[[float], None]
 
@@ -40,7 +40,7 @@ def apply_quality(scene, name: str | None) -> str:
     """Write a quality row into the scene's settings; returns the name in effect ('custom' if none fits)."""
     s = scene.nubis
     if name:
-        with scene_io.batch_edit():
+        with sceneparams.batch_edit():
             for key, value in quality.quality(name).settings.items():
                 setattr(s, key, value)
             s.viewport_quality = name

@@ -15,7 +15,7 @@ from mathutils import Matrix, Vector
 
 from ..core import composition as plan
 from ..render import engine
-from . import scene_io
+from . import sceneparams
 from .composition import (
     OWN_KEY,
     RECIPE_KEY,
@@ -57,7 +57,7 @@ def objects_box(scene) -> tuple[Vector, Vector]:
     for obj in scene.objects:
         if obj.type not in _SOLID_TYPES or obj.hide_render or obj.get(OWN_KEY):
             continue
-        m = scene_io.evaluated_matrix(obj)
+        m = sceneparams.evaluated_matrix(obj)
         corners.extend(m @ Vector(c) for c in obj.bound_box)
     if not corners:
         corners = [Vector((x, y, 0.0)) for x in (-500.0, 500.0) for y in (-500.0, 500.0)]

@@ -8,7 +8,7 @@ import bpy
 from bpy.props import EnumProperty
 
 from ..core import cloudlayers
-from . import scene_io, ui
+from . import datafield, sceneparams, ui
 from .operators import NubisOperator
 
 
@@ -56,20 +56,20 @@ class NUBIS_OT_cloud_layer_add(ui.NeedsCloudscape, NubisOperator, bpy.types.Oper
         count = len(s.cloud_layers) + 1
         source = ui.active_cloud_layer(scene)
         first = ui.first_layer_chosen(scene)
-        base = scene_io.params_from_scene(s) if first else scene_io.cloud_layer_params(s, source)
+        base = sceneparams.params_from_scene(s) if first else datafield.cloud_layer_params(s, source)
         own = cloudlayers.new_layer_params(base, _ranges(s))
-        stack = [scene_io.layer_to_dict(layer) for layer in source.layers]
+        stack = [datafield.layer_to_dict(layer) for layer in source.layers]
         taken = {c.name for c in s.cloud_layers} | {s.first_layer_name}
         number = count + 1
         while f"Layer {number}" in taken:  # names key each layer's field images and state
             number += 1
         data = cloudlayers.CloudLayer(f"Layer {number}", own, stack)
-        with scene_io.batch_edit():
-            cloud = scene_io.add_cloud_layer(s, data)
+        with sceneparams.batch_edit():
+            cloud = datafield.add_cloud_layer(s, data)
             for copy, original in zip(cloud.layers, source.layers, strict=True):
-                scene_io.copy_dabs(original, copy)
+                datafield.copy_dabs(original, copy)
         s.active_further_layer = len(s.cloud_layers) - 1
-        scene_io.generate_fields(scene)
+        datafield.generate_fields(scene)
         return f"added cloud layer '{cloud.name}' at {cloud.layer_bottom:.0f}-{cloud.layer_top:.0f} m"
 
 

@@ -25,7 +25,7 @@ from ..core.sequence import human_bytes
 from ..core.state import CloudState
 from ..render.engine import CloudGPU
 from ..render.textures import NoiseTextures
-from . import runtime, scene_io
+from . import runtime, scene_io, sceneparams
 
 # The field arrays a sequence's snapshot may hold when the field changes from frame to frame (keyed
 # layers, storms): frames whose field is unchanged share one copy.
@@ -115,7 +115,7 @@ def take(scene, options: BakeOptions) -> BakeSnapshot:
     s = scene.nubis
     noise = runtime.cloud_gpu(s.noise_seed).noise  # made or loaded now: a seed change later makes a new set
     state, plan = bake_plan(scene, options)
-    fps = scene_io.scene_fps(scene)
+    fps = sceneparams.scene_fps(scene)
     state.motion_dt = s.wind_time_scale / fps  # one frame of wind time, for the velocity grid
     return BakeSnapshot(
         state=state,
@@ -137,7 +137,7 @@ def take_sequence(scene, frames: list[int], options: BakeOptions) -> list[BakeSn
     settings = scene.nubis
     res = settings.field_resolution
     per_frame = 3 * res * res * 4 * 4  # three RGBA float images
-    if len(frames) > 1 and scene_io.field_animated(settings):
+    if len(frames) > 1 and sceneparams.field_animated(settings):
         need = per_frame * len(frames)
         if need > SEQUENCE_SNAPSHOT_LIMIT:
             fit = max(1, SEQUENCE_SNAPSHOT_LIMIT // per_frame)

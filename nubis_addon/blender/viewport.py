@@ -15,7 +15,7 @@ from ..core import camera
 from ..core.errors import NubisError
 from ..render import engine, temporal
 from ..render.gpu_context import release_at_exit
-from . import cycles_setup, runtime, scene_io, status, ui, vdbclouds
+from . import cycles_setup, datafield, runtime, scene_io, status, ui, vdbclouds
 
 _handle = None
 _fields_cache: dict = {}  # scene pointer -> (key, field arrays)
@@ -39,7 +39,7 @@ def geometry_changed(generation: int) -> None:
 def _fields_key(scene) -> tuple:
     s = scene.nubis
     images = (s.field_a, s.field_b, s.field_cirrus)
-    return (scene.as_pointer(), s.field_resolution, scene_io.field_generation()) + tuple(
+    return (scene.as_pointer(), s.field_resolution, datafield.field_generation()) + tuple(
         img.as_pointer() if img else 0 for img in images
     )
 
@@ -55,7 +55,7 @@ def field_arrays(scene) -> tuple:
             _fields_cache.clear()
         # Headless there is no debounce timer: a composite owed is made here. In the interface the
         # timer makes it (blender/events.py) and the draw shows the last field until then.
-        cached = _fields_cache[scene.as_pointer()] = (key, scene_io.read_fields(scene.nubis, flush=bpy.app.background))
+        cached = _fields_cache[scene.as_pointer()] = (key, datafield.read_fields(scene.nubis, flush=bpy.app.background))
     return cached[1]
 
 

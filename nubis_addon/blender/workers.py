@@ -18,7 +18,7 @@ from ..core.errors import NubisError
 from ..core.jobs import BakeOptions
 from ..core.presets import load_preset
 from ..render.gpu_context import ensure_gpu_context
-from . import pipeline, scene_io, snapshot
+from . import pipeline, scenepresets, snapshot
 from .registration import ensure_registered
 
 _loaded: dict[str, object] = {}
@@ -39,7 +39,7 @@ def _worker_scene(source: SceneSource | dict, frame: int):
         else:
             bpy.ops.wm.read_factory_settings(use_empty=True)
             ensure_registered()
-            scene_io.apply_preset(bpy.context.scene, load_preset(source.preset or "default"))
+            scenepresets.apply_preset(bpy.context.scene, load_preset(source.preset or "default"))
         ensure_gpu_context()
         _loaded["key"] = key
     scene = bpy.context.scene

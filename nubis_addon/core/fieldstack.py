@@ -21,7 +21,7 @@ from . import storms as stormgen
 class StackInputs:
     """What one layer's composite reads."""
 
-    layers: list[dict[str, Any]]  # its field layers, top of the stack first (scene_io.layer_to_dict)
+    layers: list[dict[str, Any]]  # its field layers, top of the stack first (datafield.layer_to_dict)
     params: Mapping[str, Any]  # its full settings
     images: Mapping[str, np.ndarray] = field(default_factory=dict)  # the image layers' pixels by image name
     rain: float | None = None  # the rain rule's cumulonimbus top type, None with the rule off

@@ -69,6 +69,11 @@ class Setting:
     quality: str = ""  # its column in presets/quality/quality.toml, if a quality level sets it
     key_override: str = ""
     object_type: str = ""  # for object settings: the kind of object allowed ("SUN": Sun lamps, "EMPTY")
+    # Each cloud layer of a layered sky holds its own value (core/cloudlayers.py); the others are the sky's.
+    cloud_layer: bool = False
+    # A cloud layer's number on the GPU (a float, int or bool, packed as a float): its member of NubisLayer
+    # (render/uniforms.py; "" none).
+    layer_member: str = ""
 
     @property
     def key(self) -> str:
@@ -108,6 +113,7 @@ SCENE: tuple[Setting, ...] = (
         panel="altitude",
         gpu=True,
         trigger="field",
+        cloud_layer=True,
     ),
     _scene(
         "layer",
@@ -123,6 +129,7 @@ SCENE: tuple[Setting, ...] = (
         panel="altitude",
         gpu=True,
         trigger="field",
+        cloud_layer=True,
     ),
     _scene(
         "layer",
@@ -240,6 +247,7 @@ SCENE: tuple[Setting, ...] = (
         unit="LENGTH",
         panel="shape",
         gpu=True,
+        cloud_layer=True,
     ),
     _scene(
         "noise",
@@ -253,6 +261,7 @@ SCENE: tuple[Setting, ...] = (
         soft_max=10000.0,
         unit="LENGTH",
         panel="shape",
+        cloud_layer=True,
     ),
     _scene(
         "noise",
@@ -266,6 +275,7 @@ SCENE: tuple[Setting, ...] = (
         soft_max=50000.0,
         unit="LENGTH",
         panel="shape",
+        cloud_layer=True,
     ),
     _scene(
         "noise",
@@ -279,6 +289,7 @@ SCENE: tuple[Setting, ...] = (
         soft_max=2000.0,
         unit="LENGTH",
         panel="shape",
+        cloud_layer=True,
     ),
     # One extinction coefficient, shared by the viewport and the VDB's Cycles material.
     _scene(
@@ -293,6 +304,7 @@ SCENE: tuple[Setting, ...] = (
         soft_max=0.5,
         panel="shape",
         gpu=True,
+        cloud_layer=True,
     ),
     _scene(
         "density",
@@ -306,6 +318,7 @@ SCENE: tuple[Setting, ...] = (
         max=1.0,
         panel="shape",
         trigger="field",
+        cloud_layer=True,
     ),
     _scene(
         "density",
@@ -319,6 +332,8 @@ SCENE: tuple[Setting, ...] = (
         min=0.0,
         max=50.0,
         internal="derived from density.cover for the scene's field (core/coverage.py)",
+        cloud_layer=True,
+        layer_member="coverage",
     ),
     _scene(
         "density",
@@ -330,6 +345,8 @@ SCENE: tuple[Setting, ...] = (
         min=0.0,
         max=1.0,
         panel="shape",
+        cloud_layer=True,
+        layer_member="erosion",
     ),
     _scene(
         "density",
@@ -339,6 +356,8 @@ SCENE: tuple[Setting, ...] = (
         "Thin Edges",
         "Make small clouds lighter by multiplying the density by the coverage (GPU Pro 7)",
         panel="shape",
+        cloud_layer=True,
+        layer_member="multiply_coverage",
     ),
     # -- wind (GPU Pro 7: 10 m/s, 500 m top offset, 0.1 upward bias)
     _scene(
@@ -352,6 +371,7 @@ SCENE: tuple[Setting, ...] = (
         max=TAU,
         unit="ROTATION",
         panel="wind",
+        cloud_layer=True,
     ),
     _scene(
         "wind",
@@ -366,6 +386,7 @@ SCENE: tuple[Setting, ...] = (
         unit="VELOCITY",
         panel="wind",
         gpu=True,
+        cloud_layer=True,
     ),
     _scene(
         "wind",
@@ -380,6 +401,8 @@ SCENE: tuple[Setting, ...] = (
         soft_max=3000.0,
         unit="LENGTH",
         panel="wind",
+        cloud_layer=True,
+        layer_member="top_offset",
     ),
     _scene(
         "wind",
@@ -392,6 +415,8 @@ SCENE: tuple[Setting, ...] = (
         max=1.0,
         panel="wind",
         gpu=True,
+        cloud_layer=True,
+        layer_member="upward_bias",
     ),
     _scene(
         "wind",
@@ -404,6 +429,8 @@ SCENE: tuple[Setting, ...] = (
         max=20.0,
         soft_max=5.0,
         panel="wind",
+        cloud_layer=True,
+        layer_member="detail_speed",
     ),
     _scene(
         "wind",
@@ -1057,6 +1084,7 @@ SCENE: tuple[Setting, ...] = (
         panel="field",
         trigger="field",
         key_override="rule_rain",
+        cloud_layer=True,
     ),
     _scene(
         "rules",
@@ -1068,6 +1096,7 @@ SCENE: tuple[Setting, ...] = (
         panel="field",
         trigger="field",
         key_override="rule_horizon",
+        cloud_layer=True,
     ),
     _scene(
         "rules",
@@ -1081,6 +1110,7 @@ SCENE: tuple[Setting, ...] = (
         panel="field",
         trigger="field",
         key_override="rule_cumulonimbus_top",
+        cloud_layer=True,
     ),
     _scene(
         "rules",
@@ -1096,6 +1126,7 @@ SCENE: tuple[Setting, ...] = (
         panel="field",
         trigger="field",
         key_override="rule_horizon_start",
+        cloud_layer=True,
     ),
     # -- Blender state only, never in a preset
     _scene(
@@ -1647,31 +1678,10 @@ EXTRA_SECTIONS: dict[str, dict[str, Setting]] = {}
 for _s in EXTRA:
     EXTRA_SECTIONS.setdefault(_s.section, {})[_s.name] = _s
 LAYER_BY_NAME: dict[str, Setting] = {s.name: s for s in LAYER}
-# The settings each cloud layer holds its own value of (core/cloudlayers.py): its altitudes, noise
+# The settings each cloud layer holds its own value of (their `cloud_layer` flag): its altitudes, noise
 # periods, density, wind and weather rules. Every other scene setting is the sky's, shared by its layers.
-CLOUD_LAYER_KEYS: tuple[str, ...] = (
-    "layer_bottom",
-    "layer_top",
-    "noise_lf_period",
-    "noise_hf_period",
-    "noise_curl_period",
-    "noise_curl_strength",
-    "density_sigma",
-    "density_cover",
-    "density_coverage",
-    "density_erosion",
-    "density_multiply_coverage",
-    "wind_direction",
-    "wind_speed",
-    "wind_top_offset",
-    "wind_upward_bias",
-    "wind_detail_speed",
-    "rule_rain",
-    "rule_horizon",
-    "rule_cumulonimbus_top",
-    "rule_horizon_start",
-)
-CLOUD_LAYER_SETTINGS: tuple[Setting, ...] = tuple(BY_KEY[k] for k in CLOUD_LAYER_KEYS)
+CLOUD_LAYER_SETTINGS: tuple[Setting, ...] = tuple(s for s in SCENE if s.cloud_layer)
+CLOUD_LAYER_KEYS: tuple[str, ...] = tuple(s.key for s in CLOUD_LAYER_SETTINGS)
 STORM_BY_NAME: dict[str, Setting] = {s.name: s for s in STORM}
 QUALITY_COLUMNS: dict[str, str] = {s.quality: s.key for s in SCENE if s.quality}
 

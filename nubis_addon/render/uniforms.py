@@ -309,10 +309,28 @@ def _sigma_scale(c: _Layer) -> float:
     return c.p["density_sigma"] / c.state.params["density_sigma"]
 
 
+def _wind_distance(c: _Layer) -> float:
+    return c.p["wind_speed"] * c.state.time
+
+
+def _settings_rows() -> tuple[tuple[str, tuple[LayerField, ...]], ...]:
+    """The rows of the cloud-layer settings flagged with a `layer_member` in the schema, four floats a row
+    in the schema's order, the last row's rest unused: a new per-layer float is one line there."""
+    fields = [
+        LayerField(s.layer_member, "float", f"the setting {s.key} ({s.label})", _setting(s.key))
+        for s in schema.CLOUD_LAYER_SETTINGS
+        if s.layer_member
+    ]
+    fields += [LayerField(None, "float", "-", lambda c: 0.0)] * (-len(fields) % 4)
+    return tuple((f"cloud_layer_settings{k}", tuple(fields[4 * k : 4 * k + 4])) for k in range(len(fields) // 4))
+
+
 F = LayerField
-# A cloud layer on the GPU, stated once: its rows of the uniform block (vec4 arrays, one row a drawn layer,
-# NUBIS_MAX_CLOUD_LAYERS rows) and, in each, the fields they hold. The rows, their documentation, NubisLayer, its
-# accessors and nubis_layer() (layer_source) are all made from this table.
+# A cloud layer on the GPU: its rows of the uniform block (vec4 arrays, one row a drawn layer,
+# NUBIS_MAX_CLOUD_LAYERS rows) and, in each, the fields they hold. The rows, their documentation, NubisLayer,
+# its accessors and nubis_layer() (layer_source) are all made from this table. Its first rows are the values
+# made from several settings or from the layer's field; the plain floats follow from the schema (their
+# `layer_member`, _settings_rows).
 _LAYER_ROWS: tuple[tuple[str, tuple[LayerField, ...]], ...] = (
     (
         "cloud_layer_heights",
@@ -333,7 +351,7 @@ _LAYER_ROWS: tuple[tuple[str, tuple[LayerField, ...]], ...] = (
         (F("noise", "vec4", "base shape period, detail period, curl period, curl strength", _noise),),
     ),
     (
-        "cloud_layer_density",
+        "cloud_layer_motion",
         (
             F(
                 "sigma_scale",
@@ -341,25 +359,8 @@ _LAYER_ROWS: tuple[tuple[str, tuple[LayerField, ...]], ...] = (
                 "its sigma over P.density_sigma, which the light model multiplies by",
                 _sigma_scale,
             ),
-            F("erosion", "float", "erosion", _setting("density_erosion")),
-            F("coverage", "float", "the multiplier on its coverage channel", _setting("density_coverage")),
-            F("multiply_coverage", "float", "0 or 1", _setting("density_multiply_coverage")),
-        ),
-    ),
-    (
-        "cloud_layer_wind",
-        (
+            F("wind_distance", "float", "wind speed x time", _wind_distance),
             F("wind_dir", "vec2", "the wind's direction", lambda c: tuple(wind_vector(c.p["wind_direction"]))),
-            F("wind_distance", "float", "wind speed x time", lambda c: c.p["wind_speed"] * c.state.time),
-            F("top_offset", "float", "the cloud tops' offset downwind", _setting("wind_top_offset")),
-        ),
-    ),
-    (
-        "cloud_layer_wind2",
-        (
-            F("upward_bias", "float", "upward bias", _setting("wind_upward_bias")),
-            F("detail_speed", "float", "detail speed", _setting("wind_detail_speed")),
-            F(None, "vec2", "-", lambda c: (0.0, 0.0)),
         ),
     ),
     (
@@ -373,6 +374,7 @@ _LAYER_ROWS: tuple[tuple[str, tuple[LayerField, ...]], ...] = (
             ),
         ),
     ),
+    *_settings_rows(),
 )
 assert all(sum(f.size for f in fields) == 4 for _row, fields in _LAYER_ROWS), "each row fills one vec4"
 

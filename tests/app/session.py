@@ -661,9 +661,10 @@ def s_edit(step: Step):
     """One edit an artist makes, through the setting's RNA property as the sidebar sets it: Shape >
     Extinction from 0.10 to 0.03, and the viewport must change."""
     scene = bpy.context.scene
-    scene_io = ext_module("scene_io")
-    fields = scene_io.read_fields(scene.nubis, flush=False)
-    params = scene_io.params_from_scene(scene.nubis)
+    datafield = ext_module("datafield")
+    sceneparams = ext_module("sceneparams")
+    fields = datafield.read_fields(scene.nubis, flush=False)
+    params = sceneparams.params_from_scene(scene.nubis)
     preset = sys.modules[f"{EXT}.nubis_addon.core.presets"].load_preset("default").params
     changed = {k: v for k, v in params.items() if k in preset and v != preset[k]}
     step.note(
@@ -1253,11 +1254,11 @@ def _paint_layer_dabs() -> int:
 
 def _cover_at(points) -> list[float]:
     """The coverage the clouds are drawn with (field A red times the multiplier) at world points."""
-    scene_io = ext_module("scene_io")
+    datafield = ext_module("datafield")
     scene = bpy.context.scene
     s = scene.nubis
-    a = scene_io.read_fields(s)[0]
-    m = scene_io.coverage_multiplier(scene)
+    a = datafield.read_fields(s)[0]
+    m = datafield.coverage_multiplier(scene)
     out = []
     for x, y in points:
         j = int(((x - s.field_origin_x) / s.field_size + 0.5) * s.field_resolution)

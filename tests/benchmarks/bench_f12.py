@@ -26,7 +26,7 @@ def main() -> None:
     import bpy
 
     import nubis_addon
-    from nubis_addon.blender import ensure_registered, scene_io, scene_render
+    from nubis_addon.blender import ensure_registered, scene_render, scenepresets
     from nubis_addon.core.presets import load_preset
     from nubis_addon.render.gpu_context import ensure_gpu_context, renderer_name
 
@@ -37,7 +37,7 @@ def main() -> None:
     bpy.ops.wm.read_factory_settings(use_empty=True)
     ensure_registered()
     scene = bpy.context.scene
-    scene_io.apply_preset(scene, load_preset("default"))
+    scenepresets.apply_preset(scene, load_preset("default"))
     bpy.ops.mesh.primitive_plane_add(size=20000.0)
     bpy.ops.mesh.primitive_cube_add(size=300.0, location=(0.0, -1500.0, 150.0))
     scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = width, height, 100

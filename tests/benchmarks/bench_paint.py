@@ -36,7 +36,7 @@ def main() -> None:
     from gpu_helpers import camera_view
 
     import nubis_addon
-    from nubis_addon.blender import ensure_registered, runtime, scene_io, viewport
+    from nubis_addon.blender import datafield, ensure_registered, runtime, sceneparams, scenepresets, viewport
     from nubis_addon.blender import paint as blender_paint
     from nubis_addon.core.presets import load_preset
     from nubis_addon.render.engine import read_pixels
@@ -52,13 +52,13 @@ def main() -> None:
         scene = bpy.context.scene
         preset = load_preset("default")
         preset.params["field_resolution"] = resolution
-        scene_io.apply_preset(scene, preset)
+        scenepresets.apply_preset(scene, preset)
         s = scene.nubis
         s.viewport_samples = 1
         rv3d = camera_view(bpy, scene, W, H)
         region = SimpleNamespace(width=W, height=H, as_pointer=lambda: 99)
         offscreen = gpu.types.GPUOffScreen(W, H, format="RGBA16F")
-        cam_xy = scene_io.evaluated_matrix(scene.camera).translation
+        cam_xy = sceneparams.evaluated_matrix(scene.camera).translation
         xs = np.linspace(cam_xy.x - 6000.0, cam_xy.x + 6000.0, samples)
         y = float(cam_xy.y) + 9000.0
 
@@ -70,7 +70,7 @@ def main() -> None:
         with offscreen.bind():
             fb = gpu.state.active_framebuffer_get()
             layer = blender_paint.paint_layer(s, "COVERAGE")
-            scene_io.generate_fields(scene)
+            datafield.generate_fields(scene)
             redraw(fb)
             redraw(fb)
             clouds = runtime.cloud_gpu(s.noise_seed)
@@ -90,7 +90,7 @@ def main() -> None:
                     cpu.append(t1 - t0)
                 timing[held] = (statistics.median(total), statistics.median(cpu), clouds.volume_fills - fills)
                 live.commit(layer)
-                scene_io.generate_fields(scene)
+                datafield.generate_fields(scene)
                 clouds.hold_light(0.0)
             # Whole: each sample composites the field and uploads it whole.
             whole_t = []
@@ -99,7 +99,7 @@ def main() -> None:
                 blender_paint.append_dabs(
                     layer, blender_paint.paint.stroke_dabs([(float(x), y + 3000.0, 1.0, i == 0)], RADIUS, 1.0)
                 )
-                scene_io.generate_fields(scene)
+                datafield.generate_fields(scene)
                 viewport.invalidate()
                 redraw(fb)
                 whole_t.append(time.perf_counter() - t0)

@@ -31,7 +31,7 @@ def main() -> None:
     import bpy
 
     import nubis_addon
-    from nubis_addon.blender import ensure_registered, pipeline, scene_io
+    from nubis_addon.blender import ensure_registered, pipeline, scene_io, scenepresets
     from nubis_addon.core import noise
     from nubis_addon.core.presets import load_preset
     from nubis_addon.render import engine
@@ -53,7 +53,7 @@ def main() -> None:
     bpy.ops.wm.read_factory_settings(use_empty=True)
     ensure_registered()
     scene = bpy.context.scene
-    scene_io.apply_preset(scene, load_preset("default"))
+    scenepresets.apply_preset(scene, load_preset("default"))
     state = scene_io.state_from_scene(scene)
     from nubis_addon.blender import runtime
 

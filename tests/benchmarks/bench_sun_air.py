@@ -31,7 +31,7 @@ def main() -> None:
     from redraws import alternating_redraws
 
     import nubis_addon
-    from nubis_addon.blender import ensure_registered, preview, runtime, scene_io, sky
+    from nubis_addon.blender import ensure_registered, preview, runtime, scene_io, scenepresets, sky
     from nubis_addon.core import camera
     from nubis_addon.core.presets import load_preset
     from nubis_addon.render.gpu_context import ensure_gpu_context, renderer_name
@@ -44,7 +44,7 @@ def main() -> None:
     bpy.ops.wm.read_factory_settings(use_empty=True)
     ensure_registered()
     scene = bpy.context.scene
-    scene_io.apply_preset(scene, preset)
+    scenepresets.apply_preset(scene, preset)
     s = scene.nubis
     view = preview.camera_view(scene, width, height)
     air = scene_io.state_from_scene(scene)

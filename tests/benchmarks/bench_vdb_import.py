@@ -94,13 +94,13 @@ def child(path: str) -> None:
     """One measurement: a fresh scene with the default sky, the Volume added, then marked and drawn."""
     import bpy
 
-    from nubis_addon.blender import ensure_registered, pipeline, scene_io
+    from nubis_addon.blender import ensure_registered, pipeline, scenepresets
     from nubis_addon.core.presets import load_preset
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     ensure_registered()
     scene = bpy.context.scene
-    scene_io.apply_preset(scene, load_preset("default"))
+    scenepresets.apply_preset(scene, load_preset("default"))
     scene.nubis.density_cover = 0.0
     pipeline.render_viewport(scene, 480, 270)  # the sky's own first frame (noise, shaders): not the cloud's
     vol = bpy.data.volumes.new("big")

@@ -114,13 +114,13 @@ BLEND_SCRIPT = """
 import sys
 sys.path.insert(0, sys.argv[-5])
 import bpy
-from nubis_addon.blender import ensure_registered, scene_io, vdbclouds
+from nubis_addon.blender import ensure_registered, datafield, scene_io, scenepresets, vdbclouds
 from nubis_addon.core.presets import load_preset
 vdb, blend, space, move = sys.argv[-4:]
 bpy.ops.wm.read_factory_settings(use_empty=True)
 ensure_registered()
 scene = bpy.context.scene
-scene_io.apply_preset(scene, load_preset("default"))
+scenepresets.apply_preset(scene, load_preset("default"))
 obj = vdbclouds.add_files(scene, [vdb])[0]
 obj.location, obj.scale = {base}, ({scale},) * 3
 obj.data.render.space = space
@@ -139,7 +139,7 @@ elif move == "delta":
 s = scene.nubis
 s.density_cover, s.cirrus_coverage = 0.0, 0.0
 s.storms.clear()
-scene_io.generate_fields(scene)
+datafield.generate_fields(scene)
 bpy.ops.wm.save_as_mainfile(filepath=blend)
 """
 

@@ -328,7 +328,7 @@ def helper_make_blends(repo: Path, d: Path, vdbs: Path) -> None:
     import bpy
 
     import nubis_addon
-    from nubis_addon.blender import ensure_registered, scene_io
+    from nubis_addon.blender import ensure_registered, scenepresets
     from nubis_addon.core.presets import load_preset
 
     nubis_addon.register()
@@ -336,7 +336,7 @@ def helper_make_blends(repo: Path, d: Path, vdbs: Path) -> None:
         bpy.ops.wm.read_factory_settings(use_empty=True)
         ensure_registered()
         scene = bpy.context.scene
-        scene_io.apply_preset(scene, load_preset("default"))
+        scenepresets.apply_preset(scene, load_preset("default"))
         for vname, path, scale in vols:
             vol = bpy.data.volumes.new(vname)
             vol.filepath = str(path)
@@ -469,7 +469,7 @@ def helper_paint(repo: Path, name: str) -> None:
     import numpy as np
 
     import nubis_addon
-    from nubis_addon.blender import ensure_registered, scene_io
+    from nubis_addon.blender import datafield, ensure_registered, sceneparams, scenepresets
     from nubis_addon.core import paint
     from nubis_addon.core.presets import load_preset
     from nubis_addon.render.gpu_context import ensure_gpu_context
@@ -480,7 +480,7 @@ def helper_paint(repo: Path, name: str) -> None:
     bpy.ops.wm.read_factory_settings(use_empty=True)
     ensure_registered()
     scene = bpy.context.scene
-    scene_io.apply_preset(scene, load_preset(preset))
+    scenepresets.apply_preset(scene, load_preset(preset))
     kwargs = calls()
     for kw in kwargs[:-1]:
         assert bpy.ops.nubis.paint_field(**kw) == {"FINISHED"}, kw
@@ -498,12 +498,12 @@ def helper_paint(repo: Path, name: str) -> None:
         return
     # What it painted: every dab of every paint layer finite, its centre where its disc touches the field,
     # its strength within -1 to 1; the fields finite; the stroke laid dabs.
-    grid = paint.Grid.of(scene_io.params_from_scene(scene.nubis))
+    grid = paint.Grid.of(sceneparams.params_from_scene(scene.nubis))
     problems, laid = [], 0
     for layer in scene.nubis.layers:
         if layer.kind != "PAINT":
             continue
-        dabs = scene_io.paint_dabs(layer)
+        dabs = datafield.paint_dabs(layer)
         laid += len(dabs) - n_before.get(layer.name, 0)
         if not np.isfinite(dabs).all():
             problems.append(f"non-finite dabs in '{layer.name}'")
@@ -516,7 +516,7 @@ def helper_paint(repo: Path, name: str) -> None:
             if not -1.0 <= st <= 1.0:
                 problems.append(f"a dab of strength {st:g}")
                 break
-    for k, plane in enumerate(scene_io.read_fields(scene.nubis)):
+    for k, plane in enumerate(datafield.read_fields(scene.nubis)):
         if not np.isfinite(plane).all():
             problems.append(f"field {'ABC'[k]} holds non-finite values")
     if laid <= 0 and kwargs[-1].get("mode") != "SMOOTH":

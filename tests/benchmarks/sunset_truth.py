@@ -34,7 +34,7 @@ CELLS = ("default@4", "default@1", "default@-1", "altocumulus_over_stratocumulus
 def _scene(cell: str, light: str = ""):
     import bpy
 
-    from nubis_addon.blender import ensure_registered, scene_io
+    from nubis_addon.blender import ensure_registered, scenepresets
     from nubis_addon.core.presets import load_preset
 
     name, *sun = cell.split("@")
@@ -48,7 +48,7 @@ def _scene(cell: str, light: str = ""):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     ensure_registered()
     scene = bpy.context.scene
-    scene_io.apply_preset(scene, preset)
+    scenepresets.apply_preset(scene, preset)
     return scene
 
 

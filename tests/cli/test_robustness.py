@@ -364,7 +364,7 @@ def test_composite_reports_progress_and_estimates_by_cost():
 
 @pytest.mark.parametrize("content", [b"", b"this is a text file, not an image\n"])
 def test_an_unreadable_image_layer_is_not_reported_missing(make_scene, tmp_path, content):
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import scenepresets
     from nubis_addon.core.errors import NubisError
     from nubis_addon.core.presets import load_preset
 
@@ -373,7 +373,7 @@ def test_an_unreadable_image_layer_is_not_reported_missing(make_scene, tmp_path,
     preset = load_preset(_preset(tmp_path, DEFAULT + layer))
     scene = make_scene("default")
     with pytest.raises(NubisError) as err:
-        scene_io.apply_preset(scene, preset)
+        scenepresets.apply_preset(scene, preset)
     text = str(err.value)
     assert "missing" not in text and "not found" not in text and str(tmp_path / "paint.png") in text
     assert ("empty file (0 bytes)" if not content else "cannot be read as an image") in text
@@ -396,7 +396,7 @@ def test_an_image_layer_bomb_is_refused_from_its_header(make_scene, tmp_path):
     from the header, and the layer refused, before any pixel is decoded."""
     import resource
 
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import scenepresets
     from nubis_addon.core.errors import NubisError
     from nubis_addon.core.presets import load_preset
 
@@ -407,14 +407,14 @@ def test_an_image_layer_bomb_is_refused_from_its_header(make_scene, tmp_path):
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     t0 = time.monotonic()
     with pytest.raises(NubisError, match=r"is 20000x20000 pixels, which would take about 7\.5 GB to read: scale it"):
-        scene_io.apply_preset(scene, preset)
+        scenepresets.apply_preset(scene, preset)
     assert time.monotonic() - t0 < 10
     assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before < 200 * 1024  # KiB: nothing decoded
 
 
 def test_a_saved_scene_beyond_reach_is_refused(make_scene):
     """A .blend may hold what no preset can: a camera at 1e30 m, five storms."""
-    from nubis_addon.blender import pipeline, scene_io
+    from nubis_addon.blender import pipeline, superstorms
     from nubis_addon.core.errors import NubisError
 
     scene = make_scene("default")
@@ -424,7 +424,7 @@ def test_a_saved_scene_beyond_reach_is_refused(make_scene):
         pipeline.check_scene(scene)
     scene.camera.location = (0.0, 0.0, 2.0)
     for i in range(5):
-        scene_io.add_storm(scene, {"x": 1000.0 * i})
+        superstorms.add_storm(scene, {"x": 1000.0 * i})
     with pytest.raises(NubisError, match="superstorms: 5 given, but a scene holds at most 4: remove 1 of them"):
         pipeline.check_scene(scene)
 

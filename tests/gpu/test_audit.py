@@ -114,10 +114,10 @@ def _vortex_angle(scene, frames, where):
     world points `where` (N, 2), the storm's blend, and the simulated time at each frame."""
     from gpu_probe import probe_vortex
 
-    from nubis_addon.blender import runtime, scene_io
+    from nubis_addon.blender import runtime, scene_io, superstorms
 
     storm = scene.nubis.storms[0]
-    cx, cy = scene_io.storm_centre(storm)
+    cx, cy = superstorms.storm_centre(storm)
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
     angles, blends, times = [], [], []
     for f in frames:
@@ -132,10 +132,10 @@ def _vortex_angle(scene, frames, where):
 
 
 def _ring_points(scene, rings):
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import superstorms
 
     storm = scene.nubis.storms[0]
-    cx, cy = scene_io.storm_centre(storm)
+    cx, cy = superstorms.storm_centre(storm)
     u = np.asarray(rings, np.float64)
     return np.stack([cx + u / 6.0 * storm.radius, np.full_like(u, cy)], axis=1).astype(np.float32)
 

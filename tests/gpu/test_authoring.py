@@ -6,9 +6,9 @@ import numpy as np
 
 
 def _coverage(scene):
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import datafield
 
-    return scene_io.read_field_image(scene.nubis.field_a, "a", scene.nubis.field_resolution)[..., 0]
+    return datafield.read_field_image(scene.nubis.field_a, "a", scene.nubis.field_resolution)[..., 0]
 
 
 def test_new_cloudscape_operator_and_layer_stack(blender):
@@ -37,7 +37,7 @@ def test_new_cloudscape_operator_and_layer_stack(blender):
 
 
 def test_painting_an_image_layer_updates_the_field(make_scene, blender):
-    from nubis_addon.blender import events, scene_io
+    from nubis_addon.blender import events, sceneparams
 
     scene = make_scene("default")
     s = scene.nubis
@@ -52,22 +52,22 @@ def test_painting_an_image_layer_updates_the_field(make_scene, blender):
     img.pixels.foreach_set(px.ravel())
     fake = types.SimpleNamespace(updates=[types.SimpleNamespace(id=img)])
     events.on_depsgraph_update(scene, fake)
-    assert scene_io.field_stale(scene)  # a composite is owed ...
+    assert sceneparams.field_stale(scene)  # a composite is owed ...
     events.composite_stale()  # ... and made by the debounce timer a moment later
-    assert not scene_io.field_stale(scene)
+    assert not sceneparams.field_stale(scene)
     cov = _coverage(scene)
     assert cov[:, :200].max() < 0.01 and cov[:, 312:].min() > 0.99
 
 
 def test_weather_rules_operator(make_scene, blender):
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import datafield
 
     scene = make_scene("default")
     s = scene.nubis
     layer = s.layers.add()
     layer.name, layer.kind, layer.channel, layer.value = "Rain", "CONSTANT", "PRECIPITATION", 1.0
     assert blender.ops.nubis.apply_weather_rules(rain=True, horizon=False) == {"FINISHED"}
-    a = scene_io.read_field_image(s.field_a, "a", s.field_resolution)
-    b = scene_io.read_field_image(s.field_b, "b", s.field_resolution)
+    a = datafield.read_field_image(s.field_a, "a", s.field_resolution)
+    b = datafield.read_field_image(s.field_b, "b", s.field_resolution)
     assert a[..., 0].min() >= 0.7 - 1e-6 and a[..., 2].min() > 0.999
     assert b[..., 2].min() == np.float32(s.rule_cumulonimbus_top)

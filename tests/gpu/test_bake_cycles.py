@@ -114,15 +114,15 @@ def test_rain_absorbs_in_the_viewport_the_bake_and_cycles(make_scene, tmp_path):
     """Rain darkening is absorption (docs/sources.md#rain-and-storm-absorption): the viewport's raining
     clouds get darker and no thinner, the bake carries it as an `absorption` grid (density x (rain - 1))
     and Cycles adds it."""
-    from nubis_addon.blender import cycles_setup, pipeline, scene_io
+    from nubis_addon.blender import cycles_setup, datafield, pipeline
     from nubis_addon.core import metrics, vdbio
 
     scene = split_coverage_scene(make_scene)
     scene.nubis.lighting_rain_absorption = 4.0
     dry = pipeline.render_viewport(scene, 48, 48)
-    a = scene_io.read_fields(scene.nubis)[0].copy()
+    a = datafield.read_fields(scene.nubis)[0].copy()
     a[..., 1] = 1.0  # precipitation everywhere
-    scene_io.write_field_image(scene.nubis, "a", a)
+    datafield.write_field_image(scene.nubis, "a", a)
     wet = pipeline.render_viewport(scene, 48, 48)
     covered = dry[..., 3] > 0.5
     assert covered.sum() > 100

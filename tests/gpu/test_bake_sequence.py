@@ -96,14 +96,14 @@ def test_cli_sequence_with_velocity_matches_the_motion_vectors(make_scene, tmp_p
 
 @pytest.fixture(scope="module")
 def distributed_bakes(tmp_path_factory, blender):
-    from nubis_addon.blender import ensure_registered, farm, scene_io
+    from nubis_addon.blender import ensure_registered, farm, scenepresets
     from nubis_addon.core import distributed
     from nubis_addon.core.presets import load_preset
 
     blender.ops.wm.read_factory_settings(use_empty=True)
     ensure_registered()
     scene = blender.context.scene
-    scene_io.apply_preset(scene, load_preset("default"))
+    scenepresets.apply_preset(scene, load_preset("default"))
     out = tmp_path_factory.mktemp("dist")
     options = BakeOptions(voxel_size=300.0, velocity=True)
     engine = distributed.parse_engine("local:2")

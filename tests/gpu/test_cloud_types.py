@@ -7,7 +7,7 @@ from nubis_addon.core.jobs import BakeOptions
 
 
 def _band(make_scene, tmp_path, cloud_type: float) -> float:
-    from nubis_addon.blender import pipeline, scene_io
+    from nubis_addon.blender import datafield, pipeline
     from nubis_addon.core import vdbio
 
     scene = make_scene("default", cirrus_coverage=0.0)
@@ -15,7 +15,7 @@ def _band(make_scene, tmp_path, cloud_type: float) -> float:
     a = np.zeros((res, res, 4), np.float32)
     a[..., 0] = 0.8  # the same coverage everywhere: only the type differs
     a[..., 2] = cloud_type
-    scene_io.write_field_image(scene.nubis, "a", a)
+    datafield.write_field_image(scene.nubis, "a", a)
     result = pipeline.bake(scene, tmp_path / f"type_{cloud_type}.vdb", BakeOptions(voxel_size=250.0))
     dense, lo = vdbio.read_grid_array(result.path, "density")
     z = np.nonzero(dense > 1e-3)[0] + lo[2]

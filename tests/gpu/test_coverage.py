@@ -47,7 +47,7 @@ def test_coverage_is_the_fraction_of_the_sky_covered(make_scene):
 def test_a_preset_with_the_old_multiplier_keeps_its_look(make_scene, tmp_path):
     """`[density] coverage = 0.6` without `cover` (mixed_sky before the change) becomes the fraction of
     the sky 0.6 covered on its own field, so the shaders get 0.6 back."""
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import scene_io, scenepresets
     from nubis_addon.core.presets import find_preset, load_preset
 
     text = find_preset("mixed_sky").read_text(encoding="utf-8")
@@ -56,7 +56,7 @@ def test_a_preset_with_the_old_multiplier_keeps_its_look(make_scene, tmp_path):
     preset = load_preset(str(old))
     assert preset.legacy_coverage == pytest.approx(0.6)
     scene = make_scene("default")
-    scene_io.apply_preset(scene, preset)
+    scenepresets.apply_preset(scene, preset)
     assert scene.nubis.density_cover == pytest.approx(0.41475, abs=0.002)
     assert scene_io.state_from_scene(scene).params["density_coverage"] == pytest.approx(0.6, abs=0.005)
 

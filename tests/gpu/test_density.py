@@ -229,7 +229,7 @@ def test_a_cheap_sample_erodes_by_the_detail_mean(make_scene):
 def test_zero_coverage_gives_no_density(make_scene):
     from gpu_probe import probe_density
 
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import datafield
 
     scene = make_scene("default")
     clouds, state, _noise = _inputs(scene)
@@ -240,7 +240,7 @@ def test_zero_coverage_gives_no_density(make_scene):
 
     field_a = state.field_a.copy()
     field_a[..., 0] = 0.0
-    scene_io.write_field_image(scene.nubis, "a", field_a)
+    datafield.write_field_image(scene.nubis, "a", field_a)
     clouds, state, _noise = _inputs(scene)
     assert float(state.field_a[..., 0].max()) == 0.0
     after = probe_density(clouds, points)
@@ -252,7 +252,7 @@ def test_density_never_falls_as_coverage_rises(make_scene):
     """GDC22: raising coverage inflates the clouds; nothing may thin out anywhere."""
     from gpu_probe import probe_density
 
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import datafield
 
     scene = make_scene("default")
     clouds, state, _noise = _inputs(scene)
@@ -262,7 +262,7 @@ def test_density_never_falls_as_coverage_rises(make_scene):
     results = []
     for c in (0.2, 0.4, 0.6, 0.8, 1.0):
         field_a[..., 0] = c
-        scene_io.write_field_image(scene.nubis, "a", field_a)
+        datafield.write_field_image(scene.nubis, "a", field_a)
         clouds, state, _noise = _inputs(scene)
         results.append(probe_density(clouds, points))
     for lower, higher in zip(results, results[1:], strict=False):
@@ -280,7 +280,7 @@ def test_time_moves_detail_but_keeps_structure(make_scene):
     wind reshapes the clouds in place: the detail changes, the cloudscape's layout does not."""
     from gpu_probe import probe_density
 
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import datafield
 
     scene = make_scene("default")  # 10 m/s: in 60 s the shape noise moves 600 m, the detail 1200 m
     clouds, state, noise_set = _inputs(scene)
@@ -327,7 +327,7 @@ def test_time_moves_detail_but_keeps_structure(make_scene):
     res = field_a.shape[1]
     x_texel = state.params["field_origin_x"] + (np.arange(res) + 0.5 - res / 2) * state.params["field_size"] / res
     field_a[:, np.abs(x_texel - state.draw_center[0]) < 3000.0, 0] = 0.0
-    scene_io.write_field_image(scene.nubis, "a", field_a)
+    datafield.write_field_image(scene.nubis, "a", field_a)
     banded_now, _t = fine_at(0.0)
     banded_later, _t = fine_at(60.0)
     _clouds, banded_state, _n = _inputs(scene)

@@ -20,13 +20,13 @@ NOISE_TARGET = 6.0  # percent
 
 @pytest.fixture(scope="module", params=sorted(MEASURED))
 def full(request, tmp_path_factory, blender):
-    from nubis_addon.blender import ensure_registered, pipeline, scene_io
+    from nubis_addon.blender import ensure_registered, pipeline, scenepresets
     from nubis_addon.core.presets import load_preset
 
     blender.ops.wm.read_factory_settings(use_empty=True)
     ensure_registered()
     scene = blender.context.scene
-    scene_io.apply_preset(scene, load_preset(request.param))
+    scenepresets.apply_preset(scene, load_preset(request.param))
     out = tmp_path_factory.mktemp(f"full_{request.param}")
     m = pipeline.compare(
         scene,

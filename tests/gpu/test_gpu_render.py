@@ -24,12 +24,12 @@ def test_clouds_only_where_coverage_is_positive(make_scene):
 
 
 def test_zero_coverage_renders_nothing(make_scene):
-    from nubis_addon.blender import pipeline, scene_io
+    from nubis_addon.blender import datafield, pipeline
 
     scene = make_scene("default")
     res = scene.nubis.field_resolution
-    scene_io.write_field_image(scene.nubis, "a", np.zeros((res, res, 4), np.float32))
-    scene_io.write_field_image(scene.nubis, "cirrus", np.zeros((res, res, 4), np.float32))
+    datafield.write_field_image(scene.nubis, "a", np.zeros((res, res, 4), np.float32))
+    datafield.write_field_image(scene.nubis, "cirrus", np.zeros((res, res, 4), np.float32))
     rgba = pipeline.render_viewport(scene, 64, 36)
     assert rgba.max() == 0.0
 

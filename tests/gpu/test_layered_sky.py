@@ -295,7 +295,7 @@ def _run_operator(name: str) -> None:
 def test_a_layer_added_in_the_sidebar_is_saved_and_read_back(make_scene, tmp_path):
     import bpy
 
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import scene_io, scenepresets
     from nubis_addon.core import presets, userpresets
 
     scene = make_scene("stratocumulus")
@@ -307,7 +307,7 @@ def test_a_layer_added_in_the_sidebar_is_saved_and_read_back(make_scene, tmp_pat
     assert cloud.field_a is not None and cloud.field_b is not None
     cloud.name = "Upper"
     cloud.wind_speed = 31.0
-    preset = scene_io.preset_from_scene(scene, "Saved")
+    preset = scenepresets.preset_from_scene(scene, "Saved")
     again = presets.preset_from_bytes(userpresets.dump_preset(preset).encode())
     assert [c.name for c in again.cloud_layers] == ["Upper"]
     assert again.cloud_layers[0].params["wind_speed"] == pytest.approx(31.0)
@@ -328,13 +328,13 @@ def test_a_stroke_paints_the_cloud_layer_chosen_in_the_list(make_scene):
     its field, and the first layer's field is left as it was."""
     import bpy
 
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import datafield, scene_io
 
     scene = make_scene(PRESET)
     s = scene.nubis
     s.active_further_layer = 0
     cloud = s.cloud_layers[0]
-    before_first = scene_io.read_fields(s)[0].copy()
+    before_first = datafield.read_fields(s)[0].copy()
     before = scene_io.state_from_scene(scene).cloud_layers[0].field_a.copy()
     stroke = stroke_elements([-3000.0, 0.0, 3000.0], z=cloud.layer_bottom)
     assert bpy.ops.nubis.paint_field(stroke=stroke, channel="COVERAGE", radius=2000.0, strength=1.0) == {"FINISHED"}
@@ -346,7 +346,7 @@ def test_a_stroke_paints_the_cloud_layer_chosen_in_the_list(make_scene):
     # The coverage the shader sees under the stroke (the field times the layer's multiplier): full.
     centre = after[res // 2 - 2 : res // 2 + 2, res // 2 - 2 : res // 2 + 2, 0] * painted.params["density_coverage"]
     assert centre.min() >= 0.99 and not np.array_equal(after, before)
-    assert np.array_equal(scene_io.read_fields(s)[0], before_first)
+    assert np.array_equal(datafield.read_fields(s)[0], before_first)
 
 
 def test_a_drag_is_live_on_the_first_layer_and_composited_at_its_end_on_a_further_one(make_scene):

@@ -10,31 +10,31 @@ import numpy as np
 
 
 def _field_a(scene):
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import datafield
 
-    return scene_io.read_fields(scene.nubis)[0].copy()
+    return datafield.read_fields(scene.nubis)[0].copy()
 
 
 def test_a_layer_edit_recomposites_the_field(make_scene):
-    from nubis_addon.blender import events, scene_io
+    from nubis_addon.blender import events, sceneparams
 
     scene = make_scene("default")
     before = _field_a(scene)
     layer = scene.nubis.layers[0]
     layer.scale *= 0.5  # what dragging the slider does
-    assert scene_io.field_stale(scene)
+    assert sceneparams.field_stale(scene)
     events.composite_stale()  # the debounce timer, a moment after the drag
     after = _field_a(scene)
     assert not np.array_equal(before, after)
     # A rule toggle too, read straight by a render (which makes the owed composite itself).
     scene.nubis.rule_horizon = True
-    assert scene_io.field_stale(scene)
+    assert sceneparams.field_stale(scene)
     assert not np.array_equal(after, _field_a(scene))  # cumulus at ~50 % far out
-    assert not scene_io.field_stale(scene)
+    assert not sceneparams.field_stale(scene)
 
 
 def test_moving_a_storm_empty_moves_its_column(blender, make_scene):
-    from nubis_addon.blender import events, scene_io
+    from nubis_addon.blender import events, sceneparams
 
     scene = make_scene("default")
     blender.ops.nubis.storm_add()
@@ -45,7 +45,7 @@ def test_moving_a_storm_empty_moves_its_column(blender, make_scene):
     depsgraph = blender.context.evaluated_depsgraph_get()
     update = types.SimpleNamespace(id=storm.empty.evaluated_get(depsgraph), is_updated_transform=True)
     events.on_depsgraph_update(scene, types.SimpleNamespace(updates=[update]))
-    assert scene_io.field_stale(scene)
+    assert sceneparams.field_stale(scene)
     events.composite_stale()
     after = _field_a(scene)
     # The storm's coverage column moved with the Empty: the coverage changed where it was and where it went.
@@ -68,7 +68,7 @@ def test_a_keyed_layer_value_changes_the_field_on_frame_change(blender, make_sce
 
 
 def test_new_cloudscape_keeps_the_artists_camera_and_world_when_asked(blender):
-    from nubis_addon.blender import ensure_registered, scene_io
+    from nubis_addon.blender import ensure_registered, scenepresets, sky
 
     blender.ops.wm.read_factory_settings(use_empty=True)
     ensure_registered()
@@ -87,12 +87,12 @@ def test_new_cloudscape_keeps_the_artists_camera_and_world_when_asked(blender):
     ) == {"FINISHED"}
     assert scene.camera == cam and tuple(cam.location) == (1.0, 2.0, 3.0) and cam.data.lens == 85.0
     assert scene.world == world and scene.render.resolution_x == 1234
-    assert scene.nubis.sun == sun and scene_io.find_sun(scene) == sun
+    assert scene.nubis.sun == sun and sky.find_sun(scene) == sun
     # Not kept: the preset's camera and sky, the artist's still in the file.
     assert blender.ops.nubis.new_cloudscape(preset="default") == {"FINISHED"}
-    assert scene.camera.name == scene_io.CAMERA_NAME and tuple(cam.location) == (1.0, 2.0, 3.0)
-    assert scene.world.name == scene_io.WORLD_NAME and world.use_fake_user
-    assert scene.nubis.sun.name == scene_io.SUN_NAME and "My Sun" in scene.objects
+    assert scene.camera.name == scenepresets.CAMERA_NAME and tuple(cam.location) == (1.0, 2.0, 3.0)
+    assert scene.world.name == scenepresets.WORLD_NAME and world.use_fake_user
+    assert scene.nubis.sun.name == scenepresets.SUN_NAME and "My Sun" in scene.objects
     assert scene.render.resolution_x == 640
 
 
@@ -157,14 +157,14 @@ def test_rendered_mode_leaves_a_baked_volume_to_the_engine(blender, make_scene, 
 
 
 def test_slider_drags_repack_nothing_and_saving_packs_the_field(blender, make_scene, tmp_path):
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import datafield, sceneparams
 
     scene = make_scene("default")
     s = scene.nubis
-    generation = scene_io.field_generation()
+    generation = datafield.field_generation()
     for value in np.linspace(0.1, 0.9, 9):  # a drag of a lighting slider: no composite, no image written
         s.lighting_powder = float(value)
-    assert scene_io.field_generation() == generation and not scene_io.field_stale(scene)
+    assert datafield.field_generation() == generation and not sceneparams.field_stale(scene)
     assert s.field_a.packed_file is None  # composites leave the images unpacked ...
     path = tmp_path / "sky.blend"
     blender.ops.wm.save_as_mainfile(filepath=str(path))

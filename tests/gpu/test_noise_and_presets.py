@@ -157,11 +157,11 @@ def _f32(x):
 def _edit_everything(scene, blender):
     """Move every setting of the cloudscape off the preset's value: scene settings, a layer, a storm and
     its Empty, the sun, the World, the camera and the render settings."""
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import sceneparams, sky
     from nubis_addon.core import schema
 
     s = scene.nubis
-    with scene_io.batch_edit():
+    with sceneparams.batch_edit():
         for i, setting in enumerate(schema.PRESET_SCENE):
             if setting.key in ("layer_bottom", "layer_top", "march_steps_min", "march_steps_max", "field_resolution"):
                 continue
@@ -181,7 +181,7 @@ def _edit_everything(scene, blender):
         layer.opacity, layer.seed, layer.blend, layer.remap = 0.7, 99, "MAX", (0.1, 0.8, 0.05, 0.95)
         s.storms[0].radius, s.storms[0].glow_color = 9876.5, (0.2, 0.4, 0.6)
     s.storms[0].empty.location = (3210.0, -4567.5, 0.0)
-    sun = scene_io.find_sun(scene)
+    sun = sky.find_sun(scene)
     sun.rotation_euler = (math.radians(30.0), math.radians(10.0), math.radians(200.0))
     sun.data.color, sun.data.energy, sun.data.angle = (0.9, 0.8, 0.7), 7.5, math.radians(1.5)
     from nubis_addon.blender import sky
@@ -203,18 +203,18 @@ def _edit_everything(scene, blender):
 
 def _snapshot(scene):
     """Every setting as Blender holds it: the schema's, the layers', the storms', and the objects'."""
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import datafield, sceneparams, sky, superstorms
     from nubis_addon.core import schema
 
     s = scene.nubis
-    sun = scene_io.find_sun(scene)
-    direction = scene_io.evaluated_matrix(sun).to_3x3().col[2]
+    sun = sky.find_sun(scene)
+    direction = sceneparams.evaluated_matrix(sun).to_3x3().col[2]
     from nubis_addon.blender import sky
 
     return {
-        "settings": {k.key: scene_io._from_blender(k, getattr(s, k.key)) for k in schema.PRESET_SCENE},
-        "layers": [scene_io.layer_to_dict(layer) for layer in s.layers],
-        "storms": [(scene_io.table_to_dict(st, schema.STORM), scene_io.storm_centre(st)) for st in s.storms],
+        "settings": {k.key: sceneparams.from_blender(k, getattr(s, k.key)) for k in schema.PRESET_SCENE},
+        "layers": [datafield.layer_to_dict(layer) for layer in s.layers],
+        "storms": [(sceneparams.table_to_dict(st, schema.STORM), superstorms.storm_centre(st)) for st in s.storms],
         "sun": (list(direction), list(sun.data.color), sun.data.energy, sun.data.angle),
         "world": sky.atmosphere(scene.world),
         "camera": (
@@ -235,7 +235,7 @@ def _snapshot(scene):
 
 
 def test_a_saved_user_preset_loads_back_to_every_setting(make_scene, blender, tmp_path, monkeypatch):
-    from nubis_addon.blender import operators, scene_io
+    from nubis_addon.blender import datafield, operators
     from nubis_addon.core import presets, schema
 
     monkeypatch.setenv("NUBIS_PRESET_DIR", str(tmp_path / "presets"))
@@ -279,7 +279,7 @@ def test_a_saved_user_preset_loads_back_to_every_setting(make_scene, blender, tm
             continue
         assert after["settings"][setting.key] == before["settings"][setting.key], setting.key
     # ... and the multiplier a composite finds from the saved Coverage is the one the saved scene drew with.
-    assert after["settings"]["density_coverage"] == pytest.approx(scene_io.coverage_multiplier(scene), rel=1e-4)
+    assert after["settings"]["density_coverage"] == pytest.approx(datafield.coverage_multiplier(scene), rel=1e-4)
     assert after["layers"] == before["layers"]
     assert after["storms"] == before["storms"]
     np.testing.assert_allclose(after["sun"][0], before["sun"][0], atol=1e-5)

@@ -16,10 +16,10 @@ def stroke(xs, y=0.0):
 
 def cover(scene):
     """The coverage the shader sees: field A red times the stored multiplier, clamped."""
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import datafield
 
-    a = scene_io.read_fields(scene.nubis)[0]
-    return np.clip(a[..., 0] * scene_io.coverage_multiplier(scene), 0.0, 1.0)
+    a = datafield.read_fields(scene.nubis)[0]
+    return np.clip(a[..., 0] * datafield.coverage_multiplier(scene), 0.0, 1.0)
 
 
 def near_stroke(scene, x0, x1, y, within):
@@ -59,7 +59,7 @@ def test_a_stroke_raises_the_cover_under_it_and_leaves_the_rest_exactly(blender,
 
 
 def test_paint_layers_disable_fade_reorder_and_clear_like_layers(blender, make_scene):
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import datafield
 
     scene = make_scene("default")
     s = scene.nubis
@@ -68,20 +68,20 @@ def test_paint_layers_disable_fade_reorder_and_clear_like_layers(blender, make_s
     painted = cover(scene)
     layer = s.layers[-1]
     layer.enabled = False
-    scene_io.generate_fields(scene)
+    datafield.generate_fields(scene)
     np.testing.assert_allclose(cover(scene), before, atol=1e-6)
     layer.enabled = True
     layer.opacity = 0.5
-    scene_io.generate_fields(scene)
+    datafield.generate_fields(scene)
     half = cover(scene)
-    values = scene_io.paint_layers(s)[0].values
+    values = datafield.paint_layers(s)[0].values
     core = near_stroke(scene, -3000, 3000, 0.0, 0.15 * RADIUS)
     np.testing.assert_allclose(half[core], np.clip(before[core] + 0.5 * values[core], 0, 1), atol=1e-5)
     assert values[core].min() > 0.9
     layer.opacity = 1.0
     # Paint acts after the stack: moving the layer to the top changes nothing.
     s.layers.move(len(s.layers) - 1, 0)
-    scene_io.generate_fields(scene)
+    datafield.generate_fields(scene)
     np.testing.assert_allclose(cover(scene), painted, atol=1e-6)
     s.active_layer = 0
     assert blender.ops.nubis.paint_layer_clear() == {"FINISHED"}
@@ -90,12 +90,12 @@ def test_paint_layers_disable_fade_reorder_and_clear_like_layers(blender, make_s
 
 
 def test_painting_a_clear_sky_at_zero_coverage_paints_only_the_stroke(blender, make_scene):
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import datafield
     from nubis_addon.core import paint
 
     scene = make_scene("default")
     scene.nubis.density_cover = 0.0
-    scene_io.generate_fields(scene)
+    datafield.generate_fields(scene)
     assert scene.nubis.density_coverage == 0.0
     blender.ops.nubis.paint_field(channel="COVERAGE", radius=RADIUS, strength=1.0, stroke=stroke([0, 1000]))
     assert scene.nubis.density_coverage == pytest.approx(paint.MULTIPLIER_FLOOR)
@@ -105,13 +105,13 @@ def test_painting_a_clear_sky_at_zero_coverage_paints_only_the_stroke(blender, m
 
 
 def test_type_and_precipitation_paint_add_to_their_channels(blender, make_scene):
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import datafield
 
     scene = make_scene("default")
-    a0 = scene_io.read_fields(scene.nubis)[0].copy()
+    a0 = datafield.read_fields(scene.nubis)[0].copy()
     blender.ops.nubis.paint_field(channel="PRECIPITATION", radius=RADIUS, strength=0.6, stroke=stroke([0, 2000]))
     blender.ops.nubis.paint_field(channel="TYPE", radius=RADIUS, strength=1.0, stroke=stroke([0, 2000]))
-    a1 = scene_io.read_fields(scene.nubis)[0]
+    a1 = datafield.read_fields(scene.nubis)[0]
     core = near_stroke(scene, 0, 2000, 0.0, 0.15 * RADIUS)
     assert np.all(a1[core, 1] >= np.minimum(a0[core, 1] + 0.54, 1.0))
     assert a1[core, 2].min() > 0.9
@@ -127,8 +127,8 @@ def test_the_live_stroke_shows_what_the_full_composite_makes(blender, make_scene
 
     import gpu
 
+    from nubis_addon.blender import datafield, runtime, sceneparams, viewport
     from nubis_addon.blender import paint as blender_paint
-    from nubis_addon.blender import runtime, scene_io, viewport
     from nubis_addon.render.engine import read_pixels
 
     scene = make_scene("default")
@@ -137,7 +137,7 @@ def test_the_live_stroke_shows_what_the_full_composite_makes(blender, make_scene
     rv3d = camera_view(blender, scene, w, h)
     s.viewport_samples = 1
     layer = blender_paint.paint_layer(s, "COVERAGE")
-    cam_xy = scene_io.evaluated_matrix(scene.camera).translation
+    cam_xy = sceneparams.evaluated_matrix(scene.camera).translation
     live = blender_paint.LiveStroke(scene, layer, RADIUS, 1.0, "SMOOTH", "ADD")
     live.hold_light = False  # the 3D view holds the shadows during a drag; here they follow at once
     clouds = runtime.cloud_gpu(s.noise_seed)
@@ -173,8 +173,8 @@ def test_the_live_stroke_shows_what_the_full_composite_makes(blender, make_scene
     assert np.abs(live_image - plain).max() > 0.05  # the stroke shows
     live.commit(layer)
     fresh = {k: v.copy() for k, v in zip("abc", arrays, strict=True)}
-    scene_io.generate_fields(scene)  # what the stroke's end owes
-    full = scene_io.read_fields(s)
+    datafield.generate_fields(scene)  # what the stroke's end owes
+    full = datafield.read_fields(s)
     for k, arr in zip("abc", full, strict=True):
         np.testing.assert_allclose(arr, fresh[k], atol=1e-6)
     final = converge(7003)
@@ -195,7 +195,7 @@ def test_the_live_stroke_shows_what_the_full_composite_makes(blender, make_scene
 
 
 def test_strokes_are_saved_and_undo_recomposites_from_them(blender, make_scene, tmp_path):
-    from nubis_addon.blender import events, scene_io
+    from nubis_addon.blender import datafield, events
 
     scene = make_scene("default")
     before = cover(scene)
@@ -207,7 +207,7 @@ def test_strokes_are_saved_and_undo_recomposites_from_them(blender, make_scene, 
     scene = blender.context.scene
     assert len(scene.nubis.layers[-1].dabs) == n
     np.testing.assert_allclose(cover(scene), painted, atol=1e-6)
-    scene_io.generate_fields(scene)  # from the saved strokes, not the saved pixels
+    datafield.generate_fields(scene)  # from the saved strokes, not the saved pixels
     np.testing.assert_allclose(cover(scene), painted, atol=1e-6)
     # What Ctrl-Z restores is the layer without the stroke's dabs; the undo handler composites from it.
     scene.nubis.layers[-1].dabs.clear()
@@ -216,10 +216,10 @@ def test_strokes_are_saved_and_undo_recomposites_from_them(blender, make_scene, 
 
 
 def test_bad_strokes_get_a_clear_message_and_change_nothing(blender, make_scene):
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import datafield
 
     scene = make_scene("default")
-    a = scene_io.read_fields(scene.nubis)[0].copy()
+    a = datafield.read_fields(scene.nubis)[0].copy()
     n_layers = len(scene.nubis.layers)
     cases = [
         (dict(radius=0.0, stroke=stroke([0, 100])), "smaller than half a field pixel"),
@@ -233,7 +233,7 @@ def test_bad_strokes_get_a_clear_message_and_change_nothing(blender, make_scene)
         with pytest.raises(RuntimeError, match=words):
             blender.ops.nubis.paint_field(**{"channel": "COVERAGE", "radius": RADIUS, "strength": 1.0, **kwargs})
     assert len(scene.nubis.layers) == n_layers
-    np.testing.assert_array_equal(scene_io.read_fields(scene.nubis)[0], a)
+    np.testing.assert_array_equal(datafield.read_fields(scene.nubis)[0], a)
     # A channel given as a name the operator does not know is refused by Blender itself, with the choices.
     with pytest.raises(TypeError, match="COVERAGE"):
         blender.ops.nubis.paint_field(channel="BOTTOM_TYPE", stroke=stroke([0, 100]))
@@ -260,16 +260,16 @@ def test_a_stroke_to_far_away_paints_its_part_over_the_field_or_is_refused(blend
     the stroke over the field is painted, in milliseconds, and a stroke with no such part is refused."""
     import time
 
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import datafield
 
     scene = make_scene("default")
     start = time.perf_counter()
     assert blender.ops.nubis.paint_field(channel="COVERAGE", radius=RADIUS, stroke=stroke([0.0, 1e12])) == {"FINISHED"}
     assert time.perf_counter() - start < 30.0  # a composite; no billions of dabs
-    dabs = scene_io.paint_dabs(scene.nubis.layers[-1])
+    dabs = datafield.paint_dabs(scene.nubis.layers[-1])
     assert len(dabs) == 76  # 0 to 37500 m (the field's edge and the radius), 500 m apart
     assert dabs[:, 0].min() == 0.0 and dabs[:, 0].max() == 37500.0
-    a = scene_io.read_fields(scene.nubis)[0].copy()
+    a = datafield.read_fields(scene.nubis)[0].copy()
     n = len(dabs)
     cases = [
         (stroke([0.0, float("inf")]), "the x of stroke point 2 must be a finite number of metres, not infinite"),
@@ -284,13 +284,13 @@ def test_a_stroke_to_far_away_paints_its_part_over_the_field_or_is_refused(blend
     )
     assert refusal(blender, stroke=stroke([1e12, 2e12], y=1e12)) == outside
     assert len(scene.nubis.layers[-1].dabs) == n
-    np.testing.assert_array_equal(scene_io.read_fields(scene.nubis)[0], a)
+    np.testing.assert_array_equal(datafield.read_fields(scene.nubis)[0], a)
 
 
 def test_the_brush_radius_and_strength_as_the_docs_say(blender, make_scene):
     """Radius: finite, half a field pixel to the field's width. Strength: Blender's slider clamps it to 0-1,
     as its own sliders do (5 paints at 1); 0 and NaN are refused (docs/painting.md#what-is-refused)."""
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import datafield
 
     make_scene("default")
     for value in (float("inf"), float("nan")):
@@ -311,7 +311,7 @@ def test_the_brush_radius_and_strength_as_the_docs_say(blender, make_scene):
     )
     assert blender.ops.nubis.paint_field(radius=RADIUS, strength=5.0, stroke=stroke([0, 100])) == {"FINISHED"}
     layer = blender.context.scene.nubis.layers[-1]
-    assert scene_io.paint_dabs(layer)[:, 3].max() == 1.0
+    assert datafield.paint_dabs(layer)[:, 3].max() == 1.0
 
 
 def test_a_long_composite_is_announced_and_an_absurd_one_refused(blender, make_scene, monkeypatch, capfd):
@@ -320,11 +320,11 @@ def test_a_long_composite_is_announced_and_an_absurd_one_refused(blender, make_s
     import re
 
     from nubis_addon.blender import paint as blender_paint
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import sceneparams
     from nubis_addon.core import console, paint
 
     scene = make_scene("default")
-    grid = paint.Grid.of(scene_io.params_from_scene(scene.nubis))
+    grid = paint.Grid.of(sceneparams.params_from_scene(scene.nubis))
     layer = blender_paint.paint_layer(scene.nubis, "COVERAGE")
     dabs = paint.stroke_dabs([(0.0, 0.0, 1.0, True), (5000.0, 0.0, 1.0, False)], RADIUS, 1.0, grid=grid)
     monkeypatch.setattr(paint, "NOTICE_S", 0.0)
@@ -379,7 +379,7 @@ def test_a_live_drag_to_far_away_lays_its_part_and_a_full_layer_stops_it(blender
 def test_a_paint_layer_offers_only_the_channels_a_brush_paints_and_refuses_another(blender, make_scene):
     """The layer's channel menu narrows for a paint layer (the schema's channel, numbered as before, so files
     read the same); a channel no brush paints is refused where it is set, in one sentence."""
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import datafield
     from nubis_addon.core import paint, schema
     from nubis_addon.core.errors import NubisError
 
@@ -403,44 +403,44 @@ def test_a_paint_layer_offers_only_the_channels_a_brush_paints_and_refuses_anoth
     # A table (a duplicate, a script) naming a channel no brush paints: refused before anything is set.
     fresh = scene.nubis.layers.add()
     with pytest.raises(NubisError) as info:
-        scene_io.layer_from_dict(fresh, {"name": "Rain paint", "kind": "paint", "channel": "density"})
+        datafield.layer_from_dict(fresh, {"name": "Rain paint", "kind": "paint", "channel": "density"})
     assert str(info.value) == (
         "the paint layer 'Rain paint' writes 'density', which a brush cannot paint: set its channel to one of "
         "coverage, precipitation, type, storm"
     )
     assert fresh.kind == "PERLIN" and fresh.name == ""
-    scene_io.layer_from_dict(fresh, {"channel": "storm", "kind": "paint"})  # the kind is set first
+    datafield.layer_from_dict(fresh, {"channel": "storm", "kind": "paint"})  # the kind is set first
     assert (fresh.kind, fresh.channel) == ("PAINT", "STORM")
     # A layer made a paint layer after its channel keeps showing it; the composite says what to change.
     other.channel, other.kind, other.name = "BOTTOM_TYPE", "PAINT", "Turned"
     assert other.channel == "BOTTOM_TYPE"
-    scene_io.add_dabs(other, paint.stroke_dabs([(0.0, 0.0, 1.0, True)], RADIUS, 1.0))
+    datafield.add_dabs(other, paint.stroke_dabs([(0.0, 0.0, 1.0, True)], RADIUS, 1.0))
     with pytest.raises(NubisError, match="'Turned' writes 'bottom_type', which a brush cannot paint"):
-        scene_io.generate_fields(scene)
+        datafield.generate_fields(scene)
 
 
 def test_a_scenes_runtime_state_lives_in_one_object_and_ends_in_one_place(blender, make_scene):
     """Stale flag, coverage histogram, pre-paint planes and raster keys: one SceneState per scene, all gone
     with forget_stale (a file load, unregister); core/paint.py caches rasters under scene_io's numbers."""
-    from nubis_addon.blender import events, scene_io
+    from nubis_addon.blender import datafield, events, sceneparams
     from nubis_addon.core import paint
 
     scene = make_scene("default")
     blender.ops.nubis.paint_field(channel="COVERAGE", radius=RADIUS, strength=1.0, stroke=stroke([0, 2000]))
     layer = scene.nubis.layers[-1]
-    state = scene_io.scene_state(scene)
+    state = sceneparams.scene_state(scene)
     assert state.cover_hist is not None and state.cover_painted and state.pre_paint is not None
-    key = scene_io.raster_key(layer)
-    assert key == scene_io.raster_key(layer) and key != layer.as_pointer()
+    key = datafield.raster_key(layer)
+    assert key == datafield.raster_key(layer) and key != layer.as_pointer()
     assert key in paint._RASTERS and layer.as_pointer() not in paint._RASTERS
     events.request_composite(scene)
-    assert scene_io.field_stale(scene) and scene_io.stale_scenes() == [scene]
-    scene_io.forget_stale()
-    assert not scene_io.field_stale(scene) and scene_io.pre_paint(scene) is None and not paint._RASTERS
-    assert scene_io.coverage_multiplier(scene) == scene.nubis.density_coverage  # the saved one, until a composite
-    assert scene_io.raster_key(layer) != key  # a new lifetime: new keys
-    scene_io.generate_fields(scene)
-    assert scene_io.scene_state(scene).cover_painted
+    assert sceneparams.field_stale(scene) and sceneparams.stale_scenes() == [scene]
+    sceneparams.forget_stale()
+    assert not sceneparams.field_stale(scene) and datafield.pre_paint(scene) is None and not paint._RASTERS
+    assert datafield.coverage_multiplier(scene) == scene.nubis.density_coverage  # the saved one, until a composite
+    assert datafield.raster_key(layer) != key  # a new lifetime: new keys
+    datafield.generate_fields(scene)
+    assert sceneparams.scene_state(scene).cover_painted
 
 
 def test_the_modifier_keys_pick_the_brush_mode(blender):

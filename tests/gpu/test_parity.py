@@ -42,12 +42,12 @@ def _looking_up(sky: bool):
 
 
 def _compare_single(blender, preset, out, samples: int) -> dict:
-    from nubis_addon.blender import ensure_registered, pipeline, scene_io
+    from nubis_addon.blender import ensure_registered, pipeline, scenepresets
 
     blender.ops.wm.read_factory_settings(use_empty=True)
     ensure_registered()
     scene = blender.context.scene
-    scene_io.apply_preset(scene, preset)
+    scenepresets.apply_preset(scene, preset)
     return pipeline.compare(
         scene,
         out,

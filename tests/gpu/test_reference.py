@@ -34,7 +34,7 @@ def test_rounds_are_sized_from_the_measured_noise_and_keep_every_sample():
 
 
 def _compare(blender, out, **kw):
-    from nubis_addon.blender import ensure_registered, pipeline, scene_io
+    from nubis_addon.blender import ensure_registered, pipeline, scenepresets
     from nubis_addon.core.presets import load_preset
 
     blender.ops.wm.read_factory_settings(use_empty=True)
@@ -43,7 +43,7 @@ def _compare(blender, out, **kw):
     preset = load_preset("default")
     preset.extra["camera"]["rotation"] = [150.0, 0.0, 20.0]  # steeply up: a small camera bake
     preset.params["cirrus_coverage"] = 0.0
-    scene_io.apply_preset(scene, preset)
+    scenepresets.apply_preset(scene, preset)
     edit = kw.pop("edit", None)
     if edit:
         edit(scene)
@@ -142,13 +142,13 @@ def test_the_comparisons_viewport_integrates_each_pixels_area(blender):
     converge on the centre's value, a different image wherever a cloud's edge crosses a pixel."""
     import dataclasses
 
-    from nubis_addon.blender import ensure_registered, pipeline, scene_io
+    from nubis_addon.blender import ensure_registered, pipeline, scenepresets
     from nubis_addon.core.presets import load_preset
 
     blender.ops.wm.read_factory_settings(use_empty=True)
     ensure_registered()
     scene = blender.context.scene
-    scene_io.apply_preset(scene, load_preset("default"))
+    scenepresets.apply_preset(scene, load_preset("default"))
     w, h, ss = 32, 18, 8
     centre_shot = pipeline.viewport_shot(scene, w, h)
     fine = pipeline.viewport_shot(scene, w * ss, h * ss)

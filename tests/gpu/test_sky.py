@@ -43,7 +43,7 @@ def test_equirectangular_layout_and_hemispheres():
 
 
 def test_new_cloudscape_builds_a_sky_tied_to_the_sun(make_scene, blender):
-    from nubis_addon.blender import scene_io, sky
+    from nubis_addon.blender import scenepresets, sky
 
     scene = make_scene("default")
     world = scene.world
@@ -51,7 +51,7 @@ def test_new_cloudscape_builds_a_sky_tied_to_the_sun(make_scene, blender):
     tex = sky.sky_node(world)
     assert tex.sky_type == ("MULTIPLE_SCATTERING" if blender.app.version >= (5, 0, 0) else "NISHITA")
     assert not tex.sun_disc  # the Sun lamp is the sun
-    sun = scene.objects[scene_io.SUN_NAME]
+    sun = scene.objects[scenepresets.SUN_NAME]
     assert math.degrees(tex.sun_elevation) == pytest.approx(28.0, abs=1e-3)
     # Turning the lamp alone moves the sky's sun and recolours the lamp (the depsgraph handler).
     noon = tuple(sun.data.color)

@@ -129,9 +129,9 @@ def test_a_disturbed_sequence_bake_writes_the_undisturbed_grids(make_scene, tmp_
         if n == 2:
             scene.nubis.density_erosion = erosion + 0.4
             scene.nubis.layers[0].opacity *= 0.5
-            from nubis_addon.blender import scene_io
+            from nubis_addon.blender import datafield
 
-            scene_io.generate_fields(scene)  # the layer edit's composite, as the debounced timer makes it
+            datafield.generate_fields(scene)  # the layer edit's composite, as the debounced timer makes it
             _viewport_redraw(scene, light=False)
 
     results = _step_all(jobs, disturb)
@@ -180,10 +180,10 @@ def _act_play(blender, scene, tmp_path):
 
 
 def _act_edit_layer(blender, scene, tmp_path):
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import datafield
 
     scene.nubis.layers[0].opacity *= 0.3
-    scene_io.generate_fields(scene)
+    datafield.generate_fields(scene)
 
 
 def _act_undo_redo(blender, scene, tmp_path):
@@ -205,9 +205,9 @@ def _act_delete_camera(blender, scene, tmp_path):
 
 
 def _act_delete_cloudscape(blender, scene, tmp_path):
-    from nubis_addon.blender import scene_io, ui
+    from nubis_addon.blender import datafield, ui
 
-    for attr, _name in scene_io.FIELD_IMAGES.values():
+    for attr, _name in datafield.FIELD_IMAGES.values():
         img = getattr(scene.nubis, attr)
         if img is not None:
             blender.data.images.remove(img)
@@ -237,14 +237,14 @@ def calm_bake(tmp_path_factory, make_scene_module):
 
 @pytest.fixture(scope="module")
 def make_scene_module(blender):
-    from nubis_addon.blender import ensure_registered, scene_io
+    from nubis_addon.blender import ensure_registered, scenepresets
     from nubis_addon.core.presets import load_preset
 
     def make(name):
         blender.ops.wm.read_factory_settings(use_empty=True)
         ensure_registered()
         scene = blender.context.scene
-        scene_io.apply_preset(scene, load_preset(name))
+        scenepresets.apply_preset(scene, load_preset(name))
         return scene
 
     return make
@@ -335,11 +335,11 @@ def test_quitting_during_a_bake_cancels_it_and_keeps_the_earlier_file(cache_dir,
             from nubis_addon.render.gpu_context import ensure_gpu_context
             nubis_addon.register()
             ensure_gpu_context()
-            from nubis_addon.blender import pipeline, scene_io, work
+            from nubis_addon.blender import datafield, pipeline, scene_io, scenepresets, work
             from nubis_addon.core.jobs import BakeOptions
             from nubis_addon.core.presets import load_preset
             scene = bpy.context.scene
-            scene_io.apply_preset(scene, load_preset("default"))
+            scenepresets.apply_preset(scene, load_preset("default"))
             pipeline.bake(scene, {str(path)!r}, BakeOptions(voxel_size={2 * VOXEL}))
             open({str(path)!r} + ".before", "wb").write(open({str(path)!r}, "rb").read())
             running = work.start(work.Work("baking", work.bake_jobs(scene, {str(path)!r}, {VOXEL}, 1)))

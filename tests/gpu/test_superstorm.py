@@ -28,13 +28,13 @@ def _gpu(scene):
 def test_outside_every_stencil_the_density_is_the_storm_free_density(storm_scene, blender):
     from gpu_probe import probe_density
 
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import superstorms
 
     scene, storm = storm_scene
     scene.nubis.layers[0].remap = (0.3, 0.7, 0.0, 0.5)
     blender.ops.nubis.generate_field()
     scene.nubis.density_cover = 0.3  # more fair-weather clouds around the storm (the preset has 2 %)
-    cx, cy = scene_io.storm_centre(storm)
+    cx, cy = superstorms.storm_centre(storm)
     rng = np.random.default_rng(3)
     n = 6000
     angle = rng.uniform(0, 2 * math.pi, n)
@@ -60,10 +60,10 @@ def test_outside_every_stencil_the_density_is_the_storm_free_density(storm_scene
 def test_vortex_turns_faster_near_the_centre(storm_scene):
     from gpu_probe import probe_vortex
 
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import superstorms
 
     scene, storm = storm_scene
-    cx, cy = scene_io.storm_centre(storm)
+    cx, cy = superstorms.storm_centre(storm)
     # Points in the middle of rings 0..4 (away from the blended overlaps), on a line out of the centre.
     fractions = (np.arange(5) + 0.5) / 6.0
     xy = np.stack([cx + fractions * storm.radius, np.full(5, cy)], axis=1)
@@ -106,7 +106,7 @@ def test_lightning_keyframe_lights_its_frame_only(storm_scene, blender):
 
 
 def test_baked_glow_grid_stays_inside_the_storm(storm_scene, tmp_path):
-    from nubis_addon.blender import pipeline, scene_io
+    from nubis_addon.blender import pipeline, superstorms
     from nubis_addon.core import vdbio
 
     scene, storm = storm_scene
@@ -117,7 +117,7 @@ def test_baked_glow_grid_stays_inside_the_storm(storm_scene, tmp_path):
     glow, lo = vdbio.read_grid_array(result.path, "glow")
     z, y, x = np.nonzero(glow > 0)
     assert len(x) > 10
-    cx, cy = scene_io.storm_centre(storm)
+    cx, cy = superstorms.storm_centre(storm)
     wx = result.plan.origin[0] + (x + lo[0]) * 500.0
     wy = result.plan.origin[1] + (y + lo[1]) * 500.0
     assert np.hypot(wx - cx, wy - cy).max() <= storm.radius
@@ -142,14 +142,14 @@ def _vortex_views(make_scene, blend: float, size: int = 96, dt: float = 0.4):
     the motion vectors of the second."""
     import dataclasses
 
-    from nubis_addon.blender import pipeline, runtime, scene_io
+    from nubis_addon.blender import pipeline, runtime, superstorms
     from nubis_addon.render import engine
 
     scene = make_scene("superstorm", wind_speed=0.0)
     storm = scene.nubis.storms[0]
     storm.spin = 0.5
     storm.blend = blend
-    cx, cy = scene_io.storm_centre(storm)
+    cx, cy = superstorms.storm_centre(storm)
     scene.camera.location = (cx, cy, 200.0)
     scene.camera.rotation_euler = (np.pi, 0.0, 0.0)
     shot = pipeline.viewport_shot(scene, size, size)
@@ -206,14 +206,14 @@ def test_removing_a_storm_keeps_the_others_animation(storm_scene, blender):
     assert blender.ops.nubis.storm_lifecycle(ramp_in=1.0, hold=1.0, ramp_out=1.0) == {"FINISHED"}
     s.active_storm = 0
     assert blender.ops.nubis.storm_remove() == {"FINISHED"}
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import sceneparams
 
-    paths = {fc.data_path for fc in scene_io.fcurves(scene)}
+    paths = {fc.data_path for fc in sceneparams.fcurves(scene)}
     assert paths == {"nubis.storms[0].blend"}  # the keyed storm moved to index 0 and kept its keys
     scene.frame_set(1 + 24)
     assert s.storms[0].blend == pytest.approx(1.0)
     assert blender.ops.nubis.storm_remove() == {"FINISHED"}
-    assert not scene_io.fcurves(scene)
+    assert not sceneparams.fcurves(scene)
 
 
 def test_bake_operator_refuses_a_path_relative_to_an_unsaved_file(storm_scene, blender):

@@ -123,12 +123,12 @@ def test_flash_mask_shows_a_flash_at_full_intensity_on_its_first_frame(shot):
     """GDC22: flashes last 4-8 frames against a 16-frame build, so the renderer builds a mask of each
     storm's flash at unit intensity before it fires and multiplies it by the flash of the frame shown.
     The first frame of a flash, after a single redraw, is as bright as the full march with the flash."""
-    from nubis_addon.blender import pipeline, runtime, scene_io
+    from nubis_addon.blender import pipeline, runtime, superstorms
     from nubis_addon.render import temporal
 
     scene, s = shot("superstorm", 64, 36)
     storm = scene.nubis.storms[0]
-    cx, cy = scene_io.storm_centre(storm)
+    cx, cy = superstorms.storm_centre(storm)
     scene.camera.location = (cx - 2000.0, cy - 14000.0, 300.0)
     scene.camera.rotation_euler = (math.radians(88), 0.0, 0.0)
     s = pipeline.viewport_shot(scene, 64, 36)
@@ -182,12 +182,12 @@ def test_sidebar_quality_and_benchmark(make_scene, blender):
 
 
 def _camera_matrices(blender, scene, w: int, h: int):
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender import sceneparams
 
     depsgraph = blender.context.evaluated_depsgraph_get()
     cam = scene.camera.evaluated_get(depsgraph)
     window = np.array(cam.calc_matrix_camera(depsgraph, x=w, y=h, scale_x=1.0, scale_y=1.0))
-    return window, np.array(scene_io.evaluated_matrix(scene.camera).inverted())
+    return window, np.array(sceneparams.evaluated_matrix(scene.camera).inverted())
 
 
 def _rays(inv_view_proj, eye, w: int, h: int) -> np.ndarray:
@@ -306,7 +306,7 @@ def test_a_3d_view_region_draws_converges_and_culls(make_scene, blender):
 
     import gpu
 
-    from nubis_addon.blender import pipeline, runtime, scene_io, viewport
+    from nubis_addon.blender import pipeline, runtime, sceneparams, viewport
     from nubis_addon.render.engine import read_pixels
 
     scene = make_scene("default")
@@ -316,7 +316,7 @@ def test_a_3d_view_region_draws_converges_and_culls(make_scene, blender):
     cam = scene.camera.evaluated_get(depsgraph)
     rv3d = SimpleNamespace(
         window_matrix=cam.calc_matrix_camera(depsgraph, x=w, y=h, scale_x=1.0, scale_y=1.0),
-        view_matrix=scene_io.evaluated_matrix(scene.camera).inverted(),
+        view_matrix=sceneparams.evaluated_matrix(scene.camera).inverted(),
         is_perspective=True,
     )
     region = SimpleNamespace(width=w, height=h, as_pointer=lambda: 4242)

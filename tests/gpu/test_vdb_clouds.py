@@ -191,15 +191,15 @@ def test_a_vdb_sequence_follows_the_timeline_as_blender_reads_it(blender, make_s
 def test_the_fields_rain_does_not_darken_a_vdb_cloud(blender, make_scene, cumulus_file):
     """An artist's cloud holds no rain: the data field's precipitation where it stands leaves it as it was
     (it darkened a read-back cumulonimbus to 57 % from Cycles, 17.7 % once it did not)."""
-    from nubis_addon.blender import pipeline, scene_io
+    from nubis_addon.blender import datafield, pipeline
 
     scene = _vdb_only(make_scene)
     _import(blender, scene, cumulus_file)
     dry = pipeline.render_viewport(scene, 64, 36)
     settings = scene.nubis
-    field = scene_io.read_fields(settings)[0].copy()
+    field = datafield.read_fields(settings)[0].copy()
     field[..., 1] = 1.0  # rain everywhere
-    scene_io.write_field_image(settings, "a", field)
+    datafield.write_field_image(settings, "a", field)
     wet = pipeline.render_viewport(scene, 64, 36)
     assert dry[..., 3].max() > 0.9
     np.testing.assert_allclose(wet, dry, atol=1e-4)

@@ -35,13 +35,13 @@ def luminance(rgba: np.ndarray) -> np.ndarray:
 def measure(name: str, args) -> dict:
     import bpy
 
-    from nubis_addon.blender import ensure_registered, pipeline, scene_io
+    from nubis_addon.blender import ensure_registered, pipeline, scenepresets
     from nubis_addon.core.presets import load_preset
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     ensure_registered()
     scene = bpy.context.scene
-    scene_io.apply_preset(scene, load_preset(name))
+    scenepresets.apply_preset(scene, load_preset(name))
     out = {"preset": name, "width": args.width, "height": args.height, "samples": args.samples, "rows": []}
     with tempfile.TemporaryDirectory(prefix="nubis-bounces-") as tmp:
         vdb = str(Path(tmp) / "clouds.vdb")

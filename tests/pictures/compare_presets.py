@@ -21,13 +21,13 @@ def compare_preset(name: str, out_dir: Path, width: int, height: int, samples: i
     """A fresh scene with the preset, compared in full mode with Cycles' noise measured: (scene, metrics)."""
     import bpy
 
-    from nubis_addon.blender import ensure_registered, pipeline, scene_io
+    from nubis_addon.blender import ensure_registered, pipeline, scenepresets
     from nubis_addon.core.presets import load_preset
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     ensure_registered()
     scene = bpy.context.scene
-    scene_io.apply_preset(scene, load_preset(name))
+    scenepresets.apply_preset(scene, load_preset(name))
     start = time.perf_counter()
     m = pipeline.compare(
         scene,

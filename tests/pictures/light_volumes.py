@@ -30,14 +30,14 @@ SAVE = os.environ.get(
 def measure(name: str, width: int, height: int, passes: int) -> dict:
     import bpy
 
-    from nubis_addon.blender import ensure_registered, pipeline, runtime, scene_io
+    from nubis_addon.blender import ensure_registered, pipeline, runtime, scenepresets
     from nubis_addon.core import metrics
     from nubis_addon.core.presets import load_preset
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     ensure_registered()
     scene = bpy.context.scene
-    scene_io.apply_preset(scene, load_preset(name))
+    scenepresets.apply_preset(scene, load_preset(name))
     for key, value in OVERRIDES.items():
         setattr(scene.nubis, key, value)
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)

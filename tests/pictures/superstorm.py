@@ -19,7 +19,7 @@ def main(out_dir: str) -> None:
     import bpy
 
     import nubis_addon
-    from nubis_addon.blender import ensure_registered, pipeline, scene_io
+    from nubis_addon.blender import ensure_registered, pipeline, scenepresets
     from nubis_addon.core import imageio
     from nubis_addon.core.presets import load_preset
     from nubis_addon.render.gpu_context import ensure_gpu_context
@@ -35,7 +35,7 @@ def main(out_dir: str) -> None:
         bpy.ops.wm.read_factory_settings(use_empty=True)
         ensure_registered()
         scene = bpy.context.scene
-        scene_io.apply_preset(scene, preset)
+        scenepresets.apply_preset(scene, preset)
         return scene
 
     def shot(scene, name: str, w: int, h: int, passes: int = 4) -> np.ndarray:

@@ -36,7 +36,7 @@ def main(out: str) -> None:
     from mathutils import Euler, Vector
 
     import nubis_addon
-    from nubis_addon.blender import ensure_registered, pipeline, scene_io
+    from nubis_addon.blender import ensure_registered, pipeline, scenepresets
     from nubis_addon.core import imageio
     from nubis_addon.core.state import sun_vector
     from nubis_addon.render.gpu_context import ensure_gpu_context
@@ -47,7 +47,7 @@ def main(out: str) -> None:
     ensure_registered()
     bpy.ops.nubis.new_cloudscape(preset="default")
     scene = bpy.context.scene
-    sun = scene.objects[scene_io.SUN_NAME]
+    sun = scene.objects[scenepresets.SUN_NAME]
     images = []
     for label, elevation, azimuth, pitch, heading in SHOTS:
         sun.rotation_euler = Vector(sun_vector(elevation, azimuth)).to_track_quat("Z", "Y").to_euler()

@@ -126,7 +126,7 @@ def prepare(out: Path, width: int, height: int, samples: int) -> dict:
     """Each preset's converged Cycles reference (reference()) and its viewport shot."""
     import bpy
 
-    from nubis_addon.blender import ensure_registered, pipeline, scene_io
+    from nubis_addon.blender import ensure_registered, pipeline, scenepresets
     from nubis_addon.core import imageio
     from nubis_addon.core.presets import find_preset, list_presets, load_preset
 
@@ -144,7 +144,7 @@ def prepare(out: Path, width: int, height: int, samples: int) -> dict:
         bpy.ops.wm.read_factory_settings(use_empty=True)
         ensure_registered()
         scene = bpy.context.scene
-        scene_io.apply_preset(scene, load_preset(path))
+        scenepresets.apply_preset(scene, load_preset(path))
         m = reference(name, where, width, height, samples)
         ss = SUPERSAMPLING
         shot = pipeline.viewport_shot(scene, width * ss, height * ss, 0, "full", tuple(m["clip_box"]))
