@@ -4,13 +4,14 @@ after it.
 - commands: the command line's commands (cli.py parses, these run); workers: what a Dask worker process
   runs for a farm bake (it registers the extension, so it sits above registration);
 - registration: registers what follows (and ensure_registered for the command line and farm workers);
-- panels, skylayers, operators: the sidebar, its Cloud Layers list's buttons, and what the other buttons do;
+- panels, skylayers, stormbuttons, operators: the sidebar, its Cloud Layers list's and Superstorms panel's
+  buttons, and what the other buttons do;
 - paint: the Paint Sky tool, its operator and panel; properties: the property groups, generated from
   core/schema.py; preview: the viewport's draw headless, and the benchmark; scene_render: F12 and Render
   Animation with the clouds in EEVEE and Cycles, and the panorama; work: the bake or render that runs in
   steps while the artist keeps working; farm: bakes of frame sequences and bakes spread over Dask workers;
-- events: what a change triggers, and Blender's handlers; pipeline: renders, bakes, Cycles renders and
-  comparisons;
+- events: what a change triggers, and Blender's handlers; comparison: the viewport against Cycles
+  rendering the bake of the same shot (compare); pipeline: renders, bakes and Cycles renders;
 - shadows: the clouds' shadow casters in final renders; composition: F12's depth pre-pass and the veil of
   the clouds in front of the objects;
 - viewport: the 3D view's draw; snapshot: what a bake reads from the scene when it starts, with GPU inputs

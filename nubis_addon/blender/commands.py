@@ -18,6 +18,7 @@ from ..core.jobs import BakeOptions, BenchmarkOptions, CompareOptions, PreviewOp
 from ..core.presets import load_preset
 from ..render.gpu_context import ensure_gpu_context
 from . import (
+    comparison,
     datafield,
     farm,
     pipeline,
@@ -192,7 +193,7 @@ def _compare(job: Job) -> str:
         reuse_reference=args.reuse_reference,
     )
     with console.quiet(job.log):
-        m = pipeline.compare(job.scene, job.out, options, step=lambda text: console.current().line(f"{PROG}: {text}"))
+        m = comparison.compare(job.scene, job.out, options, step=lambda text: console.current().line(f"{PROG}: {text}"))
     return _compare_summary(job, options, m)
 
 

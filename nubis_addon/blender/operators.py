@@ -4,16 +4,14 @@ from __future__ import annotations
 
 import contextlib
 import os
-import traceback
 
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
-from ..core import noise, presets, quality, storms, userpresets
+from ..core import noise, presets, quality, userpresets
 from ..core.errors import NubisError
 from ..core.jobs import BenchmarkOptions
 from ..core.limits import MAX_LAYERS
-from ..core.state import MAX_STORMS
 from . import (
     cycles_setup,
     datafield,
@@ -23,7 +21,6 @@ from . import (
     scenepresets,
     sky,
     status,
-    superstorms,
     ui,
     viewport,
     work,
@@ -297,260 +294,12 @@ class NUBIS_OT_apply_weather_rules(NeedsCloudscape, NubisOperator, bpy.types.Ope
         return f"Weather rules applied: {', '.join(rules) or 'none'}"
 
 
-class NUBIS_OT_storm_add(NeedsCloudscape, NubisOperator, bpy.types.Operator):
-    """Add a superstorm stencil at the 3D cursor, positioned by a new Empty"""
-
-    bl_idname = "nubis.storm_add"
-    bl_label = "Add Superstorm"
-    bl_options = {"REGISTER", "UNDO"}
-
-    @classmethod
-    def unavailable(cls, scene) -> str:
-        if len(scene.nubis.storms) >= MAX_STORMS:
-            return f"a scene holds at most {MAX_STORMS} superstorms: remove one first"
-        return ""
-
-    def run(self, context):
-        self.refuse_if_unavailable(context.scene)
-        s = context.scene.nubis
-        cursor = context.scene.cursor.location
-        superstorms.add_storm(context.scene, {"name": "Superstorm", "x": cursor.x, "y": cursor.y})
-        s.active_storm = len(s.storms) - 1
-        datafield.generate_fields(context.scene)
-        return "Superstorm added: move its Empty to place it"
-
-
-class NUBIS_OT_storm_remove(NeedsCloudscape, NubisOperator, bpy.types.Operator):
-    """Remove the active superstorm and its Empty"""
-
-    bl_idname = "nubis.storm_remove"
-    bl_label = "Remove Superstorm"
-    bl_options = {"REGISTER", "UNDO"}
-
-    @classmethod
-    def unavailable(cls, scene) -> str:
-        return "" if scene.nubis.storms else "there is no superstorm to remove: add one with Add Superstorm"
-
-    def run(self, context):
-        self.refuse_if_unavailable(context.scene)
-        s = context.scene.nubis
-        storm = s.storms[min(s.active_storm, len(s.storms) - 1)]
-        if storm.empty is not None:
-            bpy.data.objects.remove(storm.empty)
-        superstorms.remove_storm_animation(context.scene, s.active_storm)
-        s.storms.remove(s.active_storm)
-        s.active_storm = max(0, min(s.active_storm, len(s.storms) - 1))
-        datafield.generate_fields(context.scene)
-        return None
-
-
-def _active_storm(context):
-    s = context.scene.nubis
-    if not s.storms:
-        raise NubisError("add a superstorm first (Add Superstorm)")
-    return s.storms[min(s.active_storm, len(s.storms) - 1)]
-
-
-def _insert_keys(scene, storm, prop: str, keys, interpolation: str = "LINEAR") -> None:
-    """Key `prop` of a storm at (frame, value) pairs straight into its F-curve. Setting the property
-    first would not do: its update re-composites the field, which evaluates the animation and puts
-    the already keyed value back before keyframe_insert reads it."""
-    storm.keyframe_insert(prop, frame=keys[0][0])
-    path = storm.path_from_id(prop)
-    curve = next(fc for fc in sceneparams.fcurves(scene) if fc.data_path == path)
-    for frame, value in keys:
-        curve.keyframe_points.insert(frame, value, options={"FAST"}).interpolation = interpolation
-    curve.update()
-
-
-class NUBIS_OT_storm_lifecycle(NeedsCloudscape, NubisOperator, bpy.types.Operator):
-    """Keyframe the active storm's blend: ramp in, hold, ramp out from the current frame (GDC22)"""
-
-    bl_idname = "nubis.storm_lifecycle"
-    bl_label = "Keyframe Storm Lifecycle"
-    bl_options = {"REGISTER", "UNDO"}
-
-    ramp_in: FloatProperty(name="Ramp In (s)", default=120.0, min=0.0)
-    hold: FloatProperty(name="Hold (s)", default=180.0, min=0.0)
-    ramp_out: FloatProperty(name="Ramp Out (s)", default=120.0, min=0.0)
-
-    def run(self, context):
-        scene = context.scene
-        storm = _active_storm(context)
-        fps = sceneparams.scene_fps(scene)
-        keys = storms.lifecycle_keys(scene.frame_current, fps, self.ramp_in, self.hold, self.ramp_out)
-        _insert_keys(context.scene, storm, "blend", keys)
-        return f"Lifecycle keyed over frames {keys[0][0]}-{keys[-1][0]}"
-
-
-class NUBIS_OT_lightning_sequence(NeedsCloudscape, NubisOperator, bpy.types.Operator):
-    """Keyframe a lightning sequence on the active storm: intra-cloud flashes of rising intensity, then
-    one or two ground discharges (GDC22 after Uman)"""
-
-    bl_idname = "nubis.lightning_sequence"
-    bl_label = "Add Lightning"
-    bl_options = {"REGISTER", "UNDO"}
-
-    flashes: IntProperty(name="Intra-cloud Flashes", default=4, min=1, max=20)
-    discharges: IntProperty(name="Ground Discharges", default=2, min=0, max=2)
-    peak: FloatProperty(name="Peak Intensity", default=20.0, min=0.0)
-    seed: IntProperty(name="Seed", default=0, min=0)
-
-    def run(self, context):
-        scene = context.scene
-        storm = _active_storm(context)
-        fps = sceneparams.scene_fps(scene)
-        keys = storms.lightning_keys(scene.frame_current, fps, self.flashes, self.discharges, self.peak, self.seed)
-        frames = [int(k["frame"]) for k in keys]
-        _insert_keys(scene, storm, "flash", list(zip(frames, (k["flash"] for k in keys), strict=True)))
-        # Positions jump from flash to flash, set well before each fires so the viewport's flash mask
-        # is built in time (GDC22); only the intensity is interpolated.
-        where = storms.lightning_position_keys(keys)
-        at = [int(k["frame"]) for k in where]
-        for prop, values in (
-            ("flash_x", [k["x"] * storm.radius for k in where]),
-            ("flash_y", [k["y"] * storm.radius for k in where]),
-            ("flash_ground", [k["ground"] for k in where]),
-        ):
-            _insert_keys(scene, storm, prop, list(zip(at, values, strict=True)), "CONSTANT")
-        return f"{self.flashes} flashes and {self.discharges} discharges keyed from frame {int(keys[0]['frame'])}"
-
-
 def _default_bake_path(name: str) -> str:
     """Beside the .blend when it is saved, else in the home folder: never a `//` path nothing resolves."""
     return f"//{name}" if bpy.data.filepath else os.path.join(os.path.expanduser("~"), name)
 
 
-class ModalSteps:
-    """Long work the artist can cancel: it runs a group of tiles per timer tick (pipeline.bake_steps,
-    pipeline.render_shot_steps), the status bar shows its progress, Esc stops it and nothing is written.
-    It reads the scene once, when it starts (blender/snapshot.py), so the artist keeps working meanwhile;
-    one runs at a time, and opening another file or quitting cancels it (blender/work.py). In background
-    mode (scripts, the tests) it runs to its end at once."""
-
-    doing = "baking"
-    cancelled = "Bake cancelled: no file was written, earlier bakes are untouched"
-    _progress = None
-    _work = None
-
-    def jobs(self, context):
-        """(label, stepped bake) pairs, run in order."""
-        raise NotImplementedError
-
-    def finished(self, context, results) -> str:
-        raise NotImplementedError
-
-    def execute(self, context):
-        running = work.current()
-        if running is not None:  # before the scene is read: a refused start costs nothing
-            self.report({"ERROR"}, work.refusal(running))
-            return {"CANCELLED"}
-        try:
-            self._work = work.Work(self.doing, list(self.jobs(context)))
-        except NubisError as err:
-            self.report({"ERROR"}, str(err))
-            return {"CANCELLED"}
-        if bpy.app.background:
-            try:
-                message = self.finished(context, self._work.run())
-            except NubisError as err:
-                self.report({"ERROR"}, str(err))
-                return {"CANCELLED"}
-            self.report({"INFO"}, message)
-            return {"FINISHED"}
-        self.start(context)
-        context.window_manager.modal_handler_add(self)
-        return {"RUNNING_MODAL"}
-
-    def start(self, context) -> None:
-        """Register the work as this operator's (blender/work.py) and show its progress."""
-        work.start(self._work)
-        self._work.owner = self
-        self._progress = _Progress(context)
-        self._work.on_cancel = self._progress.end
-
-    def _end(self, context) -> None:
-        """Unregister the work and close its steps (a cancelled bake writes nothing); any number of times."""
-        work.finish(self._work)
-        try:
-            self._work.close()
-        finally:
-            if self._progress is not None:
-                self._progress.end()
-
-    def cancel(self, context) -> None:
-        """Blender ends the operator without its modal handler (its window closed): the work ends with it."""
-        self._end(context)
-
-    def modal(self, context, event):
-        if self._work.cancelled:  # stopped from outside (blender/work.py), which cleaned up and said why
-            return {"CANCELLED"}
-        try:
-            return self._tick(context, event)
-        except Exception as err:  # whatever failed, the work ends here: left running it refuses every later one
-            self._end(context)
-            self.report({"ERROR"}, self._failure(err))
-            return {"CANCELLED"}
-
-    def _tick(self, context, event):
-        if event.type == "ESC":
-            self._end(context)
-            self.report({"WARNING"}, self.cancelled)
-            return {"CANCELLED"}
-        if event.type != "TIMER":
-            return {"PASS_THROUGH"}
-        label = self._work.label
-        overall = self._work.step()
-        context.window_manager.progress_update(int(overall * 100))
-        if context.workspace is not None:
-            context.workspace.status_text_set(f"Nubis: {self.doing} {label}, {overall * 100:.0f}% (Esc cancels)")
-        if not self._work.done:
-            return {"RUNNING_MODAL"}
-        self._end(context)
-        self.report({"INFO"}, self.finished(context, self._work.results))
-        return {"FINISHED"}
-
-    def _failure(self, err: Exception) -> str:
-        """The sentence a failed step reports: a NubisError's own, else the unexpected error, traced to the
-        console."""
-        if isinstance(err, NubisError):
-            return str(err)
-        traceback.print_exc()
-        return (
-            f"{self.doing.capitalize()} stopped on an unexpected error ({type(err).__name__}: {err}): "
-            "see the system console for details, and report it"
-        )
-
-
-class _Progress:
-    """A modal work's timer, progress bar and status text, taken down once (by its operator, or by
-    work.cancel when a file is opened)."""
-
-    def __init__(self, context):
-        wm = context.window_manager
-        self.timer = wm.event_timer_add(0.01, window=context.window)
-        wm.progress_begin(0, 100)
-        self.shown = True
-
-    def end(self) -> None:
-        if not self.shown:
-            return
-        self.shown = False
-        _end_progress(self.timer)
-
-
-def _end_progress(timer) -> None:
-    """Take the work's timer, progress bar and status text down (from its operator, or from work.cancel)."""
-    context = bpy.context
-    wm = context.window_manager
-    if timer is not None:
-        wm.event_timer_remove(timer)
-    wm.progress_end()
-    if context.workspace is not None:
-        context.workspace.status_text_set(None)
-
-
-class NUBIS_OT_render_image(NeedsCloudscape, ModalSteps, bpy.types.Operator):
+class NUBIS_OT_render_image(NeedsCloudscape, work.ModalSteps, bpy.types.Operator):
     """Render the clouds from the scene camera into the image 'Nubis Render' (Esc cancels)"""
 
     bl_idname = "nubis.render_image"
@@ -573,7 +322,7 @@ class NUBIS_OT_render_image(NeedsCloudscape, ModalSteps, bpy.types.Operator):
         return f"Rendered {w}x{h} into the image 'Nubis Render'"
 
 
-class NUBIS_OT_bake_vdb(NeedsCloudscape, ModalSteps, bpy.types.Operator):
+class NUBIS_OT_bake_vdb(NeedsCloudscape, work.ModalSteps, bpy.types.Operator):
     """Bake the viewport's cloud density to an OpenVDB file for Cycles and other renderers (Esc cancels)"""
 
     bl_idname = "nubis.bake_vdb"
@@ -603,7 +352,7 @@ class NUBIS_OT_bake_vdb(NeedsCloudscape, ModalSteps, bpy.types.Operator):
         return f"Baked {result.active_voxels} voxels to {result.path} and added them as a Cycles volume"
 
 
-class NUBIS_OT_bake_frames(NeedsCloudscape, ModalSteps, bpy.types.Operator):
+class NUBIS_OT_bake_frames(NeedsCloudscape, work.ModalSteps, bpy.types.Operator):
     """Bake one VDB per frame of the scene's range into a folder, and load them as a Volume sequence
     (Esc cancels; frames already baked stay)"""
 
@@ -811,10 +560,6 @@ CLASSES = (
     NUBIS_OT_layer_move,
     NUBIS_OT_layer_duplicate,
     NUBIS_OT_apply_weather_rules,
-    NUBIS_OT_storm_add,
-    NUBIS_OT_storm_remove,
-    NUBIS_OT_storm_lifecycle,
-    NUBIS_OT_lightning_sequence,
     NUBIS_OT_render_image,
     NUBIS_OT_bake_vdb,
     NUBIS_OT_bake_frames,

@@ -15,6 +15,7 @@ from . import (
     scene_render,
     sky,
     skylayers,
+    stormbuttons,
     vdbclouds,
     viewport,
     work,
@@ -30,6 +31,7 @@ def register() -> None:
     events.register()
     operators.register()
     skylayers.register()
+    stormbuttons.register()
     panels.register()
     vdbclouds.register()  # its sidebar panel is a child of the main one
     paint.register()  # likewise
@@ -52,6 +54,7 @@ def unregister() -> None:
     paint.unregister()
     vdbclouds.unregister()
     panels.unregister()
+    stormbuttons.unregister()
     skylayers.unregister()
     operators.unregister()
     events.unregister()

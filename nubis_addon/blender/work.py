@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import atexit
 import os
+import traceback
 from collections.abc import Callable, Iterator
 
 import bpy
@@ -196,3 +197,132 @@ def unregister() -> None:
     cancel("the extension was disabled")
     handlers.remove(_HANDLERS)
     atexit.unregister(_at_exit)
+
+
+class ModalSteps:
+    """Long work the artist can cancel: it runs a group of tiles per timer tick (pipeline.bake_steps,
+    pipeline.render_shot_steps), the status bar shows its progress, Esc stops it and nothing is written.
+    It reads the scene once, when it starts (blender/snapshot.py), so the artist keeps working meanwhile;
+    one runs at a time, and opening another file or quitting cancels it (above). In background
+    mode (scripts, the tests) it runs to its end at once."""
+
+    doing = "baking"
+    cancelled = "Bake cancelled: no file was written, earlier bakes are untouched"
+    _progress = None
+    _work = None
+
+    def jobs(self, context):
+        """(label, stepped bake) pairs, run in order."""
+        raise NotImplementedError
+
+    def finished(self, context, results) -> str:
+        raise NotImplementedError
+
+    def execute(self, context):
+        running = current()
+        if running is not None:  # before the scene is read: a refused start costs nothing
+            self.report({"ERROR"}, refusal(running))
+            return {"CANCELLED"}
+        try:
+            self._work = Work(self.doing, list(self.jobs(context)))
+        except NubisError as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        if bpy.app.background:
+            try:
+                message = self.finished(context, self._work.run())
+            except NubisError as err:
+                self.report({"ERROR"}, str(err))
+                return {"CANCELLED"}
+            self.report({"INFO"}, message)
+            return {"FINISHED"}
+        self.start(context)
+        context.window_manager.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def start(self, context) -> None:
+        """Register the work as this operator's (above) and show its progress."""
+        start(self._work)
+        self._work.owner = self
+        self._progress = _Progress(context)
+        self._work.on_cancel = self._progress.end
+
+    def _end(self, context) -> None:
+        """Unregister the work and close its steps (a cancelled bake writes nothing); any number of times."""
+        finish(self._work)
+        try:
+            self._work.close()
+        finally:
+            if self._progress is not None:
+                self._progress.end()
+
+    def cancel(self, context) -> None:
+        """Blender ends the operator without its modal handler (its window closed): the work ends with it."""
+        self._end(context)
+
+    def modal(self, context, event):
+        if self._work.cancelled:  # stopped from outside (above), which cleaned up and said why
+            return {"CANCELLED"}
+        try:
+            return self._tick(context, event)
+        except Exception as err:  # whatever failed, the work ends here: left running it refuses every later one
+            self._end(context)
+            self.report({"ERROR"}, self._failure(err))
+            return {"CANCELLED"}
+
+    def _tick(self, context, event):
+        if event.type == "ESC":
+            self._end(context)
+            self.report({"WARNING"}, self.cancelled)
+            return {"CANCELLED"}
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        label = self._work.label
+        overall = self._work.step()
+        context.window_manager.progress_update(int(overall * 100))
+        if context.workspace is not None:
+            context.workspace.status_text_set(f"Nubis: {self.doing} {label}, {overall * 100:.0f}% (Esc cancels)")
+        if not self._work.done:
+            return {"RUNNING_MODAL"}
+        self._end(context)
+        self.report({"INFO"}, self.finished(context, self._work.results))
+        return {"FINISHED"}
+
+    def _failure(self, err: Exception) -> str:
+        """The sentence a failed step reports: a NubisError's own, else the unexpected error, traced to the
+        console."""
+        if isinstance(err, NubisError):
+            return str(err)
+        traceback.print_exc()
+        return (
+            f"{self.doing.capitalize()} stopped on an unexpected error ({type(err).__name__}: {err}): "
+            "see the system console for details, and report it"
+        )
+
+
+class _Progress:
+    """A modal work's timer, progress bar and status text, taken down once (by its operator, or by
+    cancel when a file is opened)."""
+
+    def __init__(self, context):
+        wm = context.window_manager
+        self.timer = wm.event_timer_add(0.01, window=context.window)
+        wm.progress_begin(0, 100)
+        self.shown = True
+
+    def end(self) -> None:
+        if not self.shown:
+            return
+        self.shown = False
+        _end_progress(self.timer)
+
+
+def _end_progress(timer) -> None:
+    """Take the work's timer, progress bar and status text down (from its operator, or from cancel)."""
+    context = bpy.context
+    wm = context.window_manager
+    if timer is not None:
+        wm.event_timer_remove(timer)
+    wm.progress_end()
+    if context.workspace is not None:
+        context.workspace.status_text_set(None)

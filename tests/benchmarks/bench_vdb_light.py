@@ -181,7 +181,7 @@ import sys
 sys.path.insert(0, os.getcwd())
 from types import SimpleNamespace
 import numpy as np
-from nubis_addon.blender import commands, pipeline, snapshot
+from nubis_addon.blender import commands, comparison, pipeline, snapshot
 from nubis_addon.core import imageio
 from nubis_addon.core.jobs import BakeOptions
 from nubis_addon.render.gpu_context import ensure_gpu_context
@@ -192,10 +192,10 @@ if kind == "--vdb":
     commands._add_vdb_clouds(scene, [source], False)
 ensure_gpu_context()
 # The comparison's clip box (its bake's), which also sets the light volumes' extent.
-options = BakeOptions(float(voxel), camera_only=True, size=(160, 90), thin_cirrus=pipeline.THIN_CIRRUS, vdb=False)
-clip = pipeline.bake_clip_box(snapshot.bake_plan(scene, options, wait=False)[1])
+options = BakeOptions(float(voxel), camera_only=True, size=(160, 90), thin_cirrus=comparison.THIN_CIRRUS, vdb=False)
+clip = comparison.bake_clip_box(snapshot.bake_plan(scene, options, wait=False)[1])
 shot = pipeline.viewport_shot(scene, 640, 360, 0, "full", clip)
-big = pipeline.render_shot(shot, pipeline.COMPARE_PASSES).astype(np.float64)
+big = pipeline.render_shot(shot, comparison.COMPARE_PASSES).astype(np.float64)
 imageio.write_image(out, big.reshape(90, 4, 160, 4, 4).mean(axis=(1, 3)).astype(np.float32))
 """
 

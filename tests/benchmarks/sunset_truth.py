@@ -55,7 +55,7 @@ def _scene(cell: str, light: str = ""):
 def main() -> None:
     import atmosphere_truth
 
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender import comparison
     from nubis_addon.core import imageio, metrics
     from nubis_addon.core.jobs import CompareOptions
     from nubis_addon.render.gpu_context import ensure_gpu_context
@@ -90,7 +90,7 @@ def main() -> None:
         out = Path(args.out) / (cell.replace("@", "_") + (f"_{args.light}" if args.light else ""))
         t = time.perf_counter()
         with atmosphere_truth.installed():
-            m = pipeline.compare(
+            m = comparison.compare(
                 _scene(cell, args.light), out, options, step=lambda text, c=cell: print(f"  {c}: {text}", flush=True)
             )
         row = [
@@ -103,7 +103,7 @@ def main() -> None:
         ]
         if args.production:
             own = Path(args.out) / (cell.replace("@", "_") + "_production")
-            pipeline.compare(_scene(cell, args.light), own, options)
+            comparison.compare(_scene(cell, args.light), own, options)
             truth = imageio.read_image(out / "cycles.exr")
             mine = imageio.read_image(own / "cycles.exr")
             row.append(metrics.compare(mine, truth)["luminance_bias"])

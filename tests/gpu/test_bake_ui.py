@@ -56,11 +56,11 @@ def test_render_clouds_runs_in_steps_and_a_cancel_leaves_the_image_untouched(mak
     import bpy
     import numpy as np
 
-    from nubis_addon.blender import operators, pipeline
+    from nubis_addon.blender import operators, pipeline, work
 
     scene = make_scene("default")
     scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 300, 140, 100
-    assert issubclass(operators.NUBIS_OT_render_image, operators.ModalSteps)
+    assert issubclass(operators.NUBIS_OT_render_image, work.ModalSteps)
     steps = pipeline.render_shot_steps(pipeline.viewport_shot(scene, 300, 140))
     fractions = [next(steps), next(steps)]  # 3x2 tiles of 128 pixels: two of six
     assert fractions == [1 / 6, 2 / 6]

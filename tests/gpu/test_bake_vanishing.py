@@ -20,9 +20,9 @@ TIMER = SimpleNamespace(type="TIMER")
 def _driven(cls, **props):
     """The operator class `cls` as its timer drives it: its jobs, its finish and its modal(), its reports
     kept in `reports` (a bpy operator cannot be made without Blender running it)."""
-    from nubis_addon.blender import operators
+    from nubis_addon.blender import work
 
-    class Driven(operators.ModalSteps):
+    class Driven(work.ModalSteps):
         doing = cls.doing
         cancelled = cls.cancelled
 

@@ -20,7 +20,7 @@ NOISE_TARGET = 6.0  # percent
 
 @pytest.fixture(scope="module", params=sorted(MEASURED))
 def full(request, tmp_path_factory, blender):
-    from nubis_addon.blender import ensure_registered, pipeline, scenepresets
+    from nubis_addon.blender import comparison, ensure_registered, scenepresets
     from nubis_addon.core.presets import load_preset
 
     blender.ops.wm.read_factory_settings(use_empty=True)
@@ -28,7 +28,7 @@ def full(request, tmp_path_factory, blender):
     scene = blender.context.scene
     scenepresets.apply_preset(scene, load_preset(request.param))
     out = tmp_path_factory.mktemp(f"full_{request.param}")
-    m = pipeline.compare(
+    m = comparison.compare(
         scene,
         out,
         CompareOptions(width=48, height=27, samples=256, mode="full", noise_target=NOISE_TARGET, reference=False),
@@ -50,14 +50,14 @@ def test_the_viewport_converges_to_its_own_goal_too(full):
     """With a noise target the comparison's viewport adds passes until its own grain (two halves of
     passes whose rays cross their pixels at places of their own) is under its goal: a fifth of the target
     in the luminance and 0.002 in the alpha (blender/pipeline.py VIEW_NOISE)."""
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender import comparison
 
     _name, m = full
-    goal = pipeline.VIEW_NOISE
+    goal = comparison.VIEW_NOISE
     noise, passes = m["viewport_noise"], m["viewport_passes"]
     met = (
         noise["luminance_rel_error"] <= NOISE_TARGET / 100 * goal["luminance_share"]
         and noise["alpha_rmse"] <= goal["alpha"]
     )
-    assert passes > pipeline.COMPARE_PASSES and (met or passes >= goal["most_passes"]), m
+    assert passes > comparison.COMPARE_PASSES and (met or passes >= goal["most_passes"]), m
     assert noise["alpha_rmse"] > 0.0, "the halves sample different places, so their grain is never nil"

@@ -42,13 +42,13 @@ def _looking_up(sky: bool):
 
 
 def _compare_single(blender, preset, out, samples: int) -> dict:
-    from nubis_addon.blender import ensure_registered, pipeline, scenepresets
+    from nubis_addon.blender import comparison, ensure_registered, scenepresets
 
     blender.ops.wm.read_factory_settings(use_empty=True)
     ensure_registered()
     scene = blender.context.scene
     scenepresets.apply_preset(scene, preset)
-    return pipeline.compare(
+    return comparison.compare(
         scene,
         out,
         CompareOptions(width=48, height=27, samples=samples, mode="single", voxel_size=20.0, noise_estimate=True),

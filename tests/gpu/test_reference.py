@@ -34,7 +34,7 @@ def test_rounds_are_sized_from_the_measured_noise_and_keep_every_sample():
 
 
 def _compare(blender, out, **kw):
-    from nubis_addon.blender import ensure_registered, pipeline, scenepresets
+    from nubis_addon.blender import comparison, ensure_registered, scenepresets
     from nubis_addon.core.presets import load_preset
 
     blender.ops.wm.read_factory_settings(use_empty=True)
@@ -50,7 +50,7 @@ def _compare(blender, out, **kw):
     voxel = kw.pop("voxel_size", 40.0)
     step = kw.pop("step", None)
     options = CompareOptions(width=32, height=18, mode="single", voxel_size=voxel, reference=False, **kw)
-    return pipeline.compare(scene, out, options, step=step)
+    return comparison.compare(scene, out, options, step=step)
 
 
 @pytest.fixture(scope="module")

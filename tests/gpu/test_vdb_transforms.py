@@ -57,11 +57,11 @@ def _scene(blender, make_scene, path: Path, density: float = 1.0, space: str = "
 
 def _against_cycles(blender, scene, out: Path) -> dict:
     """compare's single scattering at 32x18 (its viewport four times supersampled), Cycles at 64 samples."""
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender import comparison
 
     blender.context.view_layer.update()
     options = CompareOptions(width=32, height=18, samples=64, mode="single", reference=False)
-    return pipeline.compare(scene, out, options)
+    return comparison.compare(scene, out, options)
 
 
 def _agrees(m: dict) -> None:

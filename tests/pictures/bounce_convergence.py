@@ -35,7 +35,7 @@ def luminance(rgba: np.ndarray) -> np.ndarray:
 def measure(name: str, args) -> dict:
     import bpy
 
-    from nubis_addon.blender import ensure_registered, pipeline, scenepresets
+    from nubis_addon.blender import comparison, ensure_registered, pipeline, scenepresets
     from nubis_addon.core.presets import load_preset
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -53,7 +53,7 @@ def measure(name: str, args) -> dict:
                 voxel_size=args.voxel_size,
                 camera_only=True,
                 size=(args.width, args.height),
-                thin_cirrus=pipeline.THIN_CIRRUS,
+                thin_cirrus=comparison.THIN_CIRRUS,
             ),
         )
         out["voxel_size"] = baked.plan.voxel_size

@@ -21,7 +21,7 @@ def compare_preset(name: str, out_dir: Path, width: int, height: int, samples: i
     """A fresh scene with the preset, compared in full mode with Cycles' noise measured: (scene, metrics)."""
     import bpy
 
-    from nubis_addon.blender import ensure_registered, pipeline, scenepresets
+    from nubis_addon.blender import comparison, ensure_registered, scenepresets
     from nubis_addon.core.presets import load_preset
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -29,7 +29,7 @@ def compare_preset(name: str, out_dir: Path, width: int, height: int, samples: i
     scene = bpy.context.scene
     scenepresets.apply_preset(scene, load_preset(name))
     start = time.perf_counter()
-    m = pipeline.compare(
+    m = comparison.compare(
         scene,
         out_dir / name,
         CompareOptions(width=width, height=height, samples=samples, mode="full", voxel_size=None, noise_estimate=True),

@@ -88,7 +88,7 @@ def reference(name: str, out: Path, width: int, height: int, samples: int) -> di
     set of references); otherwise one is made, without the reference-march diagnostic."""
     import bpy
 
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender import comparison
 
     try:
         m = json.loads((out / name / "metrics.json").read_text(encoding="utf-8"))
@@ -97,7 +97,7 @@ def reference(name: str, out: Path, width: int, height: int, samples: int) -> di
     noise = (m.get("cycles_noise") or {}).get("luminance_rel_error", 1.0)
     if m.get("mode") == "full" and (m.get("width"), m.get("height")) == (width, height) and noise <= NOISE_TARGET:
         return m
-    return pipeline.compare(
+    return comparison.compare(
         bpy.context.scene,
         out / name,
         CompareOptions(
