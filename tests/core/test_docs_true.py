@@ -31,6 +31,7 @@ from pathlib import Path
 from test_architecture import import_graph
 
 from nubis_addon import cli
+from nubis_addon.core import schema
 from nubis_addon.core.presets import list_presets, preset_dir
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -303,3 +304,75 @@ def test_the_path_reader_finds_paths():
 def test_every_path_a_doc_names_exists():
     dead = [f"{doc}:{n}: {path}" for doc, n, path in _named_paths() if not (ROOT / path).exists()]
     assert not dead, "these paths do not exist; name the file as it is now:\n" + "\n".join(dead)
+
+
+# ---- the panels and their labels -------------------------------------------------------------------------
+
+GUIDE = ROOT / "docs" / "guide.md"
+# What the guide's panel list may set in bold besides the code's labels: keys and icon buttons.
+KEYS = {"+", "-", "Esc"}
+
+
+def _classes_of_blender() -> list[ast.ClassDef]:
+    return [
+        node
+        for path in sorted((PACKAGE / "blender").glob("*.py"))
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+        if isinstance(node, ast.ClassDef)
+    ]
+
+
+def _label(node: ast.ClassDef) -> str | None:
+    for stmt in node.body:
+        if isinstance(stmt, ast.Assign) and any(getattr(t, "id", "") == "bl_label" for t in stmt.targets):
+            return stmt.value.value if isinstance(stmt.value, ast.Constant) else None
+    return None
+
+
+def sidebar_panels() -> set[str]:
+    """The Nubis tab's panels by label: the main panel, every SidebarPanel subclass, and the panels the
+    schema generates (core/schema.py PANELS)."""
+    labels = {label for _id, label in schema.PANELS}
+    for node in _classes_of_blender():
+        bases = {getattr(b, "id", None) or getattr(b, "attr", None) for b in node.bases}
+        if node.name == "NUBIS_PT_main" or ("SidebarPanel" in bases and node.name.startswith("NUBIS_PT_")):
+            label = _label(node)
+            if label:
+                labels.add(label)
+    return labels
+
+
+def code_labels() -> set[str]:
+    """Every label the interface shows: classes' bl_label, text= and name= strings in blender/, the schema's
+    settings' labels and enum items' names, and its panels'."""
+    labels = {label for _id, label in schema.PANELS} | {s.label for s in schema.ALL}
+    labels |= {item[1] for s in schema.ALL for item in s.items}
+    labels |= {lab for node in _classes_of_blender() if (lab := _label(node))}
+    for path in (PACKAGE / "blender").glob("*.py"):
+        labels |= set(re.findall(r'\b(?:text|name)="([^"]+)"', path.read_text(encoding="utf-8")))
+    return labels
+
+
+def _guide_panel_list() -> str:
+    text = GUIDE.read_text(encoding="utf-8")
+    start = text.index("What each panel holds:")
+    end = text.find("\n## ", start)
+    return text[start : end if end >= 0 else len(text)]
+
+
+def test_the_guide_lists_every_sidebar_panel_by_its_label():
+    listed = set(re.findall(r"^- \*\*([^*]+)\*\*", _guide_panel_list(), re.M))
+    panels = sidebar_panels()
+    assert len(panels) >= 12, sorted(panels)
+    missing, unknown = sorted(panels - listed), sorted(listed - panels)
+    assert not missing, f"docs/guide.md's panel list lacks {missing}: add a '- **Label**: ...' item for each"
+    assert not unknown, f"docs/guide.md lists {unknown}, which no sidebar panel is called: use the panel's label"
+
+
+def test_every_label_the_guide_sets_in_bold_is_the_interface_s():
+    bold = set(re.findall(r"\*\*([^*]+)\*\*", _guide_panel_list()))
+    assert len(bold) > 30, sorted(bold)
+    wrong = sorted(bold - code_labels() - KEYS)
+    assert not wrong, (
+        f"docs/guide.md names {wrong} in bold, which the interface does not show: write the label as it is"
+    )
