@@ -8,15 +8,15 @@ does not import bpy, so core/ tests run without Blender.
 
 def register() -> None:
     from . import blender, cli
-    from .blender import cli_command
+    from .blender import blender_command
 
     blender.register()
-    cli_command.register(cli.run)
+    blender_command.register(cli.run)
 
 
 def unregister() -> None:
     from . import blender
-    from .blender import cli_command
+    from .blender import blender_command
 
-    cli_command.unregister()
+    blender_command.unregister()
     blender.unregister()

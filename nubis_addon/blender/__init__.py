@@ -1,7 +1,7 @@
 """Blender's side of the extension, listed from the top down: each module imports only modules listed
 after it.
 
-- commands: the command line's commands (cli.py parses, these run); workers: what a Dask worker process
+- commands: the command line's commands (cli.py parses, these run); daskworker: what a Dask worker process
   runs for a farm bake (it registers the extension, so it sits above registration);
 - registration: registers what follows (and ensure_registered for the command line and farm workers);
 - panels, skylayers, stormbuttons, operators: the sidebar, its Cloud Layers list's and Superstorms panel's
@@ -30,7 +30,7 @@ after it.
 - runtime: session GPU resources and the user's folders; cycles_setup: a bake as a Cycles volume with the
   matching material; handlers: application handlers added once; status: messages for the sidebar; ui: what
   the interface's pieces share (has_cloudscape, the cloudscape poll, the sidebar panel, redraws);
-- cli_command: `blender -b --command nubis`, registered by the package's register().
+- blender_command: `blender -b --command nubis`, registered by the package's register().
 """
 
 from __future__ import annotations

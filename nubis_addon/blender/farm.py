@@ -27,9 +27,9 @@ from . import pipeline, snapshot
 
 Progress = Callable[[float], None]
 # The tasks' entry points, named (not imported): the worker side registers the extension, so it sits above
-# everything it registers (blender/workers.py).
-_TASK_FRAME = f"{__package__}.workers.worker_bake_frame"
-_TASK_TILES = f"{__package__}.workers.worker_bake_tiles"
+# everything it registers (blender/daskworker.py).
+_TASK_FRAME = f"{__package__}.daskworker.worker_bake_frame"
+_TASK_TILES = f"{__package__}.daskworker.worker_bake_tiles"
 
 
 @dataclass

@@ -11,7 +11,7 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, St
 from ..core import noise, presets, quality, userpresets
 from ..core.errors import NubisError
 from ..core.jobs import BenchmarkOptions
-from ..core.limits import MAX_LAYERS
+from ..core.limits import MAX_FIELD_LAYERS
 from . import (
     cycles_setup,
     datafield,
@@ -169,8 +169,8 @@ class NUBIS_OT_layer_add(NeedsCloudscape, NubisOperator, bpy.types.Operator):
 
     @classmethod
     def unavailable(cls, scene) -> str:
-        if len(ui.active_cloud_layer(scene).layers) >= MAX_LAYERS:
-            return f"a scene holds at most {MAX_LAYERS} field layers: merge or remove one first"
+        if len(ui.active_cloud_layer(scene).layers) >= MAX_FIELD_LAYERS:
+            return f"a scene holds at most {MAX_FIELD_LAYERS} field layers: merge or remove one first"
         return ""
 
     def run(self, context):

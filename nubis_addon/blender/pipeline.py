@@ -81,7 +81,7 @@ def check_scene(scene) -> None:
     limits.check_count(
         "superstorms", len(settings.storms), MAX_STORMS, f"remove {len(settings.storms) - MAX_STORMS} of them"
     )
-    limits.check_count("field layers", len(settings.layers), limits.MAX_LAYERS, "merge or remove layers")
+    limits.check_count("field layers", len(settings.layers), limits.MAX_FIELD_LAYERS, "merge or remove layers")
     if scene.camera is not None:
         limits.check_position(
             f"the camera '{scene.camera.name}'",

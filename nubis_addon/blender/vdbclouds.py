@@ -2,7 +2,7 @@
 bake, a Mesh to Volume result), then Nubis Cloud on in the Volume's properties or the sidebar.
 
 A marked Volume is drawn by the real-time renderer with the procedural clouds (core/vdbcloud.py,
-render/vdbclouds.py): the same light model, its object's transform live, its frame's file for a
+render/vdbatlas.py): the same light model, its object's transform live, its frame's file for a
 sequence. Its values are extinction as Blender's Principled Volume reads them at Density 1, per unit of
 its Render > Space (as Cycles reads them), times the Density here; a file too large for the GPU budget
 (a preference) is drawn from a coarser level of it, and the sidebar says so. Blender's own drawing of it
@@ -20,10 +20,10 @@ from collections import OrderedDict
 import bpy
 from bpy.props import BoolProperty, FloatProperty, StringProperty
 
-from ..core import console, vdbcloud, vdbfile
+from ..core import console, vdbcheck, vdbcloud
 from ..core.errors import NubisError
 from ..core.sequence import human_bytes
-from ..render import vdbclouds as gpu_side
+from ..render import vdbatlas as gpu_side
 from . import cycles_setup, runtime, status
 from .ui import SidebarPanel, property_group_registration, redraw_views
 
@@ -205,7 +205,7 @@ def gpu_budget() -> int:
 def read(path: str, grid: str, budget: int | None = None) -> vdbcloud.VdbCloud:
     """The packed cloud of a file, read once per change of the file on disk or of the GPU budget (the
     preference's by default): the finest level of it that fits the budget (core/vdbcloud.py)."""
-    vdbfile.check(path)  # missing, a folder, damaged: one sentence before OpenVDB opens it
+    vdbcheck.check(path)  # missing, a folder, damaged: one sentence before OpenVDB opens it
     st = os.stat(path)
     budget = gpu_budget() if budget is None else budget
     key = (path, st.st_mtime_ns, st.st_size, grid, budget)

@@ -32,7 +32,7 @@ POSITION_MAX = 1e7
 # pixels per side of an image layer: twice the finest field (4096) is all a layer can give, and decoding
 # a bigger one costs 20 bytes a pixel (Blender's bytes and the float copy composited) before it is scaled.
 LAYER_IMAGE_MAX = 8192
-MAX_LAYERS = 128  # field layers per scene; each costs one full-resolution pass (estimate below)
+MAX_FIELD_LAYERS = 128  # field layers per scene; each costs one full-resolution pass (estimate below)
 
 
 def check_int(flag: str, value: int | None, lo: int, hi: int, unit: str = "") -> None:

@@ -302,7 +302,10 @@ def _check_span(value: list, where: str) -> None:
 def _parse_layers(value: Any, where: str) -> list[dict[str, Any]]:
     if isinstance(value, list):
         limits.check_count(
-            f"{where}: field.layers", len(value), limits.MAX_LAYERS, "merge or remove layers (each costs a full pass)"
+            f"{where}: field.layers",
+            len(value),
+            limits.MAX_FIELD_LAYERS,
+            "merge or remove layers (each costs a full pass)",
         )
         # A paint layer's strokes (core/paint.py) are its own array, not a setting of the schema.
         dabs = [raw.get("dabs") if isinstance(raw, dict) else None for raw in value]

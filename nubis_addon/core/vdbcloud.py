@@ -3,7 +3,7 @@
 Any float grid of a .vdb file (Houdini, EmberGen, Blender's Mesh to Volume, the extension's own bake) is
 read as Blender's Principled Volume reads it at Density 1: its values are extinction per unit of the
 space its Volume's Render > Space names (render_space_factor). The file is checked before anything large
-is made: its layout first (core/vdbfile.py: a damaged or cut-short file is one sentence, never an
+is made: its layout first (core/vdbcheck.py: a damaged or cut-short file is one sentence, never an
 allocation it states), then one sentence for a file with no float grid, an empty grid, negative or NaN
 values, or a transform that is not a uniform scale with a rotation and a translation. Its size is planned
 from the tree's own counts (ReadPlan): a grid whose bricks and index would not fit the GPU budget is read
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import bricks as brickmod
-from . import bundled, vdbfile
+from . import bundled, vdbcheck
 from .errors import NubisError
 from .sequence import human_bytes
 
@@ -79,15 +79,15 @@ class GridChoice:
 
 
 def float_grids(path: str | os.PathLike) -> list[GridChoice]:
-    """The file's grids, from its layout checked by core/vdbfile.py (nothing large is read)."""
-    layout = vdbfile.check(path)
-    return [GridChoice(g.name, vdbfile.tree_value_type(g.type_name) or g.type_name) for g in layout.grids]
+    """The file's grids, from its layout checked by core/vdbcheck.py (nothing large is read)."""
+    layout = vdbcheck.check(path)
+    return [GridChoice(g.name, vdbcheck.tree_value_type(g.type_name) or g.type_name) for g in layout.grids]
 
 
 def choose_grid(path: str | os.PathLike, name: str = "") -> str:
     """`name`, or `density`, or the file's only float grid; a sentence naming the float grids otherwise."""
     grids = float_grids(path)
-    shown = vdbfile.named(path)
+    shown = vdbcheck.named(path)
     floats = [g.name for g in grids if g.value_type in ("float", "double")]
     if not floats:
         held = ", ".join(f"'{g.name}' ({g.value_type})" for g in grids[:8]) or "no grids"
@@ -124,7 +124,7 @@ def index_to_world(grid, path: str = "") -> np.ndarray:
     with np.errstate(over="ignore", invalid="ignore"):  # a damaged transform is said below, not warned of
         cols = [np.array(t.indexToWorld(tuple(float(c) for c in e)), np.float64) - o for e in np.eye(3)]
         lengths = np.array([np.linalg.norm(c) for c in cols])
-    shown = vdbfile.named(path)
+    shown = vdbcheck.named(path)
     if not (np.all(np.isfinite(lengths)) and np.all(np.isfinite(o))) or lengths.min() <= 0.0:
         raise NubisError(
             f"grid '{grid.name}' of '{shown}' has a degenerate transform (voxels of size 0 or not finite): "
@@ -217,7 +217,7 @@ def check_plan(plan: ReadPlan, path: str, name: str, limit: int, level: int = 0)
     if widest > brickmod.MAX_ATLAS_SIDE:
         a = coarse.leaves.index(widest)
         raise NubisError(
-            f"grid '{name}' of '{vdbfile.named(path)}' spans {plan.hi[a] - plan.lo[a] + 1} voxels along "
+            f"grid '{name}' of '{vdbcheck.named(path)}' spans {plan.hi[a] - plan.lo[a] + 1} voxels along "
             f"{'xyz'[a]}, more than the {brickmod.MAX_ATLAS_SIDE * brickmod.LEAF * step} a cloud's index texture "
             f"can hold{averaged}: crop it to the cloud (stray voxels far from it widen its box) or export it at a "
             "coarser voxel size"
@@ -243,11 +243,11 @@ def check_fits(path: str | os.PathLike, grid_name: str = "", limit: int = brickm
 
 def _read_grid(path: str, name: str):
     vdb = bundled.openvdb()
-    return vdbfile.guarded(path, f"grid '{name}'", lambda: vdb.read(str(path), name))
+    return vdbcheck.guarded(path, f"grid '{name}'", lambda: vdb.read(str(path), name))
 
 
 def _check_values(grid, path: str, name: str) -> tuple[float, float]:
-    shown = vdbfile.named(path)
+    shown = vdbcheck.named(path)
     if grid.valueTypeName not in ("float", "double"):
         raise NubisError(
             f"grid '{name}' of '{shown}' holds {grid.valueTypeName} values, not floats: choose a float grid"
@@ -328,7 +328,7 @@ def read_cloud(
     """The file's grid, checked and packed into bricks (see the module's note). Refused before any voxel is
     copied when its plan does not fit `limit` bytes, and while packing when the bricks pass it."""
     path = str(path)
-    layout = vdbfile.check(path)
+    layout = vdbcheck.check(path)
     key = (path, layout.size, os.stat(path).st_mtime_ns, grid_name, limit, np.dtype(dtype).str)
     if key in _RECENT:
         _RECENT.move_to_end(key)
@@ -441,7 +441,7 @@ def _pack(src: _Source, plan: ReadPlan, level: int) -> brickmod.Bricks:
 def _copied(src: _Source, v0, shape_xyz) -> np.ndarray:
     """The file's voxels from v0 (i, j, k), shaped (x, y, z), as OpenVDB copies them."""
     out = np.zeros(shape_xyz, np.float32)
-    vdbfile.guarded(src.path, f"grid '{src.name}'", lambda: src.grid.copyToArray(out, ijk=tuple(v0)))
+    vdbcheck.guarded(src.path, f"grid '{src.name}'", lambda: src.grid.copyToArray(out, ijk=tuple(v0)))
     return out
 
 
@@ -475,7 +475,7 @@ def _checked_block(block: np.ndarray, path: str, name: str, storage: float) -> n
     """A copied block (z, y, x), its inactive values checked too (evalMinMax sees active ones only)."""
     if not np.isfinite(block).all():
         raise NubisError(
-            f"grid '{name}' of '{vdbfile.named(path)}' holds NaN or infinite values: fix the simulation or export "
+            f"grid '{name}' of '{vdbcheck.named(path)}' holds NaN or infinite values: fix the simulation or export "
             "it again"
         )
     if block.min() < 0.0:
@@ -487,10 +487,10 @@ def _checked_block(block: np.ndarray, path: str, name: str, storage: float) -> n
 
 
 def _value_scale(path: str) -> float:
-    if not vdbfile.check(path).metadata_text:
+    if not vdbcheck.check(path).metadata_text:
         return 1.0  # not a Nubis bake (it writes UTF-8), and OpenVDB's Python would abort on its text
     try:
-        meta = dict(vdbfile.guarded(path, "the metadata", lambda: bundled.openvdb().readMetadata(path)))
+        meta = dict(vdbcheck.guarded(path, "the metadata", lambda: bundled.openvdb().readMetadata(path)))
         scale = float(meta.get("nubis_density_scale", 1.0))
     except (NubisError, ValueError, TypeError):
         return 1.0
@@ -499,7 +499,7 @@ def _value_scale(path: str) -> float:
 
 def _too_large(path: str, name: str, need: int, limit: int, why: str = "") -> str:
     return (
-        f"grid '{name}' of '{vdbfile.named(path)}' needs at least {human_bytes(need)} on the GPU as bricks, over the "
+        f"grid '{name}' of '{vdbcheck.named(path)}' needs at least {human_bytes(need)} on the GPU as bricks, over the "
         f"{human_bytes(limit)} a cloud may take{why}: export it at a coarser voxel size (or a coarser level of its "
         "simulation), or crop it"
     )
@@ -608,7 +608,7 @@ def render_space_factor(object_to_world, space: str) -> float:
 
 @dataclass(frozen=True)
 class GpuLayout:
-    """How the clouds share the GPU's two textures (render/vdbclouds.py), as the uniform block tells the
+    """How the clouds share the GPU's two textures (render/vdbatlas.py), as the uniform block tells the
     shader (render/uniforms.py): bricks per side of the one atlas, each cloud's first brick in it, each
     cloud's first z slice in the one index texture, and that texture's shape (z, y, x)."""
 

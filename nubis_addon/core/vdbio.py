@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import bundled, vdbfile
+from . import bundled, vdbcheck
 from .errors import NubisError
 from .fsutil import atomic_path, shown, sync_to_disk
 
@@ -165,9 +165,9 @@ def _check_written(tmp: Path, path: Path, grids: list) -> None:
 
 def read_grid_info(path: str | os.PathLike) -> dict[str, GridInfo]:
     vdb = bundled.openvdb()
-    if not vdbfile.check(path).metadata_text:
-        raise NubisError(f"the metadata of '{vdbfile.named(path)}' holds text that is not UTF-8: bake it again")
-    grids, _meta = vdbfile.guarded(path, "the grids", lambda: vdb.readAll(str(path)))
+    if not vdbcheck.check(path).metadata_text:
+        raise NubisError(f"the metadata of '{vdbcheck.named(path)}' holds text that is not UTF-8: bake it again")
+    grids, _meta = vdbcheck.guarded(path, "the grids", lambda: vdb.readAll(str(path)))
     info = {}
     for g in grids:
         origin = tuple(float(c) for c in g.transform.indexToWorld((0, 0, 0)))
@@ -181,8 +181,8 @@ def read_grid_info(path: str | os.PathLike) -> dict[str, GridInfo]:
 def read_grid_array(path: str | os.PathLike, name: str) -> tuple[np.ndarray, tuple[int, int, int]]:
     """Dense copy of a grid's active bounding box, indexed [z, y, x], with the index of its first voxel."""
     vdb = bundled.openvdb()
-    vdbfile.check(path)
-    grid = vdbfile.guarded(path, f"grid '{name}'", lambda: vdb.read(str(path), name))
+    vdbcheck.check(path)
+    grid = vdbcheck.guarded(path, f"grid '{name}'", lambda: vdb.read(str(path), name))
     lo, hi = grid.evalActiveVoxelBoundingBox()
     shape = tuple(int(h - lo_ + 1) for lo_, h in zip(lo, hi, strict=True))
     arr = np.zeros(shape, np.float32)

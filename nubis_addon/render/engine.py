@@ -16,7 +16,7 @@ from ..core import lightvolume, noise, sky
 from ..core.errors import NubisError
 from ..core.schema import defaults
 from ..core.state import CloudState
-from . import fieldpatch, uniforms, vdbclouds
+from . import fieldpatch, uniforms, vdbatlas
 from .gpu_context import release_at_exit
 from .sources import CLOUD_LIBS, assemble, read_shader
 from .textures import NoiseTextures, field_stack_texture, field_texture, sky_texture, texture_from_array
@@ -50,7 +50,7 @@ SWITCHES = (
     "NUBIS_LIGHT_VOLUME",
     "NUBIS_VDB",
 )
-# The VDB clouds' textures, bound only in the NUBIS_VDB permutation (render/vdbclouds.py).
+# The VDB clouds' textures, bound only in the NUBIS_VDB permutation (render/vdbatlas.py).
 VDB_SAMPLERS = (("FLOAT_3D", "vdb_index"), ("FLOAT_3D", "vdb_atlas"))
 
 
@@ -238,7 +238,7 @@ class CloudGPU:
         self.field_revision = 0  # bumped by each in-place patch of the field textures (patch_field)
         self._field_uploads = 0  # bumped by each upload of other pixels: with the patches, what the volumes hold
         self.light_held_until = 0.0  # time.monotonic() before which filled volumes are not refilled
-        self.vdb = vdbclouds.VdbTextures()
+        self.vdb = vdbatlas.VdbTextures()
 
     def fork(self) -> CloudGPU:
         """GPU inputs of their own over the same noise textures: a bake or a render that runs while the

@@ -174,17 +174,17 @@ def test_unwritable_output_is_refused_before_any_work(tmp_path):
 
 
 def test_blender_command_is_registered_and_runs(blender, tmp_path):
-    """`blender -b --command nubis ...` calls cli_command.execute with the argument list."""
-    from nubis_addon.blender import cli_command
+    """`blender -b --command nubis ...` calls blender_command.execute with the argument list."""
+    from nubis_addon.blender import blender_command
 
-    assert cli_command.is_registered()
+    assert blender_command.is_registered()
     out = tmp_path / "cmd.exr"
-    code = cli_command.execute(["render", "--out", str(out), "--width", "32", "--height", "18"])
+    code = blender_command.execute(["render", "--out", str(out), "--width", "32", "--height", "18"])
     assert code == 0
     from nubis_addon.core.imageio import read_image
 
     assert np.isfinite(read_image(out)).all()
-    assert cli_command.execute(["render", "--preset", "nope", "--out", str(out)]) == 1
+    assert blender_command.execute(["render", "--preset", "nope", "--out", str(out)]) == 1
 
 
 def test_blend_file_round_trip_through_the_cli(blender, make_scene, tmp_path):

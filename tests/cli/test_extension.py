@@ -51,7 +51,7 @@ def test_built_zip_installs_enables_and_unregisters_cleanly(tmp_path):
         assert mod in {{a.module for a in bpy.context.preferences.addons}}, "not enabled"
         assert hasattr(bpy.types.Scene, "nubis"), "settings not registered"
         pkg = sys.modules[mod + ".nubis_addon.blender"]
-        assert sys.modules[mod + ".nubis_addon.blender.cli_command"].is_registered()
+        assert sys.modules[mod + ".nubis_addon.blender.blender_command"].is_registered()
         assert sys.modules[mod + ".nubis_addon.blender.viewport"].is_registered()
         bpy.ops.nubis.new_cloudscape(preset="default")
         assert bpy.context.scene.nubis.field_a is not None
@@ -68,7 +68,7 @@ def test_built_zip_installs_enables_and_unregisters_cleanly(tmp_path):
         bpy.ops.preferences.addon_disable(module=mod)
         assert not hasattr(bpy.types.Scene, "nubis"), "settings left behind"
         assert not [c for c in dir(bpy.types) if c.startswith("NUBIS_")], "classes left behind"
-        assert not sys.modules[mod + ".nubis_addon.blender.cli_command"].is_registered()
+        assert not sys.modules[mod + ".nubis_addon.blender.blender_command"].is_registered()
         assert not sys.modules[mod + ".nubis_addon.blender.viewport"].is_registered()
         print("EXTENSION-OK")
     """)

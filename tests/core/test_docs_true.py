@@ -7,7 +7,7 @@
   parser does not have; and every option is explained in docs/cli.md's prose (outside the code blocks).
 - **The modules.** Every module of the package (every .py file under nubis_addon/) is named in
   docs/architecture.md, and every module that page names exists. A module is named by its path: below a
-  subpackage from the subpackage's folder (`core/vdbfile.py`, `blender/__init__.py`, optionally with
+  subpackage from the subpackage's folder (`core/vdbcheck.py`, `blender/__init__.py`, optionally with
   `nubis_addon/` in front), at the top always whole (`nubis_addon/cli.py`, `nubis_addon/__init__.py`), so
   the repository's own `__init__.py` is not taken for the package's. A path counts only whole: not
   preceded by a word character, `/` or `.`, not followed by a word character. The docstring of

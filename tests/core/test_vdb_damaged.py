@@ -14,7 +14,7 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from nubis_addon.core import bricks, vdbcloud, vdbfile
+from nubis_addon.core import bricks, vdbcheck, vdbcloud
 from nubis_addon.core.errors import NubisError
 from tests.vdb_helpers import _openvdb, ball, write_cumulus, write_grid, write_two_voxels
 
@@ -232,6 +232,6 @@ def test_the_layout_check_reads_every_transform_and_value_type(tmp_path):
         tiles.fill((0, 0, 0), (4500, 130, 130), 1.0, True)
         path = tmp_path / f"{label}.vdb"
         vdb.write(str(path), grids=[*grids, half, tiles], metadata={"note": "x" * 3000})
-        layout = vdbfile.check(path)
+        layout = vdbcheck.check(path)
         assert [g.name for g in layout.grids] == [*(g.name for g in grids), "half", "tiles"], label
         assert layout.grids[-2].half
