@@ -51,7 +51,7 @@ def test_compare_writes_every_output(tmp_path):
     # are pinned at a resolution that can carry them in test_parity.py.
     assert 0.0 <= m["alpha_rmse"] < 0.3 and m["silhouette_iou"] > 0.6
     # The reference is converged in bounces by default (docs/convergence.md), not the scene's 8.
-    from nubis_addon.blender.pipeline import REFERENCE_BOUNCES
+    from nubis_addon.blender.comparison import REFERENCE_BOUNCES
 
     assert m["volume_bounces"] == REFERENCE_BOUNCES > 8
     assert f"samples, {REFERENCE_BOUNCES} volume bounces" in r.stdout

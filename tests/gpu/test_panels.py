@@ -165,7 +165,7 @@ def test_a_grey_button_says_why_in_the_sentence_its_click_would_refuse_with(make
     what the operator refuses with when run anyway (stated once: `unavailable`)."""
     import bpy
 
-    from nubis_addon.blender import operators, skylayers
+    from nubis_addon.blender import operators, skylayers, stormbuttons
     from nubis_addon.core.errors import NubisError
     from nubis_addon.core.state import MAX_STORMS
 
@@ -192,7 +192,8 @@ def test_a_grey_button_says_why_in_the_sentence_its_click_would_refuse_with(make
     with pytest.raises(RuntimeError) as err:
         fn()
     assert words in str(err.value), str(err.value)
-    cls = next(c for m in (operators, skylayers) for c in m.CLASSES if getattr(c, "bl_idname", "") == f"nubis.{op}")
+    classes = (*operators.CLASSES, *skylayers.CLASSES, *stormbuttons.CLASSES)
+    cls = next(c for c in classes if getattr(c, "bl_idname", "") == f"nubis.{op}")
     with pytest.raises(NubisError) as refused:
         cls.refuse_if_unavailable(cls, scene)
     assert words.lower() in str(refused.value).lower()

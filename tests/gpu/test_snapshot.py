@@ -392,8 +392,10 @@ def test_every_operator_that_changes_data_is_one_undo_step(blender):
 
     import nubis_addon.blender.mainthread as mainthread
     import nubis_addon.blender.operators as operators
+    import nubis_addon.blender.skylayers as skylayers
+    import nubis_addon.blender.stormbuttons as stormbuttons
 
-    classes = [*operators.CLASSES, mainthread.NUBIS_OT_report]
+    classes = [*operators.CLASSES, *skylayers.CLASSES, *stormbuttons.CLASSES, mainthread.NUBIS_OT_report]
     missing = []
     for cls in classes:
         if not issubclass(cls, bpy.types.Operator):
