@@ -138,6 +138,34 @@ def test_functions_stay_short_and_take_an_options_object():
     assert not too_big, too_big
 
 
+# Modules allowed past MODULE_LINES: the settings' table and the noise for good (issue 62), and those not
+# split yet, each held at its length today so it can only shrink (docs/architecture.md).
+MODULE_LINES = 600
+LONG_MODULES = {
+    "core.schema": None,
+    "core.noise": None,
+    "core.paint": 786,
+    "core.vdbcloud": 651,
+    "blender.sky": 628,
+    "render.engine": 620,
+    "blender.paint": 601,
+}
+
+
+def test_modules_stay_under_600_lines():
+    too_long = []
+    for name, path in _modules().items():
+        lines = len(path.read_text(encoding="utf-8").splitlines())
+        key = name.removeprefix("nubis_addon.")
+        ceiling = LONG_MODULES.get(key, MODULE_LINES)
+        if ceiling is not None and lines > ceiling:
+            too_long.append(f"{name}: {lines} lines (at most {ceiling})")
+    assert not too_long, "split these by concern: " + ", ".join(too_long)
+    held = {k for k, v in LONG_MODULES.items() if v is not None}
+    names = {n.removeprefix("nubis_addon.") for n in _modules()}
+    assert held <= names, f"no such module: {sorted(held - names)}: take it off LONG_MODULES"
+
+
 def test_core_imports_without_blender():
     """In a fresh interpreter, every core module imports and none pulls in bpy."""
     code = (
