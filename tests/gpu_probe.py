@@ -12,7 +12,8 @@ from pathlib import Path
 import gpu
 import numpy as np
 
-from nubis_addon.render.engine import STAGES, CloudGPU, Stage, draw_offscreen, draw_stage
+from nubis_addon.render.engine import STAGES, CloudGPU, Stage, draw_stage
+from nubis_addon.render.offscreens import draw_offscreen
 
 # Registered by the tests: the extension ships no probe, and a stage only compiles when asked for.
 _FRAGMENT = str(Path(__file__).resolve().parent / "shaders" / "nubis_probe_frag.glsl")

@@ -23,7 +23,7 @@ from ..core.fsutil import check_output_path
 from ..core.jobs import BakeOptions, RenderOptions
 from ..core.state import MAX_STORMS, CloudState
 from ..render import bake as gpu_bake
-from ..render import engine
+from ..render import engine, offscreens
 from . import (
     cycles_setup,
     datafield,
@@ -333,7 +333,7 @@ def _bake_run(snap: BakeSnapshot, grids, evaluate, path: Path, half: bool, step:
     return BakeResult(path, snap.plan, active, time.perf_counter() - start, names, snap.frame)
 
 
-run_steps = engine.run_steps  # a stepped bake or render to its end: its BakeResult or image
+run_steps = offscreens.run_steps  # a stepped bake or render to its end: its BakeResult or image
 
 
 _estimates: dict = {}

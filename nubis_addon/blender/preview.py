@@ -22,7 +22,7 @@ from ..core.bakeplan import comparison_voxel_size, view_footprint
 from ..core.errors import NubisError
 from ..core.fsutil import check_output_dir
 from ..core.jobs import BakeOptions, BenchmarkOptions, PreviewOptions
-from ..render import depthpass, engine, temporal
+from ..render import depthpass, engine, offscreens, temporal
 from ..render.gpu_context import renderer_name
 from . import cycles_setup, pipeline, runtime, scene_io, sceneparams
 
@@ -118,7 +118,9 @@ def preview(scene, out_dir, options: PreviewOptions, progress: Progress | None =
     limits.check_int("--redraws", redraws, *limits.REDRAWS_RANGE)
     limits.check_orbit("--orbit", orbit)
     out = check_output_dir(out_dir)
-    engine.check_offscreen(width, height)  # the full-size image read at the end, refused before the minutes of drawing
+    offscreens.check_offscreen(
+        width, height
+    )  # the full-size image read at the end, refused before the minutes of drawing
     q = apply_quality(scene, options.quality)
     s = scene.nubis
     result = PreviewResult(frames, quality=q, size=(width, height))

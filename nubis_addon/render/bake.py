@@ -13,7 +13,8 @@ import gpu
 import numpy as np
 
 from ..core.bakeplan import BakePlan, Tile
-from .engine import CloudGPU, fullscreen_batch, read_pixels, shader
+from .engine import CloudGPU, fullscreen_batch, shader
+from .offscreens import read_pixels
 
 # Fragments per block: 128 x 8192 is 1 M voxels, 16 MiB of float RGBA read back.
 MAX_TARGET_ROWS = 8192

@@ -12,7 +12,7 @@ import numpy as np
 from gpu.types import GPUShaderCreateInfo, GPUStageInterfaceInfo
 from gpu_extras.batch import batch_for_shader
 
-from . import engine
+from . import offscreens
 from .gpu_context import release_at_exit
 
 _VERTEX = """
@@ -55,7 +55,7 @@ def scene_hits(surfaces: Iterable[tuple[np.ndarray, np.ndarray]], view_proj, wid
     and its pixels: (height, width, 4) float32, bottom row first, xyz the world position at the pixel's
     centre and w 1 where a surface was drawn, all 0 elsewhere. The texture lives until the block ends."""
     sh = _hit_shader()
-    offscreen = engine.new_offscreen(width, height)
+    offscreen = offscreens.new_offscreen(width, height)
     matrix = np.asarray(view_proj, dtype=np.float64).reshape(4, 4)
     try:
         with offscreen.bind():
@@ -74,7 +74,7 @@ def scene_hits(surfaces: Iterable[tuple[np.ndarray, np.ndarray]], view_proj, wid
                 pos = np.ascontiguousarray(vertices, dtype=np.float32)
                 tris = np.ascontiguousarray(triangles, dtype=np.int32)
                 batch_for_shader(sh, "TRIS", {"pos": pos}, indices=tris).draw(sh)
-            pixels = engine.read_pixels(fb, width, height)
+            pixels = offscreens.read_pixels(fb, width, height)
             gpu.state.depth_test_set("NONE")
             gpu.state.depth_mask_set(False)
         yield offscreen.texture_color, pixels

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import functools
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import gpu
@@ -13,10 +13,9 @@ from gpu.types import GPUShaderCreateInfo, GPUStageInterfaceInfo
 from gpu_extras.batch import batch_for_shader
 
 from ..core import lightvolume, noise, sky
-from ..core.errors import NubisError
 from ..core.schema import defaults
 from ..core.state import CloudState
-from . import fieldpatch, uniforms, vdbatlas
+from . import fieldpatch, offscreens, uniforms, vdbatlas
 from .gpu_context import release_at_exit
 from .sources import CLOUD_LIBS, assemble, read_shader
 from .textures import NoiseTextures, field_stack_texture, field_texture, sky_texture, texture_from_array
@@ -426,65 +425,6 @@ def draw_clouds(gpu_inputs: CloudGPU, inv_view_proj, eye, **switches: int) -> No
     draw_stage("raymarch", gpu_inputs, {"inv_view_proj": inv_view_proj, "eye": tuple(eye)}, switches=switches)
 
 
-def new_offscreen(width: int, height: int):
-    """A float offscreen (with a depth buffer) of this size, or a NubisError with a size to try."""
-    return _gpu_image(lambda: gpu.types.GPUOffScreen(width, height, format="RGBA32F"), width, height)
-
-
-def _gpu_image(make: Callable, width: int, height: int):
-    """`make()`'s float GPU image of this size, or a NubisError with a smaller size to try."""
-    try:
-        return make()
-    except Exception as err:  # Blender raises a plain error when the GPU refuses the texture
-        mb = width * height * 16 / 2**20
-        raise NubisError(
-            f"the GPU could not hold a {width}x{height} float image ({mb:.0f} MB): render smaller, for example "
-            f"{max(4, width // 2)}x{max(4, height // 2)}, or on a GPU with more memory ({err})"
-        ) from None
-
-
-def check_offscreen(width: int, height: int) -> None:
-    """Whether the GPU can hold a float image of this size: a NubisError with a size to try if not."""
-    new_offscreen(width, height).free()
-
-
-def draw_offscreen(width: int, height: int, draw: Callable[[], None]) -> np.ndarray:
-    """Run `draw` into a cleared float offscreen of this size; its pixels, bottom row first."""
-    return run_steps(draw_offscreen_steps(width, height, [draw]))
-
-
-def draw_offscreen_steps(width: int, height: int, draws: Iterable[Callable[[], None]]):
-    """`draws` one after another into a cleared float offscreen of this size, as a generator that yields
-    the fraction done after each and returns the pixels, bottom row first. The interface's modal operators
-    run one draw per timer tick, with the offscreen unbound in between so Blender can redraw its windows.
-    Closing the generator frees the offscreen."""
-    offscreen = new_offscreen(width, height)
-    try:
-        with offscreen.bind():
-            gpu.state.active_framebuffer_get().clear(color=(0.0, 0.0, 0.0, 0.0))
-        draws = list(draws)
-        for i, draw in enumerate(draws):
-            with offscreen.bind():
-                gpu.state.blend_set("NONE")
-                draw()
-            yield (i + 1) / len(draws)
-        with offscreen.bind():
-            return read_pixels(gpu.state.active_framebuffer_get(), width, height)
-    finally:
-        offscreen.free()
-
-
-def run_steps(steps, progress: Callable[[float], None] | None = None):
-    """Run a stepped piece of work (a generator yielding the fraction done) to its end; its return value."""
-    while True:
-        try:
-            fraction = next(steps)
-        except StopIteration as done:
-            return done.value
-        if progress:
-            progress(fraction)
-
-
 def draw_stage(
     stage: str,
     gpu_inputs: CloudGPU,
@@ -512,7 +452,7 @@ def render_motion(gpu_inputs: CloudGPU, inv_view_proj, eye, prev_view_proj, widt
     # mathutils matrices are row-major; GLSL reads columns.
     cams = np.array([np.array(inv_view_proj.inverted()).T, np.array(prev_view_proj).T], np.float32)
     cameras = gpu.types.GPUUniformBuf(cams.tobytes())
-    px = draw_offscreen(
+    px = offscreens.draw_offscreen(
         width,
         height,
         lambda: draw_stage("motion", gpu_inputs, {"inv_view_proj": inv_view_proj, "eye": tuple(eye)}, {"C": cameras}),
@@ -535,7 +475,7 @@ def render_offscreen(
 
     The frame is drawn in tiles so that one huge draw call never stalls a software rasterizer.
     """
-    return run_steps(render_offscreen_steps(gpu_inputs, inv_view_proj, eye, width, height, tile, **switches))
+    return offscreens.run_steps(render_offscreen_steps(gpu_inputs, inv_view_proj, eye, width, height, tile, **switches))
 
 
 def render_offscreen_steps(
@@ -544,7 +484,7 @@ def render_offscreen_steps(
     """render_offscreen as a generator yielding the fraction done after each tile (for modal operators);
     returns the image."""
     draws = _tile_draws(width, height, tile, lambda: draw_clouds(gpu_inputs, inv_view_proj, eye, **switches))
-    px = yield from draw_offscreen_steps(width, height, draws)
+    px = yield from offscreens.draw_offscreen_steps(width, height, draws)
     return px[::-1].copy()
 
 
@@ -571,7 +511,7 @@ def _finish_tile(x: int, y: int) -> None:
 def _tiled(stage: str, gpu_inputs: CloudGPU, values: dict, width: int, height: int, tile: int = TILE) -> np.ndarray:
     """A full-screen stage drawn in tiles into a float offscreen; its pixels, bottom row first."""
     draws = _tile_draws(width, height, tile, lambda: draw_stage(stage, gpu_inputs, values))
-    return run_steps(draw_offscreen_steps(width, height, draws))
+    return offscreens.run_steps(offscreens.draw_offscreen_steps(width, height, draws))
 
 
 def render_panorama(gpu_inputs: CloudGPU, eye, width: int, height: int) -> np.ndarray:
@@ -592,7 +532,8 @@ def render_split(gpu_inputs: CloudGPU, inv_view_proj, eye, hit_texture, width: i
     front of it and those behind it, premultiplied RGBA (height, width, 4) each, bottom row first.
     `hit_texture` is the depth pre-pass's (render/depthpass.py) at this size."""
     targets = [
-        _gpu_image(lambda: gpu.types.GPUTexture((width, height), format="RGBA32F"), width, height) for _ in range(2)
+        offscreens._gpu_image(lambda: gpu.types.GPUTexture((width, height), format="RGBA32F"), width, height)
+        for _ in range(2)
     ]
     fb = gpu.types.GPUFrameBuffer(color_slots=targets)
     values = {"inv_view_proj": inv_view_proj, "eye": tuple(eye)}
@@ -602,19 +543,4 @@ def render_split(gpu_inputs: CloudGPU, inv_view_proj, eye, hit_texture, width: i
         gpu.state.blend_set("NONE")
         for tile_draw in _tile_draws(width, height, tile, draw):
             tile_draw()
-        return tuple(read_pixels(fb, width, height, slot) for slot in range(2))
-
-
-def read_pixels(fb, width: int, height: int, slot: int = 0) -> np.ndarray:
-    """Float RGBA of the framebuffer's colour attachment `slot`, (height, width, 4), bottom row first.
-
-    Blender's Buffer exports its memory with reversed strides to the buffer protocol (seen in 5.0.1),
-    so we view the C-ordered memory with the strides it really has instead of trusting them.
-    """
-    view = np.asarray(fb.read_color(0, 0, width, height, 4, slot, "FLOAT"))
-    if view.dtype != np.float32 or view.size != width * height * 4:
-        raise RuntimeError(f"unexpected framebuffer read-back {view.dtype} {view.shape}")
-    if view.flags.c_contiguous and view.shape == (height, width, 4):
-        return view.copy()
-    strides = (width * 16, 16, 4)
-    return np.lib.stride_tricks.as_strided(view, shape=(height, width, 4), strides=strides).copy()
+        return tuple(offscreens.read_pixels(fb, width, height, slot) for slot in range(2))

@@ -24,7 +24,7 @@ import numpy as np
 from ..core import camera, march
 from ..core.errors import NubisError
 from ..core.state import CloudState
-from . import engine, uniforms
+from . import engine, offscreens, uniforms
 
 BLOCK = 4  # the working buffer holds one pixel of every BLOCK x BLOCK block
 REDRAWS_PER_SAMPLE = BLOCK * BLOCK
@@ -319,7 +319,7 @@ class TemporalViewport:
         """The history's colour, (h, w, 4) float, top row first (tests)."""
         hw, hh = self._sizes[0]
         with self._history[0]["fb"].bind():
-            return engine.read_pixels(self._history[0]["fb"], hw, hh)[::-1].copy()
+            return offscreens.read_pixels(self._history[0]["fb"], hw, hh)[::-1].copy()
 
     def sync(self) -> None:
         """Wait for the GPU to finish this redraw (one pixel read back), for timing."""
@@ -330,4 +330,4 @@ class TemporalViewport:
 
 def render_view(tv: TemporalViewport, clouds: engine.CloudGPU, view: View, blur: float = 1.0) -> np.ndarray:
     """The upscaled view as premultiplied scene-linear RGBA (height, width, 4), top row first."""
-    return engine.draw_offscreen(view.width, view.height, lambda: tv.upscale(clouds, blur))[::-1].copy()
+    return offscreens.draw_offscreen(view.width, view.height, lambda: tv.upscale(clouds, blur))[::-1].copy()

@@ -39,8 +39,8 @@ def main() -> None:
     from nubis_addon.blender import datafield, ensure_registered, runtime, sceneparams, scenepresets, viewport
     from nubis_addon.blender import paint as blender_paint
     from nubis_addon.core.presets import load_preset
-    from nubis_addon.render.engine import read_pixels
     from nubis_addon.render.gpu_context import ensure_gpu_context, renderer_name
+    from nubis_addon.render.offscreens import read_pixels
 
     samples = int(sys.argv[1]) if len(sys.argv) > 1 else 12
     nubis_addon.register()

@@ -44,7 +44,7 @@ def main() -> None:
 
     import nubis_addon
     from nubis_addon.blender import preview, runtime, scene_io, viewport
-    from nubis_addon.render import engine, temporal
+    from nubis_addon.render import offscreens, temporal
     from nubis_addon.render.gpu_context import ensure_gpu_context, renderer_name
 
     width, height = (int(a) for a in (sys.argv[1:3] if len(sys.argv) > 2 else (640, 360)))
@@ -62,7 +62,7 @@ def main() -> None:
             ways[0]: (temporal.TemporalViewport(), view, None),
             ways[1]: (temporal.TemporalViewport(), deep, depth),
         }
-        off = engine.new_offscreen(width, height)
+        off = offscreens.new_offscreen(width, height)
         with off.bind():
             for tv, v, d in views.values():  # converge both
                 while not tv.converged:

@@ -147,7 +147,6 @@ LONG_MODULES = {
     "core.paint": 786,
     "core.vdbcloud": 651,
     "blender.sky": 628,
-    "render.engine": 620,
     "blender.paint": 601,
 }
 

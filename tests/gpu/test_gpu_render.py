@@ -49,7 +49,7 @@ def test_viewport_draw_uses_the_render_code(make_scene):
     import gpu
 
     from nubis_addon.blender import pipeline, scene_io, status, viewport
-    from nubis_addon.render.engine import read_pixels
+    from nubis_addon.render.offscreens import read_pixels
 
     assert viewport.is_registered()
     scene = make_scene("default")
@@ -104,7 +104,7 @@ def test_solid_shading_draws_the_worlds_sky_behind_the_clouds(make_scene):
     import gpu
 
     from nubis_addon.blender import pipeline, scene_io, viewport
-    from nubis_addon.render.engine import read_pixels
+    from nubis_addon.render.offscreens import read_pixels
 
     scene = make_scene("default")
     assert scene.nubis.viewport_solid_sky  # on by default

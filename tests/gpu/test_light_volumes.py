@@ -98,7 +98,7 @@ def _read_slices(shader, volume) -> np.ndarray:
     from gpu_extras.batch import batch_for_shader
 
     from nubis_addon.core import lightvolume
-    from nubis_addon.render.engine import read_pixels
+    from nubis_addon.render.offscreens import read_pixels
 
     batch = batch_for_shader(shader, "TRIS", {"pos": [(-1.0, -1.0), (3.0, -1.0), (-1.0, 3.0)]})
     w, h, depth = lightvolume.SIZE

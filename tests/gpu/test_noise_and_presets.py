@@ -67,7 +67,7 @@ def _draw(scene, viewport, w=32, h=18):
     import gpu
 
     from nubis_addon.blender import scene_io
-    from nubis_addon.render.engine import read_pixels
+    from nubis_addon.render.offscreens import read_pixels
 
     inv = scene_io.camera_inv_view_proj(scene, w, h)
     offscreen = gpu.types.GPUOffScreen(w, h, format="RGBA32F")

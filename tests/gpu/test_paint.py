@@ -129,7 +129,7 @@ def test_the_live_stroke_shows_what_the_full_composite_makes(blender, make_scene
 
     from nubis_addon.blender import datafield, runtime, sceneparams, viewport
     from nubis_addon.blender import paint as blender_paint
-    from nubis_addon.render.engine import read_pixels
+    from nubis_addon.render.offscreens import read_pixels
 
     scene = make_scene("default")
     s = scene.nubis

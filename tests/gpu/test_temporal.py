@@ -307,7 +307,7 @@ def test_a_3d_view_region_draws_converges_and_culls(make_scene, blender):
     import gpu
 
     from nubis_addon.blender import pipeline, runtime, sceneparams, viewport
-    from nubis_addon.render.engine import read_pixels
+    from nubis_addon.render.offscreens import read_pixels
 
     scene = make_scene("default")
     w, h = 64, 36
