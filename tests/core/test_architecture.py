@@ -138,7 +138,7 @@ def test_functions_stay_short_and_take_an_options_object():
     assert not too_big, too_big
 
 
-# Modules allowed past MODULE_LINES: the settings' table and the noise for good (issue 62), and those not
+# Modules allowed past MODULE_LINES: the settings' table and the noise for good, and those not
 # split yet, each held at its length today so it can only shrink (docs/architecture.md).
 MODULE_LINES = 600
 LONG_MODULES = {
