@@ -154,12 +154,11 @@ def _hemisphere_at(scene, tex, elevation: float) -> tuple[tuple, np.ndarray]:
 def _flank_balance_at_reference(scene, tex, sun, env: np.ndarray) -> float:
     """core/sky.py flank_balance of the sky at REFERENCE_SUN (`env`: its capture at the calibrated
     strength), the ground below it lit as that sun and that sky would light it."""
-    light = skymath.hemisphere_radiance(env)[0]
+    sun_light = None
     if sun is not None and not sun.hide_render:
         air = (tex.altitude, tex.air_density, getattr(tex, _aerosol_attr()), tex.ozone_density)
-        colour = np.array(skymath.transmittance(REFERENCE_SUN, *air), np.float64)
-        light = np.array(light) + colour * sun.data.energy * math.sin(REFERENCE_SUN) / math.pi
-    ground = tuple(float(c) for c in np.array(scene.nubis.sky_ground) * np.asarray(light, np.float64))
+        sun_light = (skymath.transmittance(REFERENCE_SUN, *air), sun.data.energy, math.sin(REFERENCE_SUN))
+    ground = skymath.ground_light(scene.nubis.sky_ground, skymath.hemisphere_radiance(env)[0], sun_light)
     env = skymath.with_ground(env, ground, HORIZON_BAND)
     top, _below = skymath.hemisphere_radiance(env)
     return skymath.flank_balance(top, skymath.flank_radiance(env))
@@ -313,11 +312,11 @@ def ground_radiance(scene, sun=None, world=None) -> tuple[float, float, float] |
     if world is None or world.node_tree is None or world.node_tree.nodes.get(GROUND_NODE) is None:
         return None
     sun = sun if sun is not None else find_sun(scene)
-    light = np.array(_sky_irradiance.get(world.name, np.zeros(3)), np.float64)
+    sun_light = None
     if sun is not None and not sun.hide_render:
         sine = max(0.0, float(sun.matrix_world.to_3x3().col[2].normalized().z))
-        light = light + np.array(sun.data.color) * sun.data.energy * sine / math.pi
-    return tuple(float(c) for c in np.array(scene.nubis.sky_ground) * light)
+        sun_light = (tuple(sun.data.color), sun.data.energy, sine)
+    return skymath.ground_light(scene.nubis.sky_ground, _sky_irradiance.get(world.name, np.zeros(3)), sun_light)
 
 
 def sync_ground(scene, sun=None) -> bool:

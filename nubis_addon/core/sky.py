@@ -13,6 +13,8 @@ import math
 
 import numpy as np
 
+from . import metrics
+
 # Earth and atmosphere (Bruneton and Neyret 2008, Bruneton 2017; the same constants Blender's own sky
 # model uses): radii in metres, scale heights, and sea-level coefficients per metre at 680, 550 and
 # 440 nm, the wavelengths standing for red, green and blue.
@@ -237,10 +239,18 @@ def flank_balance(above, flank) -> float:
     strength (the Ambient setting) was fitted with every cloud lit by the light from above, so a sky
     whose flank light is weighed at its fitting sun keeps the fit's balance there and takes the flank's
     own colour and its change with the sun (docs/viewport.md#light-model)."""
-    weights = (0.2126, 0.7152, 0.0722)  # Rec. 709 luminance, as core/metrics.py
-    top = sum(w * c for w, c in zip(weights, above, strict=True))
-    side = sum(w * c for w, c in zip(weights, flank, strict=True))
-    return float(top / side) if side > 1e-12 and top > 0.0 else 1.0
+    top, side = (float(metrics.luminance(np.asarray(c, np.float64))) for c in (above, flank))
+    return top / side if side > 1e-12 and top > 0.0 else 1.0
+
+
+def ground_light(albedo, sky_light, sun_light) -> tuple[float, float, float]:
+    """A Lambertian ground's radiance: its albedo times the sky's light from above (E / pi) and the sun's
+    on it (`sun_light`: colour, strength and the sine of its elevation; None for no sun)."""
+    light = np.array(sky_light, np.float64)
+    if sun_light is not None:
+        colour, energy, sine = sun_light
+        light = light + np.array(colour, np.float64) * energy * sine / math.pi
+    return tuple(float(c) for c in np.array(albedo, np.float64) * light)
 
 
 _hemispheres: dict[int, tuple] = {}

@@ -146,7 +146,7 @@ LONG_MODULES = {
     "core.noise": None,
     "core.paint": 786,
     "core.vdbcloud": 651,
-    "blender.sky": 628,
+    "blender.sky": 627,
     "blender.paint": 601,
 }
 
