@@ -21,20 +21,17 @@ from mathutils import Matrix
 
 from ..core import composition
 from ..render import depthpass, engine
-from . import scene_io, sceneparams
+from . import scene_io, sceneparams, surfaces
 
 VEIL_NAME = "Nubis Cloud Veil"
 VEIL_IMAGE = "Nubis Veil Clouds"
 VEIL_MATERIAL = "Nubis Cloud Veil"
-# Objects the depth pre-pass draws (as meshes); hair curves and point clouds are left out (docs/limits.md).
-SOLID_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT"}
 # A veil pixel this opaque or more over a surface makes the frame need the veil.
 VISIBLE_ALPHA = 1.0 / 255.0
 # The widest band the shutter may add on each side, as a share of the frame's larger side.
 MAX_BLUR_SHARE = 0.5
 
 UNIT_SQUARE = ((-0.5, -0.5, 0.0), (0.5, -0.5, 0.0), (0.5, 0.5, 0.0), (-0.5, 0.5, 0.0))  # a render quad's corners
-OWN_KEY = "nubis_own"  # an ID property on the objects Nubis adds for a render (the veil, the shadow casters)
 # What the last frame's composition did, for the benchmark and the tests: whether it needed the veil, the
 # margin it widened the frame by (pixels) and the veil's distance (metres).
 last_frame: dict[str, float] = {}
@@ -66,49 +63,6 @@ def write_image(name: str, pixels: np.ndarray) -> bpy.types.Image:
     img.pixels.foreach_set(np.ascontiguousarray(pixels, dtype=np.float32).ravel())
     img.update()
     return img
-
-
-def surfaces(scene):
-    """The evaluated scene's solid surfaces that camera rays see, one mesh at a time: world-space
-    vertices (N, 3) and triangles (M, 3). Instances (particles, geometry nodes, collections) included."""
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    shared: dict[str, tuple[np.ndarray, np.ndarray] | None] = {}  # an instanced object's mesh, read once
-    for inst in depsgraph.object_instances:
-        obj = inst.object
-        if obj.type not in SOLID_TYPES or obj.original.get(OWN_KEY) or not obj.visible_camera:
-            continue
-        if obj.original.hide_render:
-            continue
-        if inst.is_instance:
-            if obj.name not in shared:
-                shared[obj.name] = _triangles(obj)
-            found = shared[obj.name]
-        else:
-            found = _triangles(obj)
-        if found is None:
-            continue
-        co, tris = found
-        m = np.array(inst.matrix_world, np.float64)
-        yield co @ m[:3, :3].T + m[:3, 3], tris
-
-
-def _triangles(obj) -> tuple[np.ndarray, np.ndarray] | None:
-    """An evaluated object's surface as vertices (object space, float64) and triangles, or None."""
-    try:
-        mesh = obj.to_mesh()
-    except RuntimeError:  # an object with no surface to give
-        return None
-    try:
-        if mesh is None or not mesh.polygons:
-            return None
-        mesh.calc_loop_triangles()
-        co = np.empty(len(mesh.vertices) * 3, np.float32)
-        mesh.vertices.foreach_get("co", co)
-        tris = np.empty(len(mesh.loop_triangles) * 3, np.int32)
-        mesh.loop_triangles.foreach_get("vertices", tris)
-    finally:
-        obj.to_mesh_clear()
-    return co.reshape(-1, 3).astype(np.float64), tris.reshape(-1, 3)
 
 
 def _forward_matrix(scene, frame: composition.Frame) -> np.ndarray:
@@ -156,7 +110,10 @@ def split_clouds(scene, shot, clouds) -> np.ndarray:
     ww, hh = frame.size
     inv = Matrix(frame.inv_view_proj.tolist())
     start = time.perf_counter()
-    with depthpass.scene_hits(surfaces(scene), _forward_matrix(scene, frame), ww, hh) as (hit_texture, hits):
+    with depthpass.scene_hits(surfaces.camera_meshes(scene), _forward_matrix(scene, frame), ww, hh) as (
+        hit_texture,
+        hits,
+    ):
         drawn = time.perf_counter()
         clouds.update(shot.state)
         near, far = engine.render_split(clouds, inv, shot.eye, hit_texture, ww, hh)
@@ -217,7 +174,7 @@ def render_quad(scene, name: str, material) -> bpy.types.Object:
         for loop, co in zip(uv.data, ((0, 0), (1, 0), (1, 1), (0, 1)), strict=True):
             loop.uv = co
         obj = bpy.data.objects.new(name, mesh)
-    obj[OWN_KEY] = True
+    obj[surfaces.OWN_KEY] = True
     if obj.name not in scene.collection.objects:
         scene.collection.objects.link(obj)
     # Each only when it differs: a visibility set during a render, even to its own value, syncs the

@@ -24,7 +24,7 @@ from ..core.fsutil import check_output_dir
 from ..core.jobs import BakeOptions, BenchmarkOptions, PreviewOptions
 from ..render import depthpass, engine, offscreens, temporal
 from ..render.gpu_context import renderer_name
-from . import cycles_setup, pipeline, runtime, scene_io, sceneparams
+from . import cycles_setup, pipeline, runtime, scene_io, sceneparams, surfaces
 
 Progress = Callable[[float], None]
 
@@ -62,12 +62,10 @@ def scene_depth(scene, view: temporal.View):
     """The scene's depth from the camera of `view` as the 3D viewport has it (a float texture of window
     depths, 1 where nothing is drawn), drawn by F12's depth pre-pass; yields the view with its depth
     mapping and the texture, for `TemporalViewport.redraw(..., depth=...)`."""
-    from . import composition
-
     window, view_matrix = scene_io.camera_matrices(scene, view.width, view.height)
     mapping = camera.depth_mapping(window, view_matrix)
     forward = np.array(window, np.float64) @ np.array(view_matrix, np.float64)
-    with depthpass.scene_hits(composition.surfaces(scene), forward, view.width, view.height) as (_tex, hits):
+    with depthpass.scene_hits(surfaces.camera_meshes(scene), forward, view.width, view.height) as (_tex, hits):
         drawn = hits[..., 3] > 0.5
         depth = np.where(drawn, camera.window_depth(hits[..., :3], window, view_matrix), 1.0).astype(np.float32)
     texture = gpu.types.GPUTexture(

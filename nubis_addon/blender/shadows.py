@@ -17,9 +17,7 @@ from ..core import composition as plan
 from ..render import engine
 from . import sceneparams
 from .composition import (
-    OWN_KEY,
     RECIPE_KEY,
-    SOLID_TYPES,
     UNIT_SQUARE,
     built,
     collapsed,
@@ -33,6 +31,7 @@ from .composition import (
     stowed,
     write_image,
 )
+from .surfaces import OWN_KEY, SOLID_TYPES
 
 SHADOW_IMAGE = "Nubis Cloud Shadow"
 CASTER_NAME = "Nubis Cloud Shadow"
