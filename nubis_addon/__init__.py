@@ -8,7 +8,7 @@ does not import bpy, so core/ tests run without Blender.
 
 def register() -> None:
     from . import blender, cli
-    from .blender import blender_command
+    from .blender.headless import blender_command
 
     blender.register()
     blender_command.register(cli.run)
@@ -16,7 +16,7 @@ def register() -> None:
 
 def unregister() -> None:
     from . import blender
-    from .blender import blender_command
+    from .blender.headless import blender_command
 
     blender_command.unregister()
     blender.unregister()

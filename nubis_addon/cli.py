@@ -295,7 +295,7 @@ def _console_warning(console: Console, fallback):
 
 def _execute(args, in_blender: bool, log: Path) -> str:
     """Check the command line and the destination before minutes of work, then run the command
-    (blender/commands.py): it never leaves a partial file there."""
+    (blender/headless/commands.py): it never leaves a partial file there."""
     check_arguments(args)
     if args.command in ("compare", "preview", "benchmark"):
         out = check_output_dir(args.out)
@@ -313,7 +313,7 @@ def _execute(args, in_blender: bool, log: Path) -> str:
             )
     if args.command == "bake":
         _check_bake_arguments(args, out)
-    from .blender import commands  # bpy loads only now: `--help` and argument errors stay fast
+    from .blender.headless import commands  # bpy loads only now: `--help` and argument errors stay fast
 
     return commands.execute(args, in_blender, log, out)
 

@@ -105,7 +105,7 @@ vec3 nubis_sun_at(vec3 p)
 }
 
 /* The World's radiance towards `dir` (a distant environment): the equirectangular capture of the World
- * (blender/sky.py), in the layout of Blender's Environment Texture (core/sky.py). */
+ * (blender/scene/sky.py), in the layout of Blender's Environment Texture (core/sky.py). */
 vec3 nubis_sky_radiance(vec3 dir)
 {
   vec3 d = normalize(dir);

@@ -1,6 +1,6 @@
 /* The clouds seen from one point in every direction, as an equirectangular image in the layout of
  * Blender's Environment Texture (core/sky.py): premultiplied radiance and alpha, flashes and the
- * cirrus layer included, for a World environment (blender/scene_render.py). */
+ * cirrus layer included, for a World environment (blender/f12/scene_render.py). */
 void main()
 {
   float azimuth = (0.5 - uv.x) * 2.0 * NUBIS_PI;

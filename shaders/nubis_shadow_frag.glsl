@@ -1,5 +1,5 @@
 /* The clouds' transmittance towards the sun over a plane below them: the map a shadow caster in the
- * scene carries (blender/scene_render.py), so Cycles and EEVEE cast the clouds' shadows on the scene.
+ * scene carries (blender/f12/scene_render.py), so Cycles and EEVEE cast the clouds' shadows on the scene.
  * Each texel marches the full-detail density along its sun ray from where it enters the cloud shell
  * to where it leaves (rain's and storms' absorption included) and adds the cirrus layer's optical
  * depth. */

@@ -1,7 +1,7 @@
 """A path-traced truth for the sun through the air, sharing nothing with what it checks: Cycles renders the
 bake with the sun above the atmosphere, and every shadow ray towards the sun carries the transmittance of
 the standard atmosphere along its own path, integrated per ray in the shell's own nodes (not the table the
-shaders and blender/sun_air.py read, not core/sky.py's integral: its own constants, its own quadrature).
+shaders and blender/jobs/sun_air.py read, not core/sky.py's integral: its own constants, its own quadrature).
 
 The atmosphere is Bruneton's (2017): Rayleigh scattering 5.802, 13.558, 33.1 per 1000 km at 680, 550 and
 440 nm with a scale height of 8 km; Mie extinction 2e-5 / 0.9 per metre (scattering over its albedo) with
@@ -160,7 +160,7 @@ def build_truth_material(_air, planet: float, sun_dir, gate_cos: float):
 @contextlib.contextmanager
 def installed():
     """The truth's shell in place of the production one while the block runs."""
-    from nubis_addon.blender import sun_air
+    from nubis_addon.blender.jobs import sun_air
 
     own = sun_air.build_shell_material
     sun_air.build_shell_material = build_truth_material

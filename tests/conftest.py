@@ -41,7 +41,8 @@ def blender(cache_dir):
 @pytest.fixture
 def make_scene(blender):
     """A fresh factory scene turned into a preset's cloudscape; `overrides` edit the preset first."""
-    from nubis_addon.blender import ensure_registered, scenepresets
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.scene import scenepresets
     from nubis_addon.core.presets import load_preset
 
     def make(name: str = "default", **overrides):

@@ -6,7 +6,7 @@ import numpy as np
 def split_coverage_scene(make_scene, **overrides):
     """Coverage 1 on the -X half of the field and 0 on the +X half, tall cumulus, no cirrus, a camera
     12 km up looking straight down at the split."""
-    from nubis_addon.blender import datafield
+    from nubis_addon.blender.scene import datafield
 
     scene = make_scene(
         "default",
@@ -48,7 +48,7 @@ def camera_view(bpy, scene, width: int, height: int):
     """A 3D view's region-data stand-in looking through the scene camera at width x height."""
     from types import SimpleNamespace
 
-    from nubis_addon.blender import sceneparams
+    from nubis_addon.blender.scene import sceneparams
 
     depsgraph = bpy.context.evaluated_depsgraph_get()
     cam = scene.camera.evaluated_get(depsgraph)

@@ -1,36 +1,22 @@
-"""Blender's side of the extension, listed from the top down: each module imports only modules listed
-after it.
+"""Blender's side of the extension, in folders by purpose, listed from the top down: each imports only
+the folders listed after it, and no folder imports one above it (tests/core/test_architecture.py).
 
-- commands: the command line's commands (cli.py parses, these run); daskworker: what a Dask worker process
-  runs for a farm bake (it registers the extension, so it sits above registration);
-- registration: registers what follows (and ensure_registered for the command line and farm workers);
-- panels, skylayers, stormbuttons, operators: the sidebar, its Cloud Layers list's and Superstorms panel's
-  buttons, and what the other buttons do;
-- paint: the Paint Sky tool, its operator and panel; properties: the property groups, generated from
-  core/schema.py; preview: the viewport's draw headless, and the benchmark; scene_render: F12 and Render
-  Animation with the clouds in EEVEE and Cycles, and the panorama; work: the bake or render that runs in
-  steps while the artist keeps working; farm: bakes of frame sequences and bakes spread over Dask workers;
-- events: what a change triggers, and Blender's handlers; comparison: the viewport against Cycles
-  rendering the bake of the same shot (compare); pipeline: renders, bakes and Cycles renders;
-- shadows: the clouds' shadow casters in final renders; composition: F12's depth pre-pass and the veil of
-  the clouds in front of the objects;
-- viewport: the 3D view's draw; snapshot: what a bake reads from the scene when it starts, with GPU inputs
-  of its own;
-- scenepresets: a preset into a scene and a scene back into a preset; scene_io: the scene as one
-  CloudState, what core/ and render/ draw from;
-- datafield: the data field in the scene (its field layers, images, strokes and composite, for every cloud
-  layer); superstorms: the storms' Empties, stencils and lights; sceneparams: the scene's settings as plain
-  values, their animation, and what the session remembers of each scene; reference: Cycles' noise and its
-  reuse;
-- sun_air: Cycles rendering the bake lit by the sun through the air (a shell only shadow rays see);
-- sky: the physical sky World and its captures;
-- vdbclouds: Volume objects drawn as Nubis clouds; mainthread: work a render thread hands to the main
-  thread; presetlist: the presets the sidebar lists; preferences: the add-on's preferences (the cache, the
-  user's presets);
-- runtime: session GPU resources and the user's folders; cycles_setup: a bake as a Cycles volume with the
-  matching material; handlers: application handlers added once; status: messages for the sidebar; ui: what
-  the interface's pieces share (has_cloudscape, the cloudscape poll, the sidebar panel, redraws);
-- blender_command: `blender -b --command nubis`, registered by the package's register().
+- headless/: the command line's commands, `blender -b --command nubis`, a Dask worker's tasks;
+- registration.py: registers the properties, handlers, operators, panels and the draw (and
+  ensure_registered for the command line and farm workers);
+- sidebar/: the property groups, panels, buttons and the Paint Sky tool;
+- f12/: F12 and Render Animation with the clouds in EEVEE and Cycles, the veil in front of the scene's
+  objects, the clouds' shadows;
+- jobs/: renders, bakes, Cycles renders, compare, preview and the benchmark, farms, the job that runs in
+  steps while the artist works;
+- live/: the 3D viewport's draw and what each change triggers;
+- scene/: the scene's clouds as data: settings, field, storms, VDB clouds, the sky World, presets, the
+  scene as one CloudState;
+- host/: the session's GPU resources and folders, handlers, the main thread, the interface's shared
+  pieces, the preferences.
+
+live/ and jobs/ stand side by side: neither imports the other. Each folder's own docstring lists its
+modules.
 """
 
 from __future__ import annotations

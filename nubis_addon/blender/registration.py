@@ -4,22 +4,12 @@ from __future__ import annotations
 
 import bpy
 
-from . import (
-    events,
-    operators,
-    paint,
-    panels,
-    preferences,
-    properties,
-    runtime,
-    scene_render,
-    sky,
-    skylayers,
-    stormbuttons,
-    vdbclouds,
-    viewport,
-    work,
-)
+from .f12 import scene_render
+from .host import preferences, runtime
+from .jobs import work
+from .live import events, viewport
+from .scene import sky, vdbclouds
+from .sidebar import operators, paint, panels, properties, skylayers, stormbuttons
 
 _registered = [False]
 

@@ -6,7 +6,7 @@ Each answer is a reduction over a whole field channel: about 0.7 ms at 1024x1024
 so a two-layer sky spent about 100 ms of CPU a redraw on them (docs/measurements.md#a-layered-sky).
 
 Fields are replaced, never edited in place, by everything that changes them but a live brush stroke
-(blender/paint.py), which says so with `edited`. An array's entry goes when the array does. No bpy here.
+(blender/sidebar/paint.py), which says so with `edited`. An array's entry goes when the array does. No bpy here.
 """
 
 from __future__ import annotations

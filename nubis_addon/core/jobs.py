@@ -35,7 +35,7 @@ class BakeOptions:
 
 @dataclass(frozen=True)
 class RenderOptions:
-    """`render`: the viewport's clouds from the scene camera to an image (blender/pipeline.py render_files)."""
+    """`render`: the viewport's clouds from the scene camera to an image (blender/jobs/pipeline.py render_files)."""
 
     width: int
     height: int
@@ -45,7 +45,7 @@ class RenderOptions:
 
 @dataclass(frozen=True)
 class CompareOptions:
-    """`compare`: the viewport against Cycles rendering the bake of the same view (blender/pipeline.py)."""
+    """`compare`: the viewport against Cycles rendering the bake of the same view (blender/jobs/pipeline.py)."""
 
     width: int
     height: int
@@ -66,7 +66,7 @@ class CompareOptions:
 
 @dataclass(frozen=True)
 class PreviewOptions:
-    """`preview`: the viewport's own draw path replayed from the scene camera (blender/preview.py)."""
+    """`preview`: the viewport's own draw path replayed from the scene camera (blender/jobs/preview.py)."""
 
     width: int
     height: int

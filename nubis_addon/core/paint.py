@@ -34,8 +34,8 @@ class Choice:
 
 
 # The channels a brush paints, in the Paint Sky tool's menu order. Blender keeps the tool's choice by its
-# position in this list, so a new channel goes at the end. The one list: the tool's menu (blender/paint.py),
-# a paint layer's channel menu (blender/properties.py) and every check derive from it.
+# position in this list, so a new channel goes at the end. The one list: the tool's menu (blender/sidebar/paint.py),
+# a paint layer's channel menu (blender/sidebar/properties.py) and every check derive from it.
 BRUSH_CHANNELS = (
     Choice("coverage", "Coverage", "Where the clouds are: adds to the cover the Coverage slider gives"),
     Choice("type", "Cloud Type", "Stratus (0) to cumulonimbus (1)"),
@@ -63,7 +63,7 @@ class BrushMode:
 
 
 # The one list of brush modes: the tool's Mode menu, the keys a drag reads and the tooltips derive from it
-# (blender/paint.py). A drag holding several keys takes the first mode here whose key is held.
+# (blender/sidebar/paint.py). A drag holding several keys takes the first mode here whose key is held.
 BRUSH_MODES = (
     BrushMode("add", "Add", "Raise the channel under the brush", "", 1.0, "paint"),
     BrushMode("subtract", "Subtract", "Lower the channel under the brush", "ctrl", -1.0, "paint"),
@@ -74,7 +74,8 @@ BRUSH_MODE: dict[str, BrushMode] = {m.name: m for m in BRUSH_MODES}
 
 @dataclass(frozen=True)
 class DabColumn:
-    """One number of a stored dab, and how Blender stores it (blender/properties.py builds its dab from these)."""
+    """One number of a stored dab, and how Blender stores it (blender/sidebar/properties.py builds its dab
+    from these)."""
 
     name: str
     kind: str  # "float", "int" or "bool"
@@ -163,7 +164,7 @@ def union(a: tuple[int, int, int, int] | None, b: tuple[int, int, int, int] | No
 
 # ---- checking a brush, a stroke and a dab ------------------------------------------------------------
 #
-# Each rule stated once, here; the brush and a script's stroke (blender/paint.py) and a preset's dabs
+# Each rule stated once, here; the brush and a script's stroke (blender/sidebar/paint.py) and a preset's dabs
 # (parse_dabs, which core/presets.py calls) go through the same functions (docs/painting.md#what-is-refused).
 
 # Values at or beyond this size are refused as infinite: Blender stores an infinite float property as float32's
@@ -600,7 +601,7 @@ class Raster:
         return rect
 
 
-# layer key -> (grid, dabs, raster). A layer key is a number the caller gives each layer (blender/scene_io.py
+# layer key -> (grid, dabs, raster). A layer key is a number the caller gives each layer (blender/scene/scene_io.py
 # mints them), never a Blender pointer: core holds no Blender identity. A cached raster is used only for the
 # dabs it was made from, so a key that comes to name another layer costs a raster from scratch, no more.
 _RASTERS: dict[int, tuple[Grid, np.ndarray, Raster]] = {}

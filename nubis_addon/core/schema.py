@@ -2,8 +2,8 @@
 
 Each `Setting` gives its key, type, default, range, unit, label, description, the sidebar panel that
 draws it (or why none does), what a change triggers and whether it reaches the GPU. Generated from
-this table: the PropertyGroups (blender/properties.py), the one preset validator (core/presets.py),
-the sidebar panels (blender/panels.py), the quality levels' columns (core/quality.py) and the shaders'
+this table: the PropertyGroups (blender/sidebar/properties.py), the one preset validator (core/presets.py),
+the sidebar panels (blender/sidebar/panels.py), the quality levels' columns (core/quality.py) and the shaders'
 uniform block, whose members are named after the keys (render/uniforms.py).
 
 Groups and their keys:
@@ -24,7 +24,7 @@ from typing import Any
 
 TAU = 2.0 * math.pi
 
-# Sidebar panels, in the order an artist works (blender/panels.py draws them in this order).
+# Sidebar panels, in the order an artist works (blender/sidebar/panels.py draws them in this order).
 PANELS: tuple[tuple[str, str], ...] = (
     ("field", "Data Field"),
     ("altitude", "Altitude"),
@@ -40,7 +40,7 @@ PANELS: tuple[tuple[str, str], ...] = (
 )
 PANEL_IDS = tuple(p for p, _label in PANELS)
 
-# What a change triggers (blender/events.py): nothing beyond Blender's own redraw, a redraw of the
+# What a change triggers (blender/live/events.py): nothing beyond Blender's own redraw, a redraw of the
 # clouds, or a re-composite of the data field and then a redraw.
 TRIGGERS = ("none", "redraw", "field")
 

@@ -275,7 +275,7 @@ def uniform(colour, width: int = 8, height: int = 4) -> np.ndarray:
 
 
 def with_ground(env: np.ndarray, ground, band: float) -> np.ndarray:
-    """The environment below its horizon as the Nubis sky's World shows it (blender/sky.py): the sky
+    """The environment below its horizon as the Nubis sky's World shows it (blender/scene/sky.py): the sky
     mirrored at the horizon, fading into the ground's radiance `ground` with a smoothstep over the
     sines of elevation 0 to -`band`. Each row takes the smoothstep's mean over its own solid angle (a
     render's texel is the mean over its area, and a row is about as tall as the band); rows are

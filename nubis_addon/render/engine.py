@@ -242,7 +242,7 @@ class CloudGPU:
     def fork(self) -> CloudGPU:
         """GPU inputs of their own over the same noise textures: a bake or a render that runs while the
         3D viewport keeps drawing uploads its snapshot here once, and the viewport's uploads to the shared
-        inputs cannot reach it (blender/snapshot.py). Costs the field, sky and light-volume textures only."""
+        inputs cannot reach it (blender/jobs/snapshot.py). Costs the field, sky and light-volume textures only."""
         return CloudGPU(self.noise)
 
     @property

@@ -7,7 +7,7 @@ the clouds' own motion. While nothing changes the history converges: 16 redraws 
 sample, then jittered passes average in until the sample count the artist set, after which redraws only
 upscale the history. Any change (camera, setting, field, frame) restarts the count.
 
-The same code runs in the 3D viewport's draw handler (blender/viewport.py) and headless (the `preview`
+The same code runs in the 3D viewport's draw handler (blender/live/viewport.py) and headless (the `preview`
 and `benchmark` commands), so what the tests and benchmarks measure is what the artist gets.
 """
 

@@ -51,7 +51,7 @@ CLOUDS_MIN_MAE = 0.01
 # The same for the viewport with the clouds shown and hidden (the view crop).
 VIEW_MIN_MAE = 0.01
 # Console lines that are errors. Blender's own start-up noise on llvmpipe (EGL, ALSA, ...) is not matched.
-# The extension's reports to the artist are echoed there as "Nubis error: ..." (blender/mainthread.py).
+# The extension's reports to the artist are echoed there as "Nubis error: ..." (blender/host/mainthread.py).
 ERROR_LINE = re.compile(r"Traceback \(most recent call last\)|^\w*Error\b|Error in bpy\.app\.handlers|Nubis error")
 
 
@@ -90,12 +90,13 @@ def console_errors() -> list[str]:
 
 
 def ext_module(name: str):
+    """A module of the installed extension's blender/, by its path there ("host.status")."""
     return sys.modules.get(f"{EXT}.nubis_addon.blender.{name}")
 
 
 def nubis_error() -> str:
     """The extension's last error (the sidebar's error line), cleared after reading."""
-    status = ext_module("status")
+    status = ext_module("host.status")
     if status is None:
         return ""
     msg = status.last_error()
@@ -372,7 +373,7 @@ def render_ui(step: Step, name: str, how: str, animation: bool = False):
     after = scene.world.name if scene.world else None
     step.note(
         f"{name}: World {after!r}; worlds {[w.name for w in bpy.data.worlds]}; "
-        f"swapped {getattr(ext_module('scene_render'), '_swapped', None)}"
+        f"swapped {getattr(ext_module('f12.scene_render'), '_swapped', None)}"
     )
     step.check(after == world, f"{name}: the scene's World is the artist's after the render ({after!r}, was {world!r})")
     yield from close_render_window()
@@ -513,7 +514,7 @@ def _check_samples(step: Step) -> None:
 
 
 def _converge(timeout: float = 180.0):
-    views = list(ext_module("viewport")._views.values())
+    views = list(ext_module("live.viewport")._views.values())
     t = time.monotonic()
     while time.monotonic() - t < timeout and not all(tv.converged for tv in views):
         yield 1.0
@@ -526,14 +527,14 @@ def s_grain(step: Step):
     screenshots an artist sees."""
     import numpy as np
 
-    views = list(ext_module("viewport")._views.values())
+    views = list(ext_module("live.viewport")._views.values())
     step.check(bool(views), f"{len(views)} viewport(s) drawing the clouds")
     took = yield from _converge()
     first = shot(step, "02_grain_a", "view")
     for tv in views:
         tv.first_pass = 1000
         tv.restart("grain")
-    ext_module("ui").redraw_views()
+    ext_module("host.ui").redraw_views()
     took_b = yield from _converge()
     second = shot(step, "02_grain_b", "view")
     for tv in views:
@@ -557,7 +558,7 @@ def s_sidebar(step: Step):
     ui.active_panel_category = "Nubis"
     yield from settle()
     shot(step, "03_sidebar", "sidebar")
-    panels = ext_module("panels")
+    panels = ext_module("sidebar.panels")
     labels = [cls.bl_label for cls in panels.CLASSES if hasattr(cls, "bl_parent_id")]
     closed = [c.bl_label for c in panels.CLASSES if "DEFAULT_CLOSED" in getattr(c, "bl_options", ())]
     heads = {}
@@ -661,8 +662,8 @@ def s_edit(step: Step):
     """One edit an artist makes, through the setting's RNA property as the sidebar sets it: Shape >
     Extinction from 0.10 to 0.03, and the viewport must change."""
     scene = bpy.context.scene
-    datafield = ext_module("datafield")
-    sceneparams = ext_module("sceneparams")
+    datafield = ext_module("scene.datafield")
+    sceneparams = ext_module("scene.sceneparams")
     fields = datafield.read_fields(scene.nubis, flush=False)
     params = sceneparams.params_from_scene(scene.nubis)
     preset = sys.modules[f"{EXT}.nubis_addon.core.presets"].load_preset("default").params
@@ -678,9 +679,8 @@ def s_edit(step: Step):
     after = shot(step, "04_after_edit", "view")
     d = mae(before, after)
     step.check(d >= 0.005, f"the viewport changed after Extinction {old:.3g} -> 0.03 (MAE {d:.4f})")
-    step.check(
-        not ext_module("status").last_error(), f"the sidebar shows no error ({ext_module('status').last_error()})"
-    )
+    error = ext_module("host.status").last_error()
+    step.check(not error, f"the sidebar shows no error ({error})")
     scene.nubis.density_sigma = old
     yield 4.0
     # Shape > Coverage is the fraction of the sky covered; an edit reaches the viewport's clouds.
@@ -688,9 +688,8 @@ def s_edit(step: Step):
     scene.nubis.density_cover = 0.45
     yield 8.0
     yield from view_has_clouds(step, "04_coverage_045", min_mae=0.002)
-    step.check(
-        not ext_module("status").last_error(), f"the sidebar shows no error ({ext_module('status').last_error()})"
-    )
+    error = ext_module("host.status").last_error()
+    step.check(not error, f"the sidebar shows no error ({error})")
     scene.nubis.density_cover = coverage
     yield 4.0
 
@@ -894,7 +893,7 @@ def s_peak_animation(step: Step):
     scene = bpy.context.scene
     if not step.check(bool(_PEAK), "the peak of the previous step is there"):
         return
-    comp = ext_module("composition")
+    comp = ext_module("f12.composition")
     small_render(scene, "CYCLES")
     keep = (scene.frame_start, scene.frame_end, scene.frame_step, scene.frame_current, scene.render.filepath)
     scene.frame_start, scene.frame_end, scene.frame_step = 1, 3, 1
@@ -1052,7 +1051,7 @@ def s_bake_disturbed(step: Step):
     """Bake VDB runs while the artist works: the timeline jumps to its end (Shift-Right, a real key) and the
     Erosion slider moves while it bakes; the file equals a bake of the starting state made afterwards, its
     metadata names the starting frame, and Ctrl-Z takes the imported Volume away and leaves the file."""
-    pipeline, snapshot = ext_module("pipeline"), ext_module("snapshot")
+    pipeline, snapshot = ext_module("jobs.pipeline"), ext_module("jobs.snapshot")
     vdbio = _core_module("vdbio")
     bake_options = _core_module("jobs").BakeOptions
     scene = bpy.context.scene
@@ -1239,7 +1238,7 @@ def _vdb_level(step: Step, obj, without: str):
     yield 3.0
     yield from _converge()
     coarse = shot(step, "07_vdb_level_1", "view")
-    note = ext_module("vdbclouds").level_note(obj)
+    note = ext_module("scene.vdbclouds").level_note(obj)
     step.check(note.startswith("Level 1: 2x coarser"), f"over the 1 MB budget the panel says: {note!r}")
     d = mae(coarse, without)
     step.check(d >= VIEW_MIN_MAE, f"the coarser level is drawn (MAE {d:.4f} against no cloud)")
@@ -1254,7 +1253,7 @@ def _paint_layer_dabs() -> int:
 
 def _cover_at(points) -> list[float]:
     """The coverage the clouds are drawn with (field A red times the multiplier) at world points."""
-    datafield = ext_module("datafield")
+    datafield = ext_module("scene.datafield")
     scene = bpy.context.scene
     s = scene.nubis
     a = datafield.read_fields(s)[0]
@@ -1314,7 +1313,7 @@ def s_paint(step: Step):
     painted = _paint_layer_dabs()
     step.check(painted > dabs_before, f"the stroke is in a paint layer: {painted - dabs_before} dabs")
     # Where the stroke went on the cloud layer: the view ray of the drag's middle at the layer's base.
-    paint_mod = ext_module("paint")
+    paint_mod = ext_module("sidebar.paint")
     with override():
         ctx = bpy.context
         rx = xs[8] - left
@@ -1355,7 +1354,7 @@ def s_layers(step: Step):
     area = view3d_area()
     # Before +, the panel's Remove button is grey and says why (its poll message, Blender's "Disabled: ..."
     # tooltip), in the sentence a click would have been refused with.
-    remover = next(c for c in ext_module("skylayers").CLASSES if c.bl_idname == "nubis.cloud_layer_remove")
+    remover = next(c for c in ext_module("sidebar.skylayers").CLASSES if c.bl_idname == "nubis.cloud_layer_remove")
     with override(area, "UI"):
         grey = not bpy.ops.nubis.cloud_layer_remove.poll()
     why = remover.unavailable(scene)
@@ -1436,7 +1435,7 @@ def s_reopen(step: Step):
             names = json.load(f)["names"]
         kept = [c.name for c in scene.nubis.cloud_layers]
         step.check(kept == names, f"the cloud layers came back with the file: {kept}")
-        drawn = ext_module("scene_io").state_from_scene(scene).drawn_layers()
+        drawn = ext_module("scene.scene_io").state_from_scene(scene).drawn_layers()
         step.check(len(drawn) == 2, f"{len(drawn)} cloud layers drawn after reopening")
     default = type(scene.nubis).bl_rna.properties["viewport_samples"].default
     samples = scene.nubis.viewport_samples

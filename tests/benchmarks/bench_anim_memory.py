@@ -55,7 +55,7 @@ def main() -> int:
     r.filepath = os.path.join(out, "f_####")
     scene.frame_start, scene.frame_end = 1, args.frames
     samples: dict[int, tuple[float, dict[str, int]]] = {}
-    from nubis_addon.blender import composition
+    from nubis_addon.blender.f12 import composition
 
     veiled = []
 

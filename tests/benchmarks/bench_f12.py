@@ -1,8 +1,8 @@
 """What the clouds add to an F12 frame: the default cloudscape with a ground plane and a cube, rendered
 with `bpy.ops.render.render()` in EEVEE and Cycles with the clouds off and on, and the clouds' own
-parts (the camera's view, the panorama, the shadow map: blender/scene_render.py) timed inside; the
+parts (the camera's view, the panorama, the shadow map: blender/f12/scene_render.py) timed inside; the
 camera's view is split into its depth composition's parts (the depth pre-pass, the split march, the
-veil and its images: blender/composition.py).
+veil and its images: blender/f12/composition.py).
 
 Run from the repository root:
     .venv-5.3/bin/python tests/benchmarks/bench_f12.py [WIDTH HEIGHT [CYCLES_SAMPLES]]
@@ -26,7 +26,9 @@ def main() -> None:
     import bpy
 
     import nubis_addon
-    from nubis_addon.blender import ensure_registered, scene_render, scenepresets
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.f12 import scene_render
+    from nubis_addon.blender.scene import scenepresets
     from nubis_addon.core.presets import load_preset
     from nubis_addon.render.gpu_context import ensure_gpu_context, renderer_name
 

@@ -38,8 +38,10 @@ def main() -> None:
     import numpy as np
     from redraws import alternating_redraws
 
-    from nubis_addon.blender import preview, runtime, scene_io
-    from nubis_addon.blender.commands import load_scene
+    from nubis_addon.blender.headless.commands import load_scene
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.jobs import preview
+    from nubis_addon.blender.scene import scene_io
     from nubis_addon.core import camera
     from nubis_addon.render import engine
     from nubis_addon.render.gpu_context import ensure_gpu_context, renderer_name

@@ -1,4 +1,4 @@
-"""Stroke-to-redraw latency of live painting (blender/paint.py), for 512x512 and 2048x2048 fields.
+"""Stroke-to-redraw latency of live painting (blender/sidebar/paint.py), for 512x512 and 2048x2048 fields.
 
 For each brush sample along a drag over the default cloudscape: the dabs are rasterized, the stroke's
 rectangle of the field re-composited and written into the GPU texture in place, and the 3D view (480x270,
@@ -36,8 +36,11 @@ def main() -> None:
     from gpu_helpers import camera_view
 
     import nubis_addon
-    from nubis_addon.blender import datafield, ensure_registered, runtime, sceneparams, scenepresets, viewport
-    from nubis_addon.blender import paint as blender_paint
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.live import viewport
+    from nubis_addon.blender.scene import datafield, sceneparams, scenepresets
+    from nubis_addon.blender.sidebar import paint as blender_paint
     from nubis_addon.core.presets import load_preset
     from nubis_addon.render.gpu_context import ensure_gpu_context, renderer_name
     from nubis_addon.render.offscreens import read_pixels

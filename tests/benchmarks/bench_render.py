@@ -31,7 +31,9 @@ def main() -> None:
     import bpy
 
     import nubis_addon
-    from nubis_addon.blender import ensure_registered, pipeline, scene_io, scenepresets
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.scene import scene_io, scenepresets
     from nubis_addon.core import noise
     from nubis_addon.core.presets import load_preset
     from nubis_addon.render import engine
@@ -55,7 +57,7 @@ def main() -> None:
     scene = bpy.context.scene
     scenepresets.apply_preset(scene, load_preset("default"))
     state = scene_io.state_from_scene(scene)
-    from nubis_addon.blender import runtime
+    from nubis_addon.blender.host import runtime
 
     clouds = runtime.cloud_gpu(0)
     eye = scene_io.camera_eye(scene)

@@ -31,7 +31,10 @@ def main() -> None:
     from redraws import alternating_redraws
 
     import nubis_addon
-    from nubis_addon.blender import ensure_registered, preview, runtime, scene_io, scenepresets, sky
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.jobs import preview
+    from nubis_addon.blender.scene import scene_io, scenepresets, sky
     from nubis_addon.core import camera
     from nubis_addon.core.presets import load_preset
     from nubis_addon.render.gpu_context import ensure_gpu_context, renderer_name

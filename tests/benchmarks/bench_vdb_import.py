@@ -94,7 +94,9 @@ def child(path: str) -> None:
     """One measurement: a fresh scene with the default sky, the Volume added, then marked and drawn."""
     import bpy
 
-    from nubis_addon.blender import ensure_registered, pipeline, scenepresets
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.scene import scenepresets
     from nubis_addon.core.presets import load_preset
 
     bpy.ops.wm.read_factory_settings(use_empty=True)

@@ -114,7 +114,8 @@ BLEND_SCRIPT = """
 import sys
 sys.path.insert(0, sys.argv[-5])
 import bpy
-from nubis_addon.blender import ensure_registered, datafield, scene_io, scenepresets, vdbclouds
+from nubis_addon.blender import ensure_registered
+from nubis_addon.blender.scene import datafield, scene_io, scenepresets, vdbclouds
 from nubis_addon.core.presets import load_preset
 vdb, blend, space, move = sys.argv[-4:]
 bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -181,7 +182,8 @@ import sys
 sys.path.insert(0, os.getcwd())
 from types import SimpleNamespace
 import numpy as np
-from nubis_addon.blender import commands, comparison, pipeline, snapshot
+from nubis_addon.blender.headless import commands
+from nubis_addon.blender.jobs import comparison, pipeline, snapshot
 from nubis_addon.core import imageio
 from nubis_addon.core.jobs import BakeOptions
 from nubis_addon.render.gpu_context import ensure_gpu_context

@@ -43,7 +43,10 @@ def main() -> None:
     from peak import peak_scene
 
     import nubis_addon
-    from nubis_addon.blender import preview, runtime, scene_io, viewport
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.jobs import preview
+    from nubis_addon.blender.live import viewport
+    from nubis_addon.blender.scene import scene_io
     from nubis_addon.render import offscreens, temporal
     from nubis_addon.render.gpu_context import ensure_gpu_context, renderer_name
 

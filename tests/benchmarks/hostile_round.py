@@ -328,7 +328,8 @@ def helper_make_blends(repo: Path, d: Path, vdbs: Path) -> None:
     import bpy
 
     import nubis_addon
-    from nubis_addon.blender import ensure_registered, scenepresets
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.scene import scenepresets
     from nubis_addon.core.presets import load_preset
 
     nubis_addon.register()
@@ -469,7 +470,8 @@ def helper_paint(repo: Path, name: str) -> None:
     import numpy as np
 
     import nubis_addon
-    from nubis_addon.blender import datafield, ensure_registered, sceneparams, scenepresets
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.scene import datafield, sceneparams, scenepresets
     from nubis_addon.core import paint
     from nubis_addon.core.presets import load_preset
     from nubis_addon.render.gpu_context import ensure_gpu_context

@@ -44,7 +44,7 @@ def _f12(scene, out: Path) -> dict:
     """F12 to a PNG; what the frame composed, and whether the World is the artist's again."""
     import bpy
 
-    from nubis_addon.blender import composition
+    from nubis_addon.blender.f12 import composition
 
     world = scene.world.name
     scene.render.filepath = str(out)
@@ -73,7 +73,7 @@ def probe_five_million_faces(d: Path) -> dict:
     grid.rotation_euler = (math.radians(90.0), 0.0, 0.0)
     faces = len(grid.data.polygons)
     got = _f12(scene, d / "five_million.png")
-    from nubis_addon.blender import composition
+    from nubis_addon.blender.f12 import composition
 
     return {**got, "faces": faces, "depth_s": round(composition.last_frame.get("depth_s", -1), 2), "rss_mb": _rss_mb()}
 
@@ -105,7 +105,7 @@ def probe_ten_thousand_instances(d: Path) -> dict:
     depsgraph = bpy.context.evaluated_depsgraph_get()
     instances = sum(1 for i in depsgraph.object_instances if i.is_instance)
     got = _f12(scene, d / "instances.png")
-    from nubis_addon.blender import composition
+    from nubis_addon.blender.f12 import composition
 
     return {**got, "instances": instances, "depth_s": round(composition.last_frame.get("depth_s", -1), 2)}
 
@@ -234,7 +234,7 @@ def probe_vdb_replaced_between_frames(d: Path) -> dict:
     scene.frame_start, scene.frame_end = 1, 3
     scene.render.filepath = str(d / "vdb" / "f_####")
     bpy.ops.render.render(animation=True)
-    from nubis_addon.blender import status
+    from nubis_addon.blender.host import status
 
     return {
         "files": sorted(os.listdir(d / "vdb")),

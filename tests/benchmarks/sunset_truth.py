@@ -34,7 +34,8 @@ CELLS = ("default@4", "default@1", "default@-1", "altocumulus_over_stratocumulus
 def _scene(cell: str, light: str = ""):
     import bpy
 
-    from nubis_addon.blender import ensure_registered, scenepresets
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.scene import scenepresets
     from nubis_addon.core.presets import load_preset
 
     name, *sun = cell.split("@")
@@ -55,7 +56,7 @@ def _scene(cell: str, light: str = ""):
 def main() -> None:
     import atmosphere_truth
 
-    from nubis_addon.blender import comparison
+    from nubis_addon.blender.jobs import comparison
     from nubis_addon.core import imageio, metrics
     from nubis_addon.core.jobs import CompareOptions
     from nubis_addon.render.gpu_context import ensure_gpu_context

@@ -51,7 +51,7 @@ def test_compare_writes_every_output(tmp_path):
     # are pinned at a resolution that can carry them in test_parity.py.
     assert 0.0 <= m["alpha_rmse"] < 0.3 and m["silhouette_iou"] > 0.6
     # The reference is converged in bounces by default (docs/convergence.md), not the scene's 8.
-    from nubis_addon.blender.comparison import REFERENCE_BOUNCES
+    from nubis_addon.blender.jobs.comparison import REFERENCE_BOUNCES
 
     assert m["volume_bounces"] == REFERENCE_BOUNCES > 8
     assert f"samples, {REFERENCE_BOUNCES} volume bounces" in r.stdout
@@ -175,7 +175,7 @@ def test_unwritable_output_is_refused_before_any_work(tmp_path):
 
 def test_blender_command_is_registered_and_runs(blender, tmp_path):
     """`blender -b --command nubis ...` calls blender_command.execute with the argument list."""
-    from nubis_addon.blender import blender_command
+    from nubis_addon.blender.headless import blender_command
 
     assert blender_command.is_registered()
     out = tmp_path / "cmd.exr"

@@ -110,7 +110,8 @@ def scheduler(tmp_path_factory):
 def shot(blender, tmp_path_factory) -> Path:
     """The default preset saved as a .blend, as docs/bake.md's recipe bakes one (`--blend shot.blend`):
     opening it is quicker than building the preset's sky, for the command and for every worker."""
-    from nubis_addon.blender import ensure_registered, scenepresets
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.scene import scenepresets
     from nubis_addon.core.presets import load_preset
 
     blender.ops.wm.read_factory_settings(use_empty=True)

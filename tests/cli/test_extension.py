@@ -51,16 +51,16 @@ def test_built_zip_installs_enables_and_unregisters_cleanly(tmp_path):
         assert mod in {{a.module for a in bpy.context.preferences.addons}}, "not enabled"
         assert hasattr(bpy.types.Scene, "nubis"), "settings not registered"
         pkg = sys.modules[mod + ".nubis_addon.blender"]
-        assert sys.modules[mod + ".nubis_addon.blender.blender_command"].is_registered()
-        assert sys.modules[mod + ".nubis_addon.blender.viewport"].is_registered()
+        assert sys.modules[mod + ".nubis_addon.blender.headless.blender_command"].is_registered()
+        assert sys.modules[mod + ".nubis_addon.blender.live.viewport"].is_registered()
         bpy.ops.nubis.new_cloudscape(preset="default")
         assert bpy.context.scene.nubis.field_a is not None
-        cache = sys.modules[mod + ".nubis_addon.blender.runtime"].cache_dir()
+        cache = sys.modules[mod + ".nubis_addon.blender.host.runtime"].cache_dir()
         assert str(cache).startswith(bpy.utils.extension_path_user(mod)), cache
         assert {str(ROOT)!r} not in str(cache)
         prefs = bpy.context.preferences.addons[mod].preferences
         assert prefs is not None and type(prefs).bl_idname == mod, "no add-on preferences"
-        user_presets = sys.modules[mod + ".nubis_addon.blender.runtime"].user_preset_dir()
+        user_presets = sys.modules[mod + ".nubis_addon.blender.host.runtime"].user_preset_dir()
         assert str(user_presets).startswith(bpy.utils.extension_path_user(mod)), user_presets
         assert bpy.ops.nubis.clear_cache() == {{"FINISHED"}}
         assert bpy.ops.nubis.preset_add(name="Installed") == {{"FINISHED"}}
@@ -68,8 +68,8 @@ def test_built_zip_installs_enables_and_unregisters_cleanly(tmp_path):
         bpy.ops.preferences.addon_disable(module=mod)
         assert not hasattr(bpy.types.Scene, "nubis"), "settings left behind"
         assert not [c for c in dir(bpy.types) if c.startswith("NUBIS_")], "classes left behind"
-        assert not sys.modules[mod + ".nubis_addon.blender.blender_command"].is_registered()
-        assert not sys.modules[mod + ".nubis_addon.blender.viewport"].is_registered()
+        assert not sys.modules[mod + ".nubis_addon.blender.headless.blender_command"].is_registered()
+        assert not sys.modules[mod + ".nubis_addon.blender.live.viewport"].is_registered()
         print("EXTENSION-OK")
     """)
     env = dict(os.environ, HOME=str(tmp_path / "home"))

@@ -364,7 +364,7 @@ def test_composite_reports_progress_and_estimates_by_cost():
 
 @pytest.mark.parametrize("content", [b"", b"this is a text file, not an image\n"])
 def test_an_unreadable_image_layer_is_not_reported_missing(make_scene, tmp_path, content):
-    from nubis_addon.blender import scenepresets
+    from nubis_addon.blender.scene import scenepresets
     from nubis_addon.core.errors import NubisError
     from nubis_addon.core.presets import load_preset
 
@@ -396,7 +396,7 @@ def test_an_image_layer_bomb_is_refused_from_its_header(make_scene, tmp_path):
     from the header, and the layer refused, before any pixel is decoded."""
     import resource
 
-    from nubis_addon.blender import scenepresets
+    from nubis_addon.blender.scene import scenepresets
     from nubis_addon.core.errors import NubisError
     from nubis_addon.core.presets import load_preset
 
@@ -414,7 +414,8 @@ def test_an_image_layer_bomb_is_refused_from_its_header(make_scene, tmp_path):
 
 def test_a_saved_scene_beyond_reach_is_refused(make_scene):
     """A .blend may hold what no preset can: a camera at 1e30 m, five storms."""
-    from nubis_addon.blender import pipeline, superstorms
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.scene import superstorms
     from nubis_addon.core.errors import NubisError
 
     scene = make_scene("default")

@@ -86,7 +86,7 @@ def _cycle(graph: dict[str, set[str]]) -> list[str] | None:
 def test_no_import_cycle_function_level_imports_included():
     graph = import_graph()
     assert len(graph) > 40  # the walk found the package
-    assert "nubis_addon.blender.scene_io" in graph["nubis_addon.blender.viewport"]  # and its edges
+    assert "nubis_addon.blender.scene.scene_io" in graph["nubis_addon.blender.live.viewport"]  # and its edges
     cycle = _cycle(graph)
     assert cycle is None, " -> ".join(cycle)
 
@@ -94,6 +94,46 @@ def test_no_import_cycle_function_level_imports_included():
 def test_the_cycle_finder_finds_a_cycle():
     assert _cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
     assert _cycle({"a": {"b"}, "b": set()}) is None
+
+
+# blender/'s folders from the bottom up; folders on one floor do not import one another
+# (nubis_addon/blender/__init__.py).
+BLENDER_FLOORS = (("host",), ("scene",), ("live", "jobs"), ("f12",), ("sidebar",), ("registration",), ("headless",))
+
+
+def _blender_room(module: str) -> str | None:
+    parts = module.split(".")
+    if parts[:2] != ["nubis_addon", "blender"] or len(parts) < 3:
+        return None
+    return parts[2]
+
+
+def test_blender_folders_import_one_way():
+    """Every Blender-side module lives in a folder of purpose (registration alone beside them), and a
+    folder imports only folders on the floors below it: none back up, none beside it."""
+    floor = {room: i for i, rooms in enumerate(BLENDER_FLOORS) for room in rooms}
+    graph = import_graph()
+    rooms = {_blender_room(m) for m in graph} - {None}
+    assert rooms == set(floor), f"rooms without a floor or floors without a room: {rooms ^ set(floor)}"
+    bad = []
+    for name, targets in graph.items():
+        src = _blender_room(name)
+        if src is None:
+            continue
+        for target in targets:
+            dst = _blender_room(target)
+            if dst is None or dst == src:
+                continue
+            if floor[dst] >= floor[src]:
+                bad.append(f"{name} -> {target}")
+    assert not bad, "imports that run back up or sideways: " + ", ".join(sorted(bad))
+
+
+def test_the_floor_check_sees_an_import_back_up():
+    assert _blender_room("nubis_addon.blender.scene.sky") == "scene"
+    assert _blender_room("nubis_addon.blender") is None
+    floor = {room: i for i, rooms in enumerate(BLENDER_FLOORS) for room in rooms}
+    assert floor["scene"] < floor["live"] == floor["jobs"] < floor["f12"]
 
 
 def _external_imports(path: Path) -> set[str]:
@@ -146,8 +186,8 @@ LONG_MODULES = {
     "core.noise": None,
     "core.paint": 786,
     "core.vdbcloud": 651,
-    "blender.sky": 627,
-    "blender.paint": 601,
+    "blender.scene.sky": 627,
+    "blender.sidebar.paint": 601,
 }
 
 

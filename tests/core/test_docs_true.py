@@ -11,9 +11,9 @@
   `nubis_addon/` in front), at the top always whole (`nubis_addon/cli.py`, `nubis_addon/__init__.py`), so
   the repository's own `__init__.py` is not taken for the package's. A path counts only whole: not
   preceded by a word character, `/` or `.`, not followed by a word character. The docstring of
-  nubis_addon/blender/__init__.py lists every module of blender/ top down (the name before the colon of
-  each `- name: ...` item, or of each part after a `;`), and, as it says, each imports only modules
-  listed after it (imports inside functions included, as tests/core/test_architecture.py reads them).
+  nubis_addon/blender/__init__.py lists every folder of blender/ (and registration.py) top down, as the
+  floors of tests/core/test_architecture.py stand, and each folder's docstring names its modules and what
+  it may import.
 - **The presets.** Every preset that ships (what core/presets.py lists: the .toml files directly in
   presets/, so presets/quality/ is none) is in the README's gallery (the table after "**Presets.**"), its
   picture, where it has one, presets/gallery/<name>.png; the gallery shows nothing else; and the README's
@@ -28,7 +28,7 @@ import ast
 import re
 from pathlib import Path
 
-from test_architecture import import_graph
+from test_architecture import BLENDER_FLOORS
 
 from nubis_addon import cli
 from nubis_addon.core import schema
@@ -186,39 +186,38 @@ def test_every_module_docs_architecture_names_exists():
 
 
 def blender_listing() -> list[str]:
-    """The modules the docstring of blender/__init__.py lists, in its order (read without importing bpy)."""
+    """The folders (and registration.py) the docstring of blender/__init__.py lists, in its order (read
+    without importing bpy): its items start '- name/:' or '- name.py:'."""
     path = PACKAGE / "blender" / "__init__.py"
     doc = ast.get_docstring(ast.parse(path.read_text(encoding="utf-8"))) or ""
-    names: list[str] = []
-    for item in re.split(r"\n- ", doc)[1:]:
-        for part in " ".join(item.split()).split("; "):
-            head = part.split(":")[0].split(", ")
-            if ":" in part and all(re.fullmatch(r"[a-z_]+", h) for h in head):
-                names += [h for h in head if h not in names]
-    return names
+    return [m.group(1) for m in re.finditer(r"^- ([a-z_0-9]+)(?:/|\.py):", doc, re.M)]
 
 
-def test_the_blender_docstring_lists_every_module_top_down():
+def test_the_blender_docstring_lists_every_folder_top_down():
     listed = blender_listing()
-    modules = sorted(p.stem for p in (PACKAGE / "blender").glob("*.py") if p.stem != "__init__")
-    missing = [m for m in modules if m not in listed]
-    assert not missing, (
-        f"the docstring of nubis_addon/blender/__init__.py does not list {', '.join(missing)}: add a "
-        "'- name: what it does;' item for each, below every module that imports it, above those it imports"
+    rooms = sorted(
+        p.parent.name if p.name == "__init__.py" else p.stem for p in (PACKAGE / "blender").glob("*/__init__.py")
+    ) + sorted(p.stem for p in (PACKAGE / "blender").glob("*.py") if p.stem != "__init__")
+    assert sorted(listed) == sorted(rooms), (
+        f"the docstring of nubis_addon/blender/__init__.py lists {listed}, the folder holds {rooms}: give each "
+        "folder a '- name/: what it holds;' item, top down"
     )
-    gone = [m for m in listed if m not in modules]
-    assert not gone, f"the docstring of nubis_addon/blender/__init__.py lists {', '.join(gone)}: no such module"
-    graph = import_graph()
-    upward = []
-    for i, name in enumerate(listed):
-        for imported in sorted(graph[f"nubis_addon.blender.{name}"]):
-            short = imported.removeprefix("nubis_addon.blender.")
-            if short in listed and listed.index(short) < i:
-                upward.append(f"{name} imports {short}, listed above it")
-    assert not upward, (
-        "the docstring of nubis_addon/blender/__init__.py lists its modules top down, each importing only "
-        "modules listed after it, but " + "; ".join(upward) + ": move the items so that it holds"
-    )
+    floors = [room for rooms_on in reversed(BLENDER_FLOORS) for room in sorted(rooms_on)]
+    rank = {room: i for i, rooms_on in enumerate(reversed(BLENDER_FLOORS)) for room in rooms_on}
+    order = [rank[room] for room in listed]
+    assert order == sorted(order), f"list them top down as the floors stand: {floors}"
+
+
+def test_each_blender_folder_names_its_modules():
+    """Each folder's docstring names every module in it, and what it may import."""
+    missing = []
+    for init in sorted((PACKAGE / "blender").glob("*/__init__.py")):
+        doc = ast.get_docstring(ast.parse(init.read_text(encoding="utf-8"))) or ""
+        assert "May import:" in doc, f"{init.relative_to(ROOT)}: its docstring does not say what it may import"
+        for module in sorted(init.parent.glob("*.py")):
+            if module.stem != "__init__" and not re.search(rf"(?<![\w.]){module.stem}(?!\w)", doc):
+                missing.append(f"{init.parent.name}/{module.name}")
+    assert not missing, f"the folders' docstrings do not name {', '.join(missing)}: say in a few words what each holds"
 
 
 # ---- the presets -----------------------------------------------------------------------------------------
@@ -316,7 +315,7 @@ KEYS = {"+", "-", "Esc"}
 def _classes_of_blender() -> list[ast.ClassDef]:
     return [
         node
-        for path in sorted((PACKAGE / "blender").glob("*.py"))
+        for path in sorted((PACKAGE / "blender").rglob("*.py"))
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
         if isinstance(node, ast.ClassDef)
     ]
@@ -348,7 +347,7 @@ def code_labels() -> set[str]:
     labels = {label for _id, label in schema.PANELS} | {s.label for s in schema.ALL}
     labels |= {item[1] for s in schema.ALL for item in s.items}
     labels |= {lab for node in _classes_of_blender() if (lab := _label(node))}
-    for path in (PACKAGE / "blender").glob("*.py"):
+    for path in (PACKAGE / "blender").rglob("*.py"):
         labels |= set(re.findall(r'\b(?:text|name)="([^"]+)"', path.read_text(encoding="utf-8")))
     return labels
 

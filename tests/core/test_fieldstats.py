@@ -45,7 +45,7 @@ def test_each_array_has_its_own_values_and_they_go_with_it():
 
 
 def test_a_layers_extent_and_the_sky_shell_follow_an_announced_edit():
-    """The edit a live brush makes (blender/paint.py): the extent read after `edited` sees it."""
+    """The edit a live brush makes (blender/sidebar/paint.py): the extent read after `edited` sees it."""
     params = {"layer_bottom": 1000.0, "layer_top": 2000.0}
     b = field()
     layer = cloudlayers.LayerField("", params, np.zeros_like(b), b)

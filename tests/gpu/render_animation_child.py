@@ -26,7 +26,8 @@ sys.path.insert(0, ROOT)
 
 import bpy  # noqa: E402
 
-from nubis_addon.blender import composition, ensure_registered, scene_render, shadows  # noqa: E402
+from nubis_addon.blender import ensure_registered  # noqa: E402
+from nubis_addon.blender.f12 import composition, scene_render, shadows  # noqa: E402
 from nubis_addon.core import imageio  # noqa: E402
 
 ENGINE, OUT, RENDERS = "", "", []  # from the command line (main)

@@ -11,7 +11,7 @@ def _over(front: np.ndarray, back: np.ndarray) -> np.ndarray:
 
 def test_cirrus_covers_the_clouds_seen_from_above(make_scene):
     """From 20 km up the cirrus layer (9 km) is in front of the clouds below it, not behind them."""
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
 
     def render(**overrides):
         scene = make_scene("default", **{"cirrus_opacity": 8.0, "cirrus_coverage": 3.0, **overrides})
@@ -35,7 +35,7 @@ def test_cirrus_dims_the_clouds_but_keeps_their_powder_edges(make_scene):
     """GPU Pro 7's powder term darkens the sun-facing edges from the cloud's own depth towards the sun.
     A cirrus of optical depth about 1 between them and the sun must dim the clouds as a whole, not
     fill in that darkening (it did when its depth was added to the cloud's)."""
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
 
     luminance = np.array([0.2126, 0.7152, 0.0722])
 
@@ -80,7 +80,8 @@ def test_the_anvil_takes_over_without_a_step(make_scene):
     are sharp by design and left out."""
     from gpu_probe import probe_density
 
-    from nubis_addon.blender import runtime, scene_io
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.scene import scene_io
 
     scene = make_scene("superstorm")
     state = scene_io.state_from_scene(scene)
@@ -114,7 +115,8 @@ def _vortex_angle(scene, frames, where):
     world points `where` (N, 2), the storm's blend, and the simulated time at each frame."""
     from gpu_probe import probe_vortex
 
-    from nubis_addon.blender import runtime, scene_io, superstorms
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.scene import scene_io, superstorms
 
     storm = scene.nubis.storms[0]
     cx, cy = superstorms.storm_centre(storm)
@@ -132,7 +134,7 @@ def _vortex_angle(scene, frames, where):
 
 
 def _ring_points(scene, rings):
-    from nubis_addon.blender import superstorms
+    from nubis_addon.blender.scene import superstorms
 
     storm = scene.nubis.storms[0]
     cx, cy = superstorms.storm_centre(storm)
@@ -187,7 +189,7 @@ def test_reference_marches_reach_the_end_of_the_ray(make_scene):
     """llvmpipe stops a shader's loops after 65535 iterations in total; a reference march of 400 steps
     through thin cloud (every step lit) was cut short there, its clouds thinner than the real-time
     march's. It now takes longer steps within the limit, and sees the same clouds."""
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
 
     scene = make_scene("default", density_sigma=0.002, march_steps_min=400, march_steps_max=400)
     realtime = pipeline.render_viewport(scene, 32, 18, light_mode=0)
@@ -249,7 +251,7 @@ def test_a_superstorm_reference_march_reaches_the_end_of_the_ray(make_scene):
     storm was cut short after about 88 lit steps (seen here: alpha off by up to 0.8 against the
     real-time march, which has the same transmittance). It now takes longer steps and sees the same
     storm."""
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
 
     scene = make_scene(
         "superstorm",

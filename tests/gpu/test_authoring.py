@@ -6,7 +6,7 @@ import numpy as np
 
 
 def _coverage(scene):
-    from nubis_addon.blender import datafield
+    from nubis_addon.blender.scene import datafield
 
     return datafield.read_field_image(scene.nubis.field_a, "a", scene.nubis.field_resolution)[..., 0]
 
@@ -37,7 +37,8 @@ def test_new_cloudscape_operator_and_layer_stack(blender):
 
 
 def test_painting_an_image_layer_updates_the_field(make_scene, blender):
-    from nubis_addon.blender import events, sceneparams
+    from nubis_addon.blender.live import events
+    from nubis_addon.blender.scene import sceneparams
 
     scene = make_scene("default")
     s = scene.nubis
@@ -60,7 +61,7 @@ def test_painting_an_image_layer_updates_the_field(make_scene, blender):
 
 
 def test_weather_rules_operator(make_scene, blender):
-    from nubis_addon.blender import datafield
+    from nubis_addon.blender.scene import datafield
 
     scene = make_scene("default")
     s = scene.nubis

@@ -9,7 +9,7 @@ from nubis_addon.core.jobs import BakeOptions
 
 @pytest.fixture
 def baked(make_scene, tmp_path):
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
 
     scene = split_coverage_scene(make_scene)
     result = pipeline.bake(scene, tmp_path / "clouds.vdb", BakeOptions(voxel_size=400.0))
@@ -38,7 +38,7 @@ def test_vdb_has_density_grid_transform_and_voxels(baked):
 
 
 def test_failed_bake_keeps_the_previous_vdb(baked, tmp_path):
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
     from nubis_addon.core.errors import NubisError
 
     scene, result = baked
@@ -50,7 +50,7 @@ def test_failed_bake_keeps_the_previous_vdb(baked, tmp_path):
 
 
 def test_cycles_renders_the_bake(baked):
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
 
     scene, result = baked
     rgba = pipeline.render_cycles(scene, 48, 48, samples=4, vdb_path=str(result.path))
@@ -64,7 +64,7 @@ def test_cycles_renders_the_bake(baked):
 
 
 def test_cycles_mie_option_builds_a_mie_material(make_scene):
-    from nubis_addon.blender import cycles_setup
+    from nubis_addon.blender.scene import cycles_setup
 
     scene = make_scene("default")
     scene.nubis.lighting_cycles_mie = True
@@ -89,7 +89,7 @@ def test_flash_renders_offline_through_the_glow_grid(make_scene, tmp_path):
     raises every channel alike, by noise only, and fails."""
     import math
 
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
 
     scene = make_scene("superstorm")
     # A black ground: the storm's base is then lit by the flash alone, as under the Sky Texture's black
@@ -114,7 +114,8 @@ def test_rain_absorbs_in_the_viewport_the_bake_and_cycles(make_scene, tmp_path):
     """Rain darkening is absorption (docs/sources.md#rain-and-storm-absorption): the viewport's raining
     clouds get darker and no thinner, the bake carries it as an `absorption` grid (density x (rain - 1))
     and Cycles adds it."""
-    from nubis_addon.blender import cycles_setup, datafield, pipeline
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.scene import cycles_setup, datafield
     from nubis_addon.core import metrics, vdbio
 
     scene = split_coverage_scene(make_scene)

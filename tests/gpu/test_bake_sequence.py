@@ -44,7 +44,8 @@ def test_cli_sequence_with_velocity_matches_the_motion_vectors(make_scene, tmp_p
     velocity, moved back one frame and projected through the camera, gives the motion vectors the
     viewport's motion pass draws for the same clouds (superstorm: wind and the vortex's turn)."""
     from nubis_addon import cli
-    from nubis_addon.blender import pipeline, scene_io
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.scene import scene_io
     from nubis_addon.core import vdbio
 
     out = tmp_path / "clouds_####.vdb"
@@ -96,7 +97,9 @@ def test_cli_sequence_with_velocity_matches_the_motion_vectors(make_scene, tmp_p
 
 @pytest.fixture(scope="module")
 def distributed_bakes(tmp_path_factory, blender):
-    from nubis_addon.blender import ensure_registered, farm, scenepresets
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.jobs import farm
+    from nubis_addon.blender.scene import scenepresets
     from nubis_addon.core import distributed
     from nubis_addon.core.presets import load_preset
 

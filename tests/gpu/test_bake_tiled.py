@@ -9,7 +9,7 @@ from nubis_addon.core.jobs import BakeOptions
 
 
 def _small_plan(scene, voxel=300.0, tile=8):
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender.scene import scene_io
     from nubis_addon.core.bakeplan import plan_bake
 
     state = scene_io.state_from_scene(scene)
@@ -20,7 +20,7 @@ def _small_plan(scene, voxel=300.0, tile=8):
 
 
 def _dense_and_tiled(scene, state, plan, packed=False):
-    from nubis_addon.blender import runtime
+    from nubis_addon.blender.host import runtime
     from nubis_addon.render import bake as gpu_bake
 
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
@@ -98,7 +98,7 @@ def test_spans_bound_the_cloud_and_the_cirrus_slab(make_scene):
 
 
 def test_bake_writes_half_floats_and_pipeline_metadata(make_scene, tmp_path):
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
     from nubis_addon.core import bundled, vdbio
 
     scene = split_coverage_scene(make_scene)
@@ -121,7 +121,7 @@ def test_bake_writes_half_floats_and_pipeline_metadata(make_scene, tmp_path):
 def test_a_killed_bake_leaves_the_old_file_untouched(make_scene, tmp_path):
     """An error in the middle of the GPU work (here raised by the progress callback, as an interrupt
     would) leaves the earlier file byte for byte and no temporary file beside it."""
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
 
     scene = split_coverage_scene(make_scene)
     first = pipeline.bake(scene, tmp_path / "clouds.vdb", BakeOptions(voxel_size=400.0))
@@ -146,7 +146,7 @@ def test_a_probe_counts_what_the_bake_writes_and_a_bake_past_its_measured_share_
     """probe_share counts the cloudy voxels of a camera-only bake without building its trees: the same
     count as the written grid. A bake planned by that share (not by the bound) stops once its trees
     outgrow the memory limit, and leaves the earlier file as it was."""
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
     from nubis_addon.core import bakeplan
 
     scene = split_coverage_scene(make_scene)

@@ -10,7 +10,7 @@ from nubis_addon.core.jobs import BakeOptions
 
 
 def test_a_cancelled_bake_leaves_the_earlier_file_byte_identical(make_scene, tmp_path):
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
 
     scene = make_scene("default")
     path = tmp_path / "clouds.vdb"
@@ -28,7 +28,7 @@ def test_a_cancelled_bake_leaves_the_earlier_file_byte_identical(make_scene, tmp
 
 
 def test_the_bake_panel_estimates_before_baking(make_scene):
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
 
     scene = make_scene("default")
     coarse = pipeline.bake_estimate(scene, 800.0)
@@ -38,7 +38,7 @@ def test_the_bake_panel_estimates_before_baking(make_scene):
 
 
 def test_bake_sequence_writes_numbered_files_and_loads_them_as_a_sequence(blender, make_scene, tmp_path):
-    from nubis_addon.blender import cycles_setup
+    from nubis_addon.blender.scene import cycles_setup
 
     scene = make_scene("default")
     scene.frame_start, scene.frame_end = 3, 5
@@ -56,7 +56,8 @@ def test_render_clouds_runs_in_steps_and_a_cancel_leaves_the_image_untouched(mak
     import bpy
     import numpy as np
 
-    from nubis_addon.blender import operators, pipeline, work
+    from nubis_addon.blender.jobs import pipeline, work
+    from nubis_addon.blender.sidebar import operators
 
     scene = make_scene("default")
     scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 300, 140, 100

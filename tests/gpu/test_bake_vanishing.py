@@ -1,5 +1,5 @@
 """A modal bake whose output folder goes while it runs, and a step that fails in a way nobody foresaw: the
-operator says one sentence, the work is cleared (blender/work.py), and the next bake starts and succeeds.
+operator says one sentence, the work is cleared (blender/jobs/work.py), and the next bake starts and succeeds.
 
 In the interface a timer calls the operator's modal() once per group of tiles; background mode runs the
 operators to their end at once, so here the operator's own modal() is called by hand with timer events, on
@@ -20,7 +20,7 @@ TIMER = SimpleNamespace(type="TIMER")
 def _driven(cls, **props):
     """The operator class `cls` as its timer drives it: its jobs, its finish and its modal(), its reports
     kept in `reports` (a bpy operator cannot be made without Blender running it)."""
-    from nubis_addon.blender import work
+    from nubis_addon.blender.jobs import work
 
     class Driven(work.ModalSteps):
         doing = cls.doing
@@ -44,7 +44,7 @@ def _driven(cls, **props):
 
 def _start(op, context):
     """What the operator's execute does in the interface, before Blender adds its modal handler."""
-    from nubis_addon.blender import work
+    from nubis_addon.blender.jobs import work
 
     op._work = work.Work(op.doing, list(op.jobs(context)))
     op.start(context)
@@ -68,7 +68,8 @@ def _gone(folder) -> str:
 
 
 def test_bake_vdb_whose_folder_is_removed_says_so_and_the_next_bake_runs(blender, make_scene, tmp_path):
-    from nubis_addon.blender import operators, work
+    from nubis_addon.blender.jobs import work
+    from nubis_addon.blender.sidebar import operators
 
     make_scene("default")
     context = blender.context
@@ -88,7 +89,8 @@ def test_bake_vdb_whose_folder_is_removed_says_so_and_the_next_bake_runs(blender
 
 
 def test_bake_sequence_whose_folder_is_replaced_by_a_file_says_so_and_the_next_bake_runs(blender, make_scene, tmp_path):
-    from nubis_addon.blender import operators, work
+    from nubis_addon.blender.jobs import work
+    from nubis_addon.blender.sidebar import operators
 
     scene = make_scene("default")
     scene.frame_start, scene.frame_end = 1, 3
@@ -122,7 +124,8 @@ def test_bake_sequence_whose_folder_is_replaced_by_a_file_says_so_and_the_next_b
 def test_an_unexpected_failure_of_a_step_is_said_and_clears_the_work(blender, make_scene, tmp_path, name):
     """A step raising anything at all (here a job that raises OSError half way) used to escape modal(): the
     work stayed registered and every later Bake or Render Clouds was refused."""
-    from nubis_addon.blender import operators, work
+    from nubis_addon.blender.jobs import work
+    from nubis_addon.blender.sidebar import operators
 
     make_scene("default")
     context = blender.context
@@ -152,7 +155,7 @@ def test_an_unexpected_failure_of_a_step_is_said_and_clears_the_work(blender, ma
 def test_work_whose_operator_is_gone_is_cleared_when_the_next_starts(blender, make_scene, tmp_path):
     """Blender frees an operator whose modal() raised; its work, left registered, can step no more and took
     no Esc: the next bake clears it (nothing of it is written) instead of being refused."""
-    from nubis_addon.blender import work
+    from nubis_addon.blender.jobs import work
 
     scene = make_scene("default")
     kept = []

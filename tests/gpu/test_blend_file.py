@@ -4,7 +4,7 @@ import numpy as np
 
 
 def test_settings_and_fields_survive_save_and_reload(make_scene, blender, tmp_path):
-    from nubis_addon.blender import datafield
+    from nubis_addon.blender.scene import datafield
 
     scene = make_scene("default")
     scene.nubis.density_sigma = 0.0731

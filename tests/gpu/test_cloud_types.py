@@ -7,7 +7,8 @@ from nubis_addon.core.jobs import BakeOptions
 
 
 def _band(make_scene, tmp_path, cloud_type: float) -> float:
-    from nubis_addon.blender import datafield, pipeline
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.scene import datafield
     from nubis_addon.core import vdbio
 
     scene = make_scene("default", cirrus_coverage=0.0)

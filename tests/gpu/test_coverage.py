@@ -14,7 +14,8 @@ def _top_view_cover(scene, size: int = 192) -> float:
     `render` reports), over a square well inside the field and the draw radius, cirrus left out."""
     from mathutils import Matrix
 
-    from nubis_addon.blender import runtime, scene_io
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.scene import scene_io
     from nubis_addon.core import camera
     from nubis_addon.render import engine
 
@@ -47,7 +48,7 @@ def test_coverage_is_the_fraction_of_the_sky_covered(make_scene):
 def test_a_preset_with_the_old_multiplier_keeps_its_look(make_scene, tmp_path):
     """`[density] coverage = 0.6` without `cover` (mixed_sky before the change) becomes the fraction of
     the sky 0.6 covered on its own field, so the shaders get 0.6 back."""
-    from nubis_addon.blender import scene_io, scenepresets
+    from nubis_addon.blender.scene import scene_io, scenepresets
     from nubis_addon.core.presets import find_preset, load_preset
 
     text = find_preset("mixed_sky").read_text(encoding="utf-8")

@@ -19,7 +19,8 @@ _sampler_unorm8: dict[int, bool] = {}
 
 def _inputs(scene):
     """(CloudGPU updated to the scene, its CloudState, the NoiseSet behind the GPU textures)."""
-    from nubis_addon.blender import runtime, scene_io
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.scene import scene_io
     from nubis_addon.core import noise
 
     seed = scene.nubis.noise_seed
@@ -229,7 +230,7 @@ def test_a_cheap_sample_erodes_by_the_detail_mean(make_scene):
 def test_zero_coverage_gives_no_density(make_scene):
     from gpu_probe import probe_density
 
-    from nubis_addon.blender import datafield
+    from nubis_addon.blender.scene import datafield
 
     scene = make_scene("default")
     clouds, state, _noise = _inputs(scene)
@@ -252,7 +253,7 @@ def test_density_never_falls_as_coverage_rises(make_scene):
     """GDC22: raising coverage inflates the clouds; nothing may thin out anywhere."""
     from gpu_probe import probe_density
 
-    from nubis_addon.blender import datafield
+    from nubis_addon.blender.scene import datafield
 
     scene = make_scene("default")
     clouds, state, _noise = _inputs(scene)
@@ -280,7 +281,7 @@ def test_time_moves_detail_but_keeps_structure(make_scene):
     wind reshapes the clouds in place: the detail changes, the cloudscape's layout does not."""
     from gpu_probe import probe_density
 
-    from nubis_addon.blender import datafield
+    from nubis_addon.blender.scene import datafield
 
     scene = make_scene("default")  # 10 m/s: in 60 s the shape noise moves 600 m, the detail 1200 m
     clouds, state, noise_set = _inputs(scene)

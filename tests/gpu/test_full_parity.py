@@ -20,7 +20,9 @@ NOISE_TARGET = 6.0  # percent
 
 @pytest.fixture(scope="module", params=sorted(MEASURED))
 def full(request, tmp_path_factory, blender):
-    from nubis_addon.blender import comparison, ensure_registered, scenepresets
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.jobs import comparison
+    from nubis_addon.blender.scene import scenepresets
     from nubis_addon.core.presets import load_preset
 
     blender.ops.wm.read_factory_settings(use_empty=True)
@@ -49,8 +51,8 @@ def test_full_parity_against_a_converged_reference(full):
 def test_the_viewport_converges_to_its_own_goal_too(full):
     """With a noise target the comparison's viewport adds passes until its own grain (two halves of
     passes whose rays cross their pixels at places of their own) is under its goal: a fifth of the target
-    in the luminance and 0.002 in the alpha (blender/pipeline.py VIEW_NOISE)."""
-    from nubis_addon.blender import comparison
+    in the luminance and 0.002 in the alpha (blender/jobs/pipeline.py VIEW_NOISE)."""
+    from nubis_addon.blender.jobs import comparison
 
     _name, m = full
     goal = comparison.VIEW_NOISE

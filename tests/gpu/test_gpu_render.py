@@ -12,7 +12,7 @@ def test_gpu_context_is_real(blender):
 
 
 def test_clouds_only_where_coverage_is_positive(make_scene):
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
 
     scene = split_coverage_scene(make_scene)
     rgba = pipeline.render_viewport(scene, 96, 96)
@@ -24,7 +24,8 @@ def test_clouds_only_where_coverage_is_positive(make_scene):
 
 
 def test_zero_coverage_renders_nothing(make_scene):
-    from nubis_addon.blender import datafield, pipeline
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.scene import datafield
 
     scene = make_scene("default")
     res = scene.nubis.field_resolution
@@ -35,7 +36,7 @@ def test_zero_coverage_renders_nothing(make_scene):
 
 
 def test_default_preset_has_sky_and_cloud(make_scene):
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
 
     rgba = pipeline.render_viewport(make_scene("default"), 128, 72)
     alpha = rgba[..., 3]
@@ -48,7 +49,10 @@ def test_viewport_draw_uses_the_render_code(make_scene):
     bound framebuffer) reproduces the offscreen render once every pixel has its sample."""
     import gpu
 
-    from nubis_addon.blender import pipeline, scene_io, status, viewport
+    from nubis_addon.blender.host import status
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.live import viewport
+    from nubis_addon.blender.scene import scene_io
     from nubis_addon.render.offscreens import read_pixels
 
     assert viewport.is_registered()
@@ -76,7 +80,7 @@ def test_motion_vectors_follow_the_wind(make_scene):
     """GDC22's scroll motion vectors: a cloud seen from above moves downwind by speed x timestep."""
     from gpu_helpers import split_coverage_scene
 
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
 
     speed, time_scale = 100.0, 4.0  # the features move at speed x time scale in animation seconds
     scene = split_coverage_scene(
@@ -103,7 +107,9 @@ def test_solid_shading_draws_the_worlds_sky_behind_the_clouds(make_scene):
     over it, and nothing drawn in front of an object (the far plane)."""
     import gpu
 
-    from nubis_addon.blender import pipeline, scene_io, viewport
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.live import viewport
+    from nubis_addon.blender.scene import scene_io
     from nubis_addon.render.offscreens import read_pixels
 
     scene = make_scene("default")

@@ -16,7 +16,7 @@ def _alpha_halves(image: np.ndarray) -> tuple[float, float]:
 
 
 def _render(scene, width=96, height=54):
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
 
     return pipeline.render_viewport(scene, width, height, passes=2)
 
@@ -42,7 +42,8 @@ def test_the_panorama_and_the_preview_show_every_layer(make_scene, tmp_path):
     """`panorama` (the environment from the camera between the layers) and `preview` (the viewport's draw
     path replayed) draw both layers: each differs from its output with one layer alone in the half of the
     view the other layer fills."""
-    from nubis_addon.blender import preview, scene_render
+    from nubis_addon.blender.f12 import scene_render
+    from nubis_addon.blender.jobs import preview
     from nubis_addon.core import imageio
     from nubis_addon.core.jobs import PreviewOptions
 
@@ -102,7 +103,9 @@ def _view_samples(scene, width=64, height=36) -> tuple[float, float]:
     of the camera's view."""
     import mathutils
 
-    from nubis_addon.blender import preview, runtime, scene_io
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.jobs import preview
+    from nubis_addon.blender.scene import scene_io
     from nubis_addon.core import camera
     from nubis_addon.render import engine
 
@@ -170,7 +173,8 @@ def test_no_cloud_stands_above_where_the_view_march_ends_a_layer(make_scene):
     from gpu_probe import probe_density, probe_reach
     from oracle import top_ramp_end
 
-    from nubis_addon.blender import runtime, scene_io
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.scene import scene_io
     from nubis_addon.core import cloudlayers
 
     scene = make_scene(PRESET)
@@ -240,7 +244,8 @@ def four_layers(make_scene, tmp_path):
 
 
 def test_four_layers_draw_and_bake_into_one_vdb(four_layers, tmp_path):
-    from nubis_addon.blender import pipeline, scene_io
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.scene import scene_io
     from nubis_addon.core import vdbio
     from nubis_addon.core.jobs import BakeOptions
 
@@ -295,7 +300,7 @@ def _run_operator(name: str) -> None:
 def test_a_layer_added_in_the_sidebar_is_saved_and_read_back(make_scene, tmp_path):
     import bpy
 
-    from nubis_addon.blender import scene_io, scenepresets
+    from nubis_addon.blender.scene import scene_io, scenepresets
     from nubis_addon.core import presets, userpresets
 
     scene = make_scene("stratocumulus")
@@ -328,7 +333,7 @@ def test_a_stroke_paints_the_cloud_layer_chosen_in_the_list(make_scene):
     its field, and the first layer's field is left as it was."""
     import bpy
 
-    from nubis_addon.blender import datafield, scene_io
+    from nubis_addon.blender.scene import datafield, scene_io
 
     scene = make_scene(PRESET)
     s = scene.nubis
@@ -350,7 +355,7 @@ def test_a_stroke_paints_the_cloud_layer_chosen_in_the_list(make_scene):
 
 
 def test_a_drag_is_live_on_the_first_layer_and_composited_at_its_end_on_a_further_one(make_scene):
-    from nubis_addon.blender import paint as blender_paint
+    from nubis_addon.blender.sidebar import paint as blender_paint
 
     scene = make_scene(PRESET)
     brush = (2000.0, 1.0, "SMOOTH", "ADD")

@@ -10,7 +10,8 @@ import pytest
 
 @pytest.fixture
 def clouds(make_scene):
-    from nubis_addon.blender import runtime, scene_io
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.scene import scene_io
 
     scene = make_scene("default")
     state = scene_io.state_from_scene(scene)

@@ -8,7 +8,8 @@ import numpy as np
 
 
 def test_volumes_are_refilled_only_when_what_they_hold_changes(make_scene):
-    from nubis_addon.blender import runtime, scene_io
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.scene import scene_io
     from nubis_addon.core import lightvolume
 
     scene = make_scene("default")
@@ -43,7 +44,8 @@ def test_volumes_see_the_whole_deck_that_the_long_tap_misses(make_scene):
     """A stratus deck: the real-time light with the volumes against the reference march (the same light
     model with its optical depths marched: 48 fine samples towards the sun, 24 up and 24 down), and GPU
     Pro 7's long tap against the same, in one run."""
-    from nubis_addon.blender import pipeline, runtime
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.jobs import pipeline
     from nubis_addon.core import metrics
 
     scene = make_scene("stratus_overcast")
@@ -124,7 +126,9 @@ def test_the_sky_volume_knows_a_towers_flank_from_a_decks_middle(make_scene):
     directions) where no cloud is near, far more inside a deck, and less on a tower's flank than in its
     core; and the sky light it lets in brightens the towers under the World alone while a deck's look
     barely moves."""
-    from nubis_addon.blender import pipeline, runtime, scene_io
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.scene import scene_io
     from nubis_addon.core import metrics
 
     sides, lum = {}, {}

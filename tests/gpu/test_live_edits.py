@@ -10,13 +10,14 @@ import numpy as np
 
 
 def _field_a(scene):
-    from nubis_addon.blender import datafield
+    from nubis_addon.blender.scene import datafield
 
     return datafield.read_fields(scene.nubis)[0].copy()
 
 
 def test_a_layer_edit_recomposites_the_field(make_scene):
-    from nubis_addon.blender import events, sceneparams
+    from nubis_addon.blender.live import events
+    from nubis_addon.blender.scene import sceneparams
 
     scene = make_scene("default")
     before = _field_a(scene)
@@ -34,7 +35,8 @@ def test_a_layer_edit_recomposites_the_field(make_scene):
 
 
 def test_moving_a_storm_empty_moves_its_column(blender, make_scene):
-    from nubis_addon.blender import events, sceneparams
+    from nubis_addon.blender.live import events
+    from nubis_addon.blender.scene import sceneparams
 
     scene = make_scene("default")
     blender.ops.nubis.storm_add()
@@ -68,7 +70,8 @@ def test_a_keyed_layer_value_changes_the_field_on_frame_change(blender, make_sce
 
 
 def test_new_cloudscape_keeps_the_artists_camera_and_world_when_asked(blender):
-    from nubis_addon.blender import ensure_registered, scenepresets, sky
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.scene import scenepresets, sky
 
     blender.ops.wm.read_factory_settings(use_empty=True)
     ensure_registered()
@@ -120,7 +123,7 @@ def _fake_view(scene, shading="SOLID", screen=None, area=None):
 
 
 def test_the_draw_handler_stays_out_of_wireframe_and_switched_off_views(make_scene, monkeypatch):
-    from nubis_addon.blender import viewport
+    from nubis_addon.blender.live import viewport
 
     scene = make_scene("default")
     calls = []
@@ -145,7 +148,8 @@ def test_the_draw_handler_stays_out_of_wireframe_and_switched_off_views(make_sce
 
 
 def test_rendered_mode_leaves_a_baked_volume_to_the_engine(blender, make_scene, monkeypatch):
-    from nubis_addon.blender import cycles_setup, viewport
+    from nubis_addon.blender.live import viewport
+    from nubis_addon.blender.scene import cycles_setup
 
     scene = make_scene("default")
     monkeypatch.setattr(viewport, "draw_region", lambda *args: None)
@@ -157,7 +161,7 @@ def test_rendered_mode_leaves_a_baked_volume_to_the_engine(blender, make_scene, 
 
 
 def test_slider_drags_repack_nothing_and_saving_packs_the_field(blender, make_scene, tmp_path):
-    from nubis_addon.blender import datafield, sceneparams
+    from nubis_addon.blender.scene import datafield, sceneparams
 
     scene = make_scene("default")
     s = scene.nubis

@@ -51,7 +51,7 @@ class LabelLayout:
 @pytest.fixture
 def own_cache(tmp_path, monkeypatch, blender):
     """An empty cache folder of the test's own, and no noise on the GPU or on the worker."""
-    from nubis_addon.blender import runtime
+    from nubis_addon.blender.host import runtime
 
     folder = tmp_path / "cache"
     monkeypatch.setenv("NUBIS_CACHE_DIR", str(folder))
@@ -66,7 +66,7 @@ def _draw(scene, viewport, w=32, h=18):
     temporal view or None, the seconds it took and the drawn pixels."""
     import gpu
 
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender.scene import scene_io
     from nubis_addon.render.offscreens import read_pixels
 
     inv = scene_io.camera_inv_view_proj(scene, w, h)
@@ -86,7 +86,9 @@ def _draw(scene, viewport, w=32, h=18):
 
 
 def test_noise_is_made_off_the_draw_and_a_seed_drag_keeps_the_cache_bounded(make_scene, own_cache):
-    from nubis_addon.blender import panels, runtime, viewport
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.live import viewport
+    from nubis_addon.blender.sidebar import panels
     from nubis_addon.core import noise
 
     scene = make_scene("default")
@@ -128,7 +130,7 @@ def test_noise_is_made_off_the_draw_and_a_seed_drag_keeps_the_cache_bounded(make
 
 
 def test_clear_cache_empties_it_and_the_preferences_show_it(blender, own_cache, cache_dir):
-    from nubis_addon.blender import preferences, runtime
+    from nubis_addon.blender.host import preferences, runtime
     from nubis_addon.core import noise
 
     noise.load_or_generate(cache_dir, 0)  # the session's cache holds seed 0 now
@@ -157,7 +159,7 @@ def _f32(x):
 def _edit_everything(scene, blender):
     """Move every setting of the cloudscape off the preset's value: scene settings, a layer, a storm and
     its Empty, the sun, the World, the camera and the render settings."""
-    from nubis_addon.blender import sceneparams, sky
+    from nubis_addon.blender.scene import sceneparams, sky
     from nubis_addon.core import schema
 
     s = scene.nubis
@@ -184,7 +186,7 @@ def _edit_everything(scene, blender):
     sun = sky.find_sun(scene)
     sun.rotation_euler = (math.radians(30.0), math.radians(10.0), math.radians(200.0))
     sun.data.color, sun.data.energy, sun.data.angle = (0.9, 0.8, 0.7), 7.5, math.radians(1.5)
-    from nubis_addon.blender import sky
+    from nubis_addon.blender.scene import sky
 
     assert sky.is_nubis_sky(scene.world)  # the preset's physically based sky: its atmosphere round-trips
     scene.world.color = (0.1, 0.2, 0.3)
@@ -203,13 +205,13 @@ def _edit_everything(scene, blender):
 
 def _snapshot(scene):
     """Every setting as Blender holds it: the schema's, the layers', the storms', and the objects'."""
-    from nubis_addon.blender import datafield, sceneparams, sky, superstorms
+    from nubis_addon.blender.scene import datafield, sceneparams, sky, superstorms
     from nubis_addon.core import schema
 
     s = scene.nubis
     sun = sky.find_sun(scene)
     direction = sceneparams.evaluated_matrix(sun).to_3x3().col[2]
-    from nubis_addon.blender import sky
+    from nubis_addon.blender.scene import sky
 
     return {
         "settings": {k.key: sceneparams.from_blender(k, getattr(s, k.key)) for k in schema.PRESET_SCENE},
@@ -235,7 +237,8 @@ def _snapshot(scene):
 
 
 def test_a_saved_user_preset_loads_back_to_every_setting(make_scene, blender, tmp_path, monkeypatch):
-    from nubis_addon.blender import datafield, operators
+    from nubis_addon.blender.scene import datafield
+    from nubis_addon.blender.sidebar import operators
     from nubis_addon.core import presets, schema
 
     monkeypatch.setenv("NUBIS_PRESET_DIR", str(tmp_path / "presets"))
@@ -248,7 +251,7 @@ def test_a_saved_user_preset_loads_back_to_every_setting(make_scene, blender, tm
     assert path.is_file() and scene.nubis.preset == "dusk_storm"
     assert sorted(p.name for p in path.parent.iterdir()) == ["dusk_storm.toml"]
     # The menu lists it after the shipped ones, with its description as the tooltip.
-    from nubis_addon.blender import presetlist
+    from nubis_addon.blender.host import presetlist
 
     entries = presetlist.preset_entries()
     assert [e.user for e in entries] == [False] * len(presets.list_presets()) + [True]
@@ -257,7 +260,7 @@ def test_a_saved_user_preset_loads_back_to_every_setting(make_scene, blender, tm
     assert operators.NUBIS_OT_preset_load.description(None, props) == "A storm at dusk, saved by the test"
     assert presetlist.active_preset(blender.context).path == path
     # The main panel's preset row: the menu shows the active preset, with + and - beside it.
-    from nubis_addon.blender import panels
+    from nubis_addon.blender.sidebar import panels
 
     layout = LabelLayout()
     panels.NUBIS_PT_main.draw(types.SimpleNamespace(layout=layout), types.SimpleNamespace(scene=scene))

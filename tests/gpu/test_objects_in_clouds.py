@@ -1,4 +1,4 @@
-"""F12 with the scene's objects in the clouds (blender/composition.py, docs/sky.md#objects-in-the-clouds): the
+"""F12 with the scene's objects in the clouds (blender/f12/composition.py, docs/sky.md#objects-in-the-clouds): the
 clouds between the camera and an object veil it in EEVEE and Cycles as Cycles veils it when it renders the
 camera's bake of the same clouds; objects that rise into the layer receive the shadows of the clouds above
 each point; the veil blurs with the camera over the shutter. Judged on display-referred PNGs (Rec. 709
@@ -75,7 +75,7 @@ def _scene(blender, case: str, emission: bool = True):
 
 
 def _engine(blender, engine: str) -> str:
-    from nubis_addon.blender import scene_render
+    from nubis_addon.blender.f12 import scene_render
 
     if engine == "CYCLES":
         return engine
@@ -116,7 +116,8 @@ def _without_clouds(blender, scene, path) -> tuple[np.ndarray, np.ndarray]:
 def _bake_reference(blender, scene, tmp) -> np.ndarray:
     """Cycles rendering the camera's bake of the same clouds (the World's sky, no Nubis background); 64
     samples: at 32 its own noise inside a cloud was most of the difference measured against it."""
-    from nubis_addon.blender import cycles_setup, pipeline
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.scene import cycles_setup
     from nubis_addon.core.jobs import BakeOptions
 
     vdb = tmp / "camera.vdb"
@@ -140,7 +141,7 @@ def veiled(request, blender, tmp_path_factory):
     reference = _bake_reference(blender, scene, tmp)
     # EEVEE on the mountain only: its shader compiles cost a software rasterizer most of a minute per scene.
     engines = ("CYCLES", "EEVEE") if case == "below" else ("CYCLES",)
-    from nubis_addon.blender import composition
+    from nubis_addon.blender.f12 import composition
 
     renders = {}
     for engine in engines:
@@ -165,7 +166,7 @@ def test_the_clouds_veil_an_object_as_cycles_veils_it_in_the_bake(veiled):
 
 def test_without_an_object_in_the_clouds_the_render_keeps_its_background(blender, tmp_path):
     """No surface behind a cloud and no motion blur: no veil, the World's image holds all the clouds."""
-    from nubis_addon.blender import composition
+    from nubis_addon.blender.f12 import composition
 
     scene, obj = _scene(blender, "below")
     obj.location.y = -16000.0  # behind the camera
@@ -196,7 +197,7 @@ def test_a_fast_pan_blurs_the_clouds_as_far_as_the_ground(blender, tmp_path):
     spread along a pan as far as the ground's texture edges. Measured apart: the clouds over a plain ground,
     then the checkered ground without clouds; each the box along the pan that turns the still frame into
     the blurred one."""
-    from nubis_addon.blender import composition
+    from nubis_addon.blender.f12 import composition
     from nubis_addon.core.composition import FILTER_MARGIN
 
     scene, ground = _scene(blender, "above")
@@ -241,7 +242,7 @@ def _fcurves(obj):
 
 def _stack_transmittance(blender, scene, points: np.ndarray) -> np.ndarray:
     """The product of the casters' maps a shadow ray from each point crosses on its way to the sun."""
-    from nubis_addon.blender import shadows
+    from nubis_addon.blender.f12 import shadows
 
     sun = np.array(scene.objects["Nubis Sun"].matrix_world.to_3x3().col[2])
     total = np.ones(len(points))
@@ -269,7 +270,7 @@ def test_a_peak_in_the_layer_is_shaded_where_clouds_stand_between_it_and_the_sun
     sun: a stack of casters through the layer, not one above the peak (which left the flank unshaded)."""
     from mathutils import Vector
 
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender.scene import scene_io
 
     scene, mountain = _scene(blender, "below", emission=False)
     # The sun from the side: the flank the camera sees is in sun, and the clouds' shadows fall beside them.
@@ -298,7 +299,7 @@ def test_a_peak_in_the_layer_is_shaded_where_clouds_stand_between_it_and_the_sun
 def _veil_alpha(blender) -> np.ndarray:
     """The last frame's veil opacity per pixel (top row first): the shadow on a pixel behind a cloud hides
     behind the cloud's own light."""
-    from nubis_addon.blender import composition
+    from nubis_addon.blender.f12 import composition
 
     img = blender.data.images[composition.VEIL_IMAGE]
     m = int(composition.last_frame["margin"])
@@ -310,7 +311,7 @@ def _visible_points(blender, scene, obj) -> np.ndarray:
     """The point of `obj` each pixel's centre sees (top row first), NaN where the pixel sees anything else."""
     from mathutils import Vector
 
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender.scene import scene_io
     from nubis_addon.core import sky as skymath
 
     inv = scene_io.camera_inv_view_proj(scene, W, H)
@@ -331,7 +332,7 @@ def test_other_cameras_render_with_the_clouds_and_the_world_back(blender, kind, 
     """An orthographic camera is composed like a perspective one; a panoramic camera keeps the clouds as a
     background (a documented fallback, said once on the console); motion blur with a zero shutter renders
     as a still. No traceback, the World and the Cycles settings as they were (_render checks those)."""
-    from nubis_addon.blender import composition, scene_render
+    from nubis_addon.blender.f12 import composition, scene_render
 
     scene, _obj = _scene(blender, "below")
     cam = scene.camera
@@ -370,7 +371,9 @@ def test_the_viewport_veils_the_peak_as_f12_does(blender, tmp_path):
     (docs/viewport.md#clouds-in-front-of-the-scene): the share of the peak's pixels the clouds change by
     more than 0.05 within 0.8-1.25x of F12's, and the peak's pixels within 0.03 of F12's on average
     (display-referred)."""
-    from nubis_addon.blender import preview, runtime, scene_io
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.jobs import preview
+    from nubis_addon.blender.scene import scene_io
     from nubis_addon.render import temporal
 
     scene, _obj = _scene(blender, "below")
@@ -430,7 +433,9 @@ def test_an_orbit_around_the_peak_leaves_no_veil_behind_at_its_silhouette(blende
     reprojected onto it), and at most 6 % of them are off by 0.1. Measured at 96x54: a bias of -0.003 and
     4.6 % off (7.6 % of the peak's inner pixels, 12 % of the sky's); reprojecting across the silhouette as
     before read +0.004 and 4.5 % (docs/viewport.md#clouds-in-front-of-the-scene)."""
-    from nubis_addon.blender import preview, runtime, scene_io
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.jobs import preview
+    from nubis_addon.blender.scene import scene_io
     from nubis_addon.render import temporal
 
     scene, _obj = _scene(blender, "below")

@@ -16,7 +16,7 @@ def stroke(xs, y=0.0):
 
 def cover(scene):
     """The coverage the shader sees: field A red times the stored multiplier, clamped."""
-    from nubis_addon.blender import datafield
+    from nubis_addon.blender.scene import datafield
 
     a = datafield.read_fields(scene.nubis)[0]
     return np.clip(a[..., 0] * datafield.coverage_multiplier(scene), 0.0, 1.0)
@@ -59,7 +59,7 @@ def test_a_stroke_raises_the_cover_under_it_and_leaves_the_rest_exactly(blender,
 
 
 def test_paint_layers_disable_fade_reorder_and_clear_like_layers(blender, make_scene):
-    from nubis_addon.blender import datafield
+    from nubis_addon.blender.scene import datafield
 
     scene = make_scene("default")
     s = scene.nubis
@@ -90,7 +90,7 @@ def test_paint_layers_disable_fade_reorder_and_clear_like_layers(blender, make_s
 
 
 def test_painting_a_clear_sky_at_zero_coverage_paints_only_the_stroke(blender, make_scene):
-    from nubis_addon.blender import datafield
+    from nubis_addon.blender.scene import datafield
     from nubis_addon.core import paint
 
     scene = make_scene("default")
@@ -105,7 +105,7 @@ def test_painting_a_clear_sky_at_zero_coverage_paints_only_the_stroke(blender, m
 
 
 def test_type_and_precipitation_paint_add_to_their_channels(blender, make_scene):
-    from nubis_addon.blender import datafield
+    from nubis_addon.blender.scene import datafield
 
     scene = make_scene("default")
     a0 = datafield.read_fields(scene.nubis)[0].copy()
@@ -127,8 +127,10 @@ def test_the_live_stroke_shows_what_the_full_composite_makes(blender, make_scene
 
     import gpu
 
-    from nubis_addon.blender import datafield, runtime, sceneparams, viewport
-    from nubis_addon.blender import paint as blender_paint
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.live import viewport
+    from nubis_addon.blender.scene import datafield, sceneparams
+    from nubis_addon.blender.sidebar import paint as blender_paint
     from nubis_addon.render.offscreens import read_pixels
 
     scene = make_scene("default")
@@ -195,7 +197,8 @@ def test_the_live_stroke_shows_what_the_full_composite_makes(blender, make_scene
 
 
 def test_strokes_are_saved_and_undo_recomposites_from_them(blender, make_scene, tmp_path):
-    from nubis_addon.blender import datafield, events
+    from nubis_addon.blender.live import events
+    from nubis_addon.blender.scene import datafield
 
     scene = make_scene("default")
     before = cover(scene)
@@ -216,7 +219,7 @@ def test_strokes_are_saved_and_undo_recomposites_from_them(blender, make_scene, 
 
 
 def test_bad_strokes_get_a_clear_message_and_change_nothing(blender, make_scene):
-    from nubis_addon.blender import datafield
+    from nubis_addon.blender.scene import datafield
 
     scene = make_scene("default")
     a = datafield.read_fields(scene.nubis)[0].copy()
@@ -260,7 +263,7 @@ def test_a_stroke_to_far_away_paints_its_part_over_the_field_or_is_refused(blend
     the stroke over the field is painted, in milliseconds, and a stroke with no such part is refused."""
     import time
 
-    from nubis_addon.blender import datafield
+    from nubis_addon.blender.scene import datafield
 
     scene = make_scene("default")
     start = time.perf_counter()
@@ -290,7 +293,7 @@ def test_a_stroke_to_far_away_paints_its_part_over_the_field_or_is_refused(blend
 def test_the_brush_radius_and_strength_as_the_docs_say(blender, make_scene):
     """Radius: finite, half a field pixel to the field's width. Strength: Blender's slider clamps it to 0-1,
     as its own sliders do (5 paints at 1); 0 and NaN are refused (docs/painting.md#what-is-refused)."""
-    from nubis_addon.blender import datafield
+    from nubis_addon.blender.scene import datafield
 
     make_scene("default")
     for value in (float("inf"), float("nan")):
@@ -319,8 +322,8 @@ def test_a_long_composite_is_announced_and_an_absurd_one_refused(blender, make_s
     say how long the composite takes; a composite over the memory bound is refused and changes nothing."""
     import re
 
-    from nubis_addon.blender import paint as blender_paint
-    from nubis_addon.blender import sceneparams
+    from nubis_addon.blender.scene import sceneparams
+    from nubis_addon.blender.sidebar import paint as blender_paint
     from nubis_addon.core import console, paint
 
     scene = make_scene("default")
@@ -352,7 +355,7 @@ def test_a_long_composite_is_announced_and_an_absurd_one_refused(blender, make_s
 def test_a_live_drag_to_far_away_lays_its_part_and_a_full_layer_stops_it(blender, make_scene, monkeypatch):
     """A grazing view ray can land a drag's sample 1e12 m away: the drag lays the part over the field; a
     sample past the float range is no sample; the dabs are counted against the layer's cap before laying."""
-    from nubis_addon.blender import paint as blender_paint
+    from nubis_addon.blender.sidebar import paint as blender_paint
     from nubis_addon.core import paint
     from nubis_addon.core.errors import NubisError
 
@@ -379,7 +382,7 @@ def test_a_live_drag_to_far_away_lays_its_part_and_a_full_layer_stops_it(blender
 def test_a_paint_layer_offers_only_the_channels_a_brush_paints_and_refuses_another(blender, make_scene):
     """The layer's channel menu narrows for a paint layer (the schema's channel, numbered as before, so files
     read the same); a channel no brush paints is refused where it is set, in one sentence."""
-    from nubis_addon.blender import datafield
+    from nubis_addon.blender.scene import datafield
     from nubis_addon.core import paint, schema
     from nubis_addon.core.errors import NubisError
 
@@ -422,7 +425,8 @@ def test_a_paint_layer_offers_only_the_channels_a_brush_paints_and_refuses_anoth
 def test_a_scenes_runtime_state_lives_in_one_object_and_ends_in_one_place(blender, make_scene):
     """Stale flag, coverage histogram, pre-paint planes and raster keys: one SceneState per scene, all gone
     with forget_stale (a file load, unregister); core/paint.py caches rasters under scene_io's numbers."""
-    from nubis_addon.blender import datafield, events, sceneparams
+    from nubis_addon.blender.live import events
+    from nubis_addon.blender.scene import datafield, sceneparams
     from nubis_addon.core import paint
 
     scene = make_scene("default")
@@ -446,7 +450,7 @@ def test_a_scenes_runtime_state_lives_in_one_object_and_ends_in_one_place(blende
 def test_the_modifier_keys_pick_the_brush_mode(blender):
     from types import SimpleNamespace
 
-    from nubis_addon.blender import paint as blender_paint
+    from nubis_addon.blender.sidebar import paint as blender_paint
 
     def event(ctrl=False, shift=False):
         return SimpleNamespace(ctrl=ctrl, shift=shift)

@@ -71,7 +71,7 @@ def _draw_all(panels, context, texts: list | None = None) -> list:
 
 
 def test_every_setting_with_a_panel_is_drawn(blender, make_scene):
-    from nubis_addon.blender import panels
+    from nubis_addon.blender.sidebar import panels
     from nubis_addon.core import schema
 
     scene = make_scene("default")
@@ -105,7 +105,7 @@ FULL_LABEL = 35
 
 
 def test_every_label_fits_the_default_sidebar(blender, make_scene):
-    from nubis_addon.blender import panels
+    from nubis_addon.blender.sidebar import panels
     from nubis_addon.core import schema
 
     scene = make_scene("default")
@@ -120,7 +120,7 @@ def test_every_label_fits_the_default_sidebar(blender, make_scene):
 
 def test_the_recording_layout_notices_a_missing_setting(blender, make_scene):
     """The check above can fail: a panel that forgets a setting is caught."""
-    from nubis_addon.blender import panels
+    from nubis_addon.blender.sidebar import panels
 
     scene = make_scene("default")
     context = types.SimpleNamespace(scene=scene)
@@ -165,7 +165,7 @@ def test_a_grey_button_says_why_in_the_sentence_its_click_would_refuse_with(make
     what the operator refuses with when run anyway (stated once: `unavailable`)."""
     import bpy
 
-    from nubis_addon.blender import operators, skylayers, stormbuttons
+    from nubis_addon.blender.sidebar import operators, skylayers, stormbuttons
     from nubis_addon.core.errors import NubisError
     from nubis_addon.core.state import MAX_STORMS
 

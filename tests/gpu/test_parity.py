@@ -42,7 +42,9 @@ def _looking_up(sky: bool):
 
 
 def _compare_single(blender, preset, out, samples: int) -> dict:
-    from nubis_addon.blender import comparison, ensure_registered, scenepresets
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.jobs import comparison
+    from nubis_addon.blender.scene import scenepresets
 
     blender.ops.wm.read_factory_settings(use_empty=True)
     ensure_registered()

@@ -1,12 +1,12 @@
 """compare's Cycles reference: sampled until its own noise is under a target, and reused by a later
-comparison only when nothing Cycles sees has changed (blender/reference.py)."""
+comparison only when nothing Cycles sees has changed (blender/jobs/reference.py)."""
 
 import json
 
 import numpy as np
 import pytest
 
-from nubis_addon.blender import reference
+from nubis_addon.blender.jobs import reference
 from nubis_addon.core.jobs import CompareOptions
 
 
@@ -34,7 +34,9 @@ def test_rounds_are_sized_from_the_measured_noise_and_keep_every_sample():
 
 
 def _compare(blender, out, **kw):
-    from nubis_addon.blender import comparison, ensure_registered, scenepresets
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.jobs import comparison
+    from nubis_addon.blender.scene import scenepresets
     from nubis_addon.core.presets import load_preset
 
     blender.ops.wm.read_factory_settings(use_empty=True)
@@ -101,7 +103,7 @@ def test_a_memory_bound_comparison_bakes_finer_by_what_the_clouds_fill_and_falls
     """Where the bound (every evaluated voxel cloud) refuses the voxels the camera asks for, compare counts
     what the clouds fill with a probe and bakes at the camera's size; if the clouds then fill more than
     the probe said, the guarded bake stops and compare bakes at the size the bound allows."""
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender.scene import scene_io
     from nubis_addon.core import bakeplan
 
     seen = {}
@@ -142,7 +144,9 @@ def test_the_comparisons_viewport_integrates_each_pixels_area(blender):
     converge on the centre's value, a different image wherever a cloud's edge crosses a pixel."""
     import dataclasses
 
-    from nubis_addon.blender import ensure_registered, pipeline, scenepresets
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.scene import scenepresets
     from nubis_addon.core.presets import load_preset
 
     blender.ops.wm.read_factory_settings(use_empty=True)

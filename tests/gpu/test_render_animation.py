@@ -1,4 +1,4 @@
-"""Render Animation with an object in the clouds (blender/scene_render.py begin/finish, blender/composition.py
+"""Render Animation with an object in the clouds (blender/f12/scene_render.py begin/finish, blender/f12/composition.py
 ready/stow/put_away; docs/sky.md#render-animation), each engine in a child process of its own
 (tests/gpu/render_animation_child.py), as a pipeline's bpy script renders:
 

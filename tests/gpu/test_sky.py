@@ -1,5 +1,5 @@
 """The physically based sky, the clouds lit by the World, final renders in EEVEE and Cycles with the
-clouds and their shadows (blender/sky.py, blender/scene_render.py), and the `panorama` command."""
+clouds and their shadows (blender/scene/sky.py, blender/f12/scene_render.py), and the `panorama` command."""
 
 from __future__ import annotations
 
@@ -43,7 +43,7 @@ def test_equirectangular_layout_and_hemispheres():
 
 
 def test_new_cloudscape_builds_a_sky_tied_to_the_sun(make_scene, blender):
-    from nubis_addon.blender import scenepresets, sky
+    from nubis_addon.blender.scene import scenepresets, sky
 
     scene = make_scene("default")
     world = scene.world
@@ -78,7 +78,7 @@ def test_the_ground_below_the_horizon_is_lit_by_the_sun_and_the_sky(make_scene, 
     E_sky the sky's own irradiance (the exact integral over the capture's upper half), in step with the
     lamp and the Ground setting; the capture's lower half, made without a second render, is what a
     render of the World shows there."""
-    from nubis_addon.blender import sky
+    from nubis_addon.blender.scene import sky
 
     scene = make_scene("default")
     sun = sky.find_sun(scene)
@@ -136,7 +136,8 @@ def test_the_sky_behind_the_clouds_is_not_one_colour(tmp_path):
 def test_a_sky_capture_is_kept_between_sessions_and_a_damaged_one_is_rendered_again(blender, monkeypatch):
     """Every headless command rendered the same sky again (about a second each); the capture is now kept in
     the cache by the World's settings, a damaged file is rendered again, and Clear Cache removes them."""
-    from nubis_addon.blender import runtime, sky
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.scene import sky
 
     world = blender.data.worlds.new("Stored Sky")
     if world.node_tree is None:
@@ -160,7 +161,8 @@ def test_a_sky_capture_is_kept_between_sessions_and_a_damaged_one_is_rendered_ag
 
 
 def test_an_artists_world_is_kept_and_lights_the_clouds(blender):
-    from nubis_addon.blender import ensure_registered, scene_io, sky
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.scene import scene_io, sky
 
     blender.ops.wm.read_factory_settings(use_empty=True)
     ensure_registered()
@@ -236,7 +238,7 @@ def _small_renders(scene) -> None:
 
 
 def _engine_name(blender, engine: str) -> str:
-    from nubis_addon.blender import scene_render
+    from nubis_addon.blender.f12 import scene_render
 
     if engine == "CYCLES":
         return engine
@@ -261,7 +263,7 @@ CUBE_MIN, CUBE_MAX = np.array([-150.0, -1650.0, 0.0]), np.array([150.0, -1350.0,
 
 def _masks(scene):
     """Per pixel: where the camera sees the ground (and the point it sees), the cube, and open sky."""
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender.scene import scene_io
 
     inv = scene_io.camera_inv_view_proj(scene, W, H)
     dirs = skymath.camera_directions(inv, scene_io.camera_eye(scene), W, H)
@@ -283,7 +285,7 @@ def _masks(scene):
 
 def _shadow_at(blender, scene, points):
     """The shadow map's transmittance where sunlight reaching `points` crosses the caster."""
-    from nubis_addon.blender import shadows
+    from nubis_addon.blender.f12 import shadows
 
     caster = scene.objects[shadows.CASTER_NAME]
     img = blender.data.images[shadows.SHADOW_IMAGE]
@@ -305,7 +307,8 @@ def _shadow_at(blender, scene, points):
 
 @pytest.mark.parametrize("engine", ["CYCLES", "EEVEE"])
 def test_final_render_shows_clouds_behind_the_cube_and_their_moving_shadows(blender, f12_scene, engine, tmp_path):
-    from nubis_addon.blender import pipeline, scene_render, shadows
+    from nubis_addon.blender.f12 import scene_render, shadows
+    from nubis_addon.blender.jobs import pipeline
 
     scene = f12_scene
     name = _engine_name(blender, engine)
@@ -345,7 +348,7 @@ def test_final_render_shows_clouds_behind_the_cube_and_their_moving_shadows(blen
 
 
 def test_renders_without_the_clouds_get_no_stale_shadow(blender, f12_scene):
-    from nubis_addon.blender import scene_render, shadows
+    from nubis_addon.blender.f12 import scene_render, shadows
 
     scene = f12_scene
     scene_render.prepare_frame(scene)
@@ -362,7 +365,7 @@ def test_renders_without_the_clouds_get_no_stale_shadow(blender, f12_scene):
 def test_the_render_world_is_built_again_only_when_the_world_changed(blender, f12_scene):
     """A new render World each frame made EEVEE compile its shader again for every frame; it is kept
     while the artist's World is unchanged, its images refilled in place."""
-    from nubis_addon.blender import scene_render
+    from nubis_addon.blender.f12 import scene_render
 
     scene = f12_scene
     base = scene.world
@@ -444,7 +447,9 @@ def test_cloud_shadows_over_a_large_ground_start_below_the_clouds(make_scene, bl
     """A 200 km ground plane put the shadow caster at the objects' top plus 2 % of their extent, 4.4 km
     up and above the cumulus: the map marched from there saw no cloud and F12 showed no shadow. The
     caster now sits under the clouds' floor and its map holds the shadows."""
-    from nubis_addon.blender import runtime, scene_io, shadows
+    from nubis_addon.blender.f12 import shadows
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.scene import scene_io
 
     scene = make_scene("default")
     blender.ops.mesh.primitive_plane_add(size=200000.0)
@@ -482,7 +487,7 @@ def test_f12_over_a_200_km_ground_seen_from_400_m_shows_cloud_shadows(make_scene
     finally:
         scene.nubis.sky_render_clouds = True
     weights = np.array([0.2126, 0.7152, 0.0722])
-    from nubis_addon.blender import scene_io
+    from nubis_addon.blender.scene import scene_io
 
     inv = scene_io.camera_inv_view_proj(scene, W, H)
     ground = skymath.camera_directions(inv, scene_io.camera_eye(scene), W, H)[..., 2] < -0.05

@@ -1,5 +1,5 @@
 """Work that runs while the artist keeps working: a bake or a render is a snapshot of the moment it
-started (blender/snapshot.py, blender/work.py).
+started (blender/jobs/snapshot.py, blender/jobs/work.py).
 
 The modal operators step their work from a timer; here the same jobs (work.bake_jobs, sequence_jobs,
 render_jobs) are stepped by hand, and between two steps the test does what an artist does meanwhile: the
@@ -29,7 +29,8 @@ def _viewport_redraw(scene, light: bool = True) -> None:
     """What the 3D viewport's draw does on every redraw: its own state onto the shared GPU inputs. A bake
     reads the fields and the uniforms, never the light volumes: with `light` False the redraw leaves the
     volumes unfilled (over a second each on the suite's software rasterizer) and uploads the rest."""
-    from nubis_addon.blender import runtime, scene_io
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.scene import scene_io
 
     runtime.cloud_gpu(scene.nubis.noise_seed).update(scene_io.state_from_scene(scene), light=light)
 
@@ -37,7 +38,7 @@ def _viewport_redraw(scene, light: bool = True) -> None:
 def _step_all(jobs, disturb, least: int = 4) -> list:
     """Run `jobs` as the modal operator does, calling disturb(n) after the n-th step (at least `least`
     steps before the last write)."""
-    from nubis_addon.blender import work
+    from nubis_addon.blender.jobs import work
 
     running = work.start(work.Work("baking", jobs))
     try:
@@ -74,7 +75,7 @@ def _metadata(path: Path) -> dict:
 def test_a_disturbed_bake_writes_the_undisturbed_grid(make_scene, tmp_path):
     """The issue's case: viewport uploads after every step, the timeline moved 200 frames on after the
     first, the Erosion slider moved by 0.4 after the third (scene.frame_current 1 at the start)."""
-    from nubis_addon.blender import pipeline, work
+    from nubis_addon.blender.jobs import pipeline, work
 
     scene = make_scene("default")
     start_frame, erosion = scene.frame_current, scene.nubis.density_erosion
@@ -105,7 +106,7 @@ def test_a_disturbed_bake_writes_the_undisturbed_grid(make_scene, tmp_path):
 def test_a_disturbed_sequence_bake_writes_the_undisturbed_grids(make_scene, tmp_path):
     """Bake Sequence takes every frame's snapshot at its start and puts the timeline back on its frame;
     scrubbing, edits and viewport uploads during it change no file."""
-    from nubis_addon.blender import pipeline, work
+    from nubis_addon.blender.jobs import pipeline, work
 
     scene = make_scene("default")
     scene.frame_set(5)
@@ -129,7 +130,7 @@ def test_a_disturbed_sequence_bake_writes_the_undisturbed_grids(make_scene, tmp_
         if n == 2:
             scene.nubis.density_erosion = erosion + 0.4
             scene.nubis.layers[0].opacity *= 0.5
-            from nubis_addon.blender import datafield
+            from nubis_addon.blender.scene import datafield
 
             datafield.generate_fields(scene)  # the layer edit's composite, as the debounced timer makes it
             _viewport_redraw(scene, light=False)
@@ -144,7 +145,7 @@ def test_a_disturbed_sequence_bake_writes_the_undisturbed_grids(make_scene, tmp_
 
 def test_a_disturbed_render_gives_the_undisturbed_image(make_scene):
     """Render Clouds: its shot is read at the start and its GPU inputs are its own."""
-    from nubis_addon.blender import pipeline, work
+    from nubis_addon.blender.jobs import pipeline, work
 
     scene = make_scene("default")
     scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 300, 140, 100
@@ -180,7 +181,7 @@ def _act_play(blender, scene, tmp_path):
 
 
 def _act_edit_layer(blender, scene, tmp_path):
-    from nubis_addon.blender import datafield
+    from nubis_addon.blender.scene import datafield
 
     scene.nubis.layers[0].opacity *= 0.3
     datafield.generate_fields(scene)
@@ -205,7 +206,8 @@ def _act_delete_camera(blender, scene, tmp_path):
 
 
 def _act_delete_cloudscape(blender, scene, tmp_path):
-    from nubis_addon.blender import datafield, ui
+    from nubis_addon.blender.host import ui
+    from nubis_addon.blender.scene import datafield
 
     for attr, _name in datafield.FIELD_IMAGES.values():
         img = getattr(scene.nubis, attr)
@@ -227,7 +229,7 @@ ACTIONS = {
 
 @pytest.fixture(scope="module")
 def calm_bake(tmp_path_factory, make_scene_module):
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
 
     scene = make_scene_module("default")
     path = tmp_path_factory.mktemp("calm") / "calm.vdb"
@@ -237,7 +239,8 @@ def calm_bake(tmp_path_factory, make_scene_module):
 
 @pytest.fixture(scope="module")
 def make_scene_module(blender):
-    from nubis_addon.blender import ensure_registered, scenepresets
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.scene import scenepresets
     from nubis_addon.core.presets import load_preset
 
     def make(name):
@@ -254,7 +257,7 @@ def make_scene_module(blender):
 def test_what_the_artist_does_during_a_bake_leaves_its_result_alone(blender, make_scene, calm_bake, tmp_path, action):
     """Each action between the bake's steps, with the viewport redrawing after it: the result is exactly
     the snapshot's. (A scrub, a slider and the frame sequence: the tests above.)"""
-    from nubis_addon.blender import work
+    from nubis_addon.blender.jobs import work
 
     scene = make_scene("default")
     jobs = work.bake_jobs(scene, str(tmp_path / "busy.vdb"), VOXEL, tiles_per_step=1)
@@ -270,7 +273,7 @@ def test_what_the_artist_does_during_a_bake_leaves_its_result_alone(blender, mak
 
 
 def test_a_second_bake_or_render_is_refused_while_one_runs(blender, make_scene, tmp_path):
-    from nubis_addon.blender import work
+    from nubis_addon.blender.jobs import work
     from nubis_addon.core.errors import NubisError
 
     scene = make_scene("default")
@@ -299,7 +302,7 @@ def test_a_second_bake_or_render_is_refused_while_one_runs(blender, make_scene, 
 
 @pytest.mark.parametrize("how", ["open another file", "file new"])
 def test_opening_a_file_cancels_the_work_and_keeps_the_earlier_file(blender, make_scene, tmp_path, how):
-    from nubis_addon.blender import pipeline, work
+    from nubis_addon.blender.jobs import pipeline, work
 
     scene = make_scene("default")
     path = tmp_path / "clouds.vdb"
@@ -335,7 +338,8 @@ def test_quitting_during_a_bake_cancels_it_and_keeps_the_earlier_file(cache_dir,
             from nubis_addon.render.gpu_context import ensure_gpu_context
             nubis_addon.register()
             ensure_gpu_context()
-            from nubis_addon.blender import datafield, pipeline, scene_io, scenepresets, work
+            from nubis_addon.blender.scene import datafield, scene_io, scenepresets
+            from nubis_addon.blender.jobs import pipeline, work
             from nubis_addon.core.jobs import BakeOptions
             from nubis_addon.core.presets import load_preset
             scene = bpy.context.scene
@@ -361,7 +365,8 @@ def test_quitting_during_a_bake_cancels_it_and_keeps_the_earlier_file(cache_dir,
 def test_ctrl_z_after_a_bake_removes_the_volume_and_keeps_the_file(blender, make_scene, tmp_path):
     """Bake VDB is one undo step (Blender pushes it when an UNDO operator finishes; background mode does not,
     so the test pushes where the interface would)."""
-    from nubis_addon.blender import cycles_setup, operators
+    from nubis_addon.blender.scene import cycles_setup
+    from nubis_addon.blender.sidebar import operators
 
     make_scene("default")
     path = tmp_path / "clouds.vdb"
@@ -390,10 +395,10 @@ NO_UNDO = {
 def test_every_operator_that_changes_data_is_one_undo_step(blender):
     import bpy
 
-    import nubis_addon.blender.mainthread as mainthread
-    import nubis_addon.blender.operators as operators
-    import nubis_addon.blender.skylayers as skylayers
-    import nubis_addon.blender.stormbuttons as stormbuttons
+    import nubis_addon.blender.host.mainthread as mainthread
+    import nubis_addon.blender.sidebar.operators as operators
+    import nubis_addon.blender.sidebar.skylayers as skylayers
+    import nubis_addon.blender.sidebar.stormbuttons as stormbuttons
 
     classes = [*operators.CLASSES, *skylayers.CLASSES, *stormbuttons.CLASSES, mainthread.NUBIS_OT_report]
     missing = []

@@ -13,7 +13,8 @@ ENERGY = 5.0  # the default preset's sun strength
 
 
 def _sun_scene(make_scene, elevation: float, azimuth: float = 230.0):
-    from nubis_addon.blender import runtime, scene_io
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.scene import scene_io
 
     scene = make_scene("default", sun__elevation=elevation, sun__azimuth=azimuth)
     state = scene_io.state_from_scene(scene)
@@ -98,7 +99,8 @@ def test_without_a_nubis_sky_every_cloud_takes_the_lamp_s_colour(make_scene):
     altitude, the sun below the horizon included."""
     from gpu_probe import probe_sun
 
-    from nubis_addon.blender import runtime, scene_io, sky
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.scene import scene_io, sky
 
     scene = make_scene("default", sun__elevation=2.0)
     scene.nubis.sky_sun_color = False
@@ -117,7 +119,7 @@ def test_f12_at_minus_one_degree_shows_lit_clouds_over_an_unlit_ground(make_scen
     """The sun 1 degree below the horizon, a 200 km ground, the camera 400 m up looking 8 degrees down:
     F12 with the sun's strength at 5 against F12 with it at 0. Above the horizon the clouds (over 1.5 km,
     above the shadow line) gain the sun's red light; the ground, in Earth's shadow, gains nothing."""
-    from nubis_addon.blender import scene_io, sky
+    from nubis_addon.blender.scene import scene_io, sky
     from nubis_addon.core import imageio
     from nubis_addon.core import sky as skymath
 
@@ -166,7 +168,7 @@ def test_f12_at_minus_one_degree_shows_lit_clouds_over_an_unlit_ground(make_scen
 
 @pytest.mark.parametrize("elevation", [4.0, -1.0])
 def test_cycles_lights_the_bake_through_the_same_air(make_scene, blender, elevation, tmp_path):
-    """What Cycles renders the bake with (blender/sun_air.py): the lamp's sun above the air, and a shell
+    """What Cycles renders the bake with (blender/jobs/sun_air.py): the lamp's sun above the air, and a shell
     only shadow rays see. Three white cards facing the sun at 0.3, 2.5 and 6 km, seen from the sun's side, lit by
     the sun alone (the World black): each gets the sun times the air's
     transmittance from where it stands (core/sky.transmittance) within 3 %, the card in Earth's shadow
@@ -174,7 +176,8 @@ def test_cycles_lights_the_bake_through_the_same_air(make_scene, blender, elevat
     from bpy_extras.object_utils import world_to_camera_view
     from mathutils import Vector
 
-    from nubis_addon.blender import scene_io, sky, sun_air
+    from nubis_addon.blender.jobs import sun_air
+    from nubis_addon.blender.scene import scene_io, sky
     from nubis_addon.core import imageio
 
     scene = make_scene("default", sun__elevation=elevation, sun__azimuth=90.0)
@@ -247,7 +250,7 @@ def test_cycles_lights_the_bake_through_the_same_air(make_scene, blender, elevat
 
 
 def _shell_gone(blender) -> bool:
-    from nubis_addon.blender import sun_air
+    from nubis_addon.blender.jobs import sun_air
 
     return (
         blender.data.objects.get(sun_air.SHELL_NAME) is None and blender.data.materials.get(sun_air.SHELL_NAME) is None
@@ -258,7 +261,7 @@ def test_a_cloud_s_flank_takes_the_horizon_s_light_at_the_luminance_its_calibrat
     """docs/viewport.md#light-model: at the sun a Nubis sky is calibrated at (30°) the flank's light has
     the luminance of the light from above; at 4° it is brighter than that and far warmer (the glow
     along the horizon against the blue overhead); the march's clouds take its colour."""
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
     from nubis_addon.core import metrics
 
     def lum(c):

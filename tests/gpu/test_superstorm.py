@@ -17,7 +17,8 @@ def storm_scene(make_scene):
 
 
 def _gpu(scene):
-    from nubis_addon.blender import runtime, scene_io
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.scene import scene_io
 
     state = scene_io.state_from_scene(scene)
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
@@ -28,7 +29,7 @@ def _gpu(scene):
 def test_outside_every_stencil_the_density_is_the_storm_free_density(storm_scene, blender):
     from gpu_probe import probe_density
 
-    from nubis_addon.blender import superstorms
+    from nubis_addon.blender.scene import superstorms
 
     scene, storm = storm_scene
     scene.nubis.layers[0].remap = (0.3, 0.7, 0.0, 0.5)
@@ -60,7 +61,7 @@ def test_outside_every_stencil_the_density_is_the_storm_free_density(storm_scene
 def test_vortex_turns_faster_near_the_centre(storm_scene):
     from gpu_probe import probe_vortex
 
-    from nubis_addon.blender import superstorms
+    from nubis_addon.blender.scene import superstorms
 
     scene, storm = storm_scene
     cx, cy = superstorms.storm_centre(storm)
@@ -80,7 +81,7 @@ def test_vortex_turns_faster_near_the_centre(storm_scene):
 
 
 def test_lightning_keyframe_lights_its_frame_only(storm_scene, blender):
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
 
     scene, storm = storm_scene
     scene.camera.location = (0.0, 3000.0, 2.0)
@@ -106,7 +107,8 @@ def test_lightning_keyframe_lights_its_frame_only(storm_scene, blender):
 
 
 def test_baked_glow_grid_stays_inside_the_storm(storm_scene, tmp_path):
-    from nubis_addon.blender import pipeline, superstorms
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.scene import superstorms
     from nubis_addon.core import vdbio
 
     scene, storm = storm_scene
@@ -142,7 +144,9 @@ def _vortex_views(make_scene, blend: float, size: int = 96, dt: float = 0.4):
     the motion vectors of the second."""
     import dataclasses
 
-    from nubis_addon.blender import pipeline, runtime, superstorms
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.scene import superstorms
     from nubis_addon.render import engine
 
     scene = make_scene("superstorm", wind_speed=0.0)
@@ -206,7 +210,7 @@ def test_removing_a_storm_keeps_the_others_animation(storm_scene, blender):
     assert blender.ops.nubis.storm_lifecycle(ramp_in=1.0, hold=1.0, ramp_out=1.0) == {"FINISHED"}
     s.active_storm = 0
     assert blender.ops.nubis.storm_remove() == {"FINISHED"}
-    from nubis_addon.blender import sceneparams
+    from nubis_addon.blender.scene import sceneparams
 
     paths = {fc.data_path for fc in sceneparams.fcurves(scene)}
     assert paths == {"nubis.storms[0].blend"}  # the keyed storm moved to index 0 and kept its keys

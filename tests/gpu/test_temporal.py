@@ -12,7 +12,7 @@ import pytest
 
 @pytest.fixture
 def shot(make_scene):
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
 
     def make(name="default", w=64, h=36, **overrides):
         scene = make_scene(name, **overrides)
@@ -33,7 +33,8 @@ def _redraws(tv, clouds, state, view, n, samples=8):
 
 
 def test_still_view_converges_to_the_full_march_and_stops(shot):
-    from nubis_addon.blender import pipeline, runtime
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.jobs import pipeline
     from nubis_addon.render import temporal
 
     scene, s = shot()
@@ -63,7 +64,7 @@ def test_still_view_converges_to_the_full_march_and_stops(shot):
 
 
 def test_any_change_restarts_the_convergence(shot):
-    from nubis_addon.blender import runtime
+    from nubis_addon.blender.host import runtime
     from nubis_addon.render import temporal
 
     scene, s = shot()
@@ -90,8 +91,10 @@ def test_any_change_restarts_the_convergence(shot):
 def test_a_pan_fills_what_comes_in_from_off_screen(shot):
     """After a converged view turns by 8 degrees, the strip that enters from off screen comes from the
     working buffer (S15): no black or stale edge, close to the naive march of the new view."""
-    from nubis_addon.blender import pipeline, runtime, scene_io
-    from nubis_addon.blender.preview import orbit_camera
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.jobs.preview import orbit_camera
+    from nubis_addon.blender.scene import scene_io
     from nubis_addon.render import temporal
 
     scene, s = shot("stratocumulus", w=96, h=54)
@@ -123,7 +126,9 @@ def test_flash_mask_shows_a_flash_at_full_intensity_on_its_first_frame(shot):
     """GDC22: flashes last 4-8 frames against a 16-frame build, so the renderer builds a mask of each
     storm's flash at unit intensity before it fires and multiplies it by the flash of the frame shown.
     The first frame of a flash, after a single redraw, is as bright as the full march with the flash."""
-    from nubis_addon.blender import pipeline, runtime, superstorms
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.scene import superstorms
     from nubis_addon.render import temporal
 
     scene, s = shot("superstorm", 64, 36)
@@ -163,7 +168,7 @@ def test_sidebar_quality_and_benchmark(make_scene, blender):
     """The Viewport panel's Quality menu writes a row of presets/quality/quality.toml into the scene,
     and its Benchmark button reports the benchmark's numbers without changing the artist's render
     settings."""
-    from nubis_addon.blender import status
+    from nubis_addon.blender.host import status
 
     scene = make_scene("default")
     assert blender.ops.nubis.viewport_quality(quality="draft") == {"FINISHED"}
@@ -182,7 +187,7 @@ def test_sidebar_quality_and_benchmark(make_scene, blender):
 
 
 def _camera_matrices(blender, scene, w: int, h: int):
-    from nubis_addon.blender import sceneparams
+    from nubis_addon.blender.scene import sceneparams
 
     depsgraph = blender.context.evaluated_depsgraph_get()
     cam = scene.camera.evaluated_get(depsgraph)
@@ -215,7 +220,8 @@ def test_a_pixel_geometry_covers_holds_the_clouds_in_front_of_it_as_f12s_near_pa
     (docs/viewport.md#clouds-in-front-of-the-scene)."""
     import gpu
 
-    from nubis_addon.blender import pipeline, runtime
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.jobs import pipeline
     from nubis_addon.core import camera
     from nubis_addon.render import engine, temporal
 
@@ -280,7 +286,7 @@ def test_viewport_reads_the_depth_once_per_change(blender):
     when the view or the scene changed."""
     import gpu
 
-    from nubis_addon.blender import viewport
+    from nubis_addon.blender.live import viewport
 
     off = gpu.types.GPUOffScreen(32, 16, format="RGBA16F")
     try:
@@ -306,7 +312,10 @@ def test_a_3d_view_region_draws_converges_and_culls(make_scene, blender):
 
     import gpu
 
-    from nubis_addon.blender import pipeline, runtime, sceneparams, viewport
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.live import viewport
+    from nubis_addon.blender.scene import sceneparams
     from nubis_addon.render.offscreens import read_pixels
 
     scene = make_scene("default")
@@ -356,7 +365,8 @@ def test_sizes_that_are_not_multiples_of_four_have_no_dark_edge(shot):
     """Where the view's size is not a multiple of 4 the last working-buffer column holds no marched
     pixel for most of the 16 offsets; filling pixels without history must not blend that empty
     column in (it darkened the right edge)."""
-    from nubis_addon.blender import pipeline, runtime
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.jobs import pipeline
     from nubis_addon.render import temporal
 
     scene, s = shot("stratocumulus", w=65, h=37)

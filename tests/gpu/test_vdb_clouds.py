@@ -45,7 +45,8 @@ def test_the_shader_reads_the_grid_where_its_object_puts_it(blender, make_scene,
     from gpu_probe import probe_density
     from mathutils import Matrix
 
-    from nubis_addon.blender import pipeline, runtime
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.jobs import pipeline
     from nubis_addon.core import bundled, vdbcloud
 
     scene = _vdb_only(make_scene)
@@ -81,7 +82,7 @@ def _centroid_x(img: np.ndarray) -> float:
 
 
 def test_a_marked_volume_is_drawn_and_follows_its_object(blender, make_scene, cumulus_file):
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
 
     scene = _vdb_only(make_scene)
     obj = _import(blender, scene, cumulus_file)
@@ -106,7 +107,7 @@ def test_a_marked_volume_is_drawn_and_follows_its_object(blender, make_scene, cu
 
 def test_the_real_time_light_agrees_with_the_reference_march(blender, make_scene, cumulus_file):
     """Measured 7.6 % at 160x90 with 4x supersampling (docs/vdb.md); here smaller, with room for grain."""
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
     from nubis_addon.core import metrics
 
     scene = _vdb_only(make_scene)
@@ -121,7 +122,7 @@ def test_the_real_time_light_agrees_with_the_reference_march(blender, make_scene
 def test_the_bake_holds_the_vdb_cloud_as_the_viewport_draws_it(blender, make_scene, cumulus_file, tmp_path):
     """What the artist sees is what Cycles renders: the extension's bake of a sky with a VDB cloud holds
     its density; a comparison's bake leaves it out (Cycles renders the cloud's own file)."""
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
     from nubis_addon.core import vdbio
 
     scene = _vdb_only(make_scene)
@@ -143,7 +144,9 @@ def test_the_bake_holds_the_vdb_cloud_as_the_viewport_draws_it(blender, make_sce
 def test_a_file_that_vanishes_is_said_and_the_rest_still_draws(blender, make_scene, cumulus_file, tmp_path):
     import shutil
 
-    from nubis_addon.blender import pipeline, scene_io, status, vdbclouds
+    from nubis_addon.blender.host import status
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.scene import scene_io, vdbclouds
     from nubis_addon.core.errors import NubisError
 
     scene = make_scene("default")  # the procedural clouds on
@@ -168,7 +171,7 @@ def test_a_file_that_vanishes_is_said_and_the_rest_still_draws(blender, make_sce
 @pytest.mark.parametrize("mode", ["CLIP", "EXTEND", "REPEAT", "PING_PONG"])
 def test_a_vdb_sequence_follows_the_timeline_as_blender_reads_it(blender, make_scene, tmp_path, mode):
     """The frame's file by Blender's own rule: the same file the evaluated Volume reads, every frame."""
-    from nubis_addon.blender import scene_io, vdbclouds
+    from nubis_addon.blender.scene import scene_io, vdbclouds
 
     scene = _vdb_only(make_scene)
     for n, x in ((3, -1500.0), (4, 0.0), (5, 1500.0)):
@@ -191,7 +194,8 @@ def test_a_vdb_sequence_follows_the_timeline_as_blender_reads_it(blender, make_s
 def test_the_fields_rain_does_not_darken_a_vdb_cloud(blender, make_scene, cumulus_file):
     """An artist's cloud holds no rain: the data field's precipitation where it stands leaves it as it was
     (it darkened a read-back cumulonimbus to 57 % from Cycles, 17.7 % once it did not)."""
-    from nubis_addon.blender import datafield, pipeline
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.scene import datafield
 
     scene = _vdb_only(make_scene)
     _import(blender, scene, cumulus_file)

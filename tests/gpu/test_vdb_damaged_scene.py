@@ -34,7 +34,10 @@ def _scene_with(blender, make_scene, paths):
 
 
 def test_a_damaged_file_in_a_saved_blend_is_left_out_and_said(blender, make_scene, small_cloud, tmp_path):
-    from nubis_addon.blender import ensure_registered, pipeline, scene_io, status, vdbclouds
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.host import status
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.scene import scene_io, vdbclouds
     from nubis_addon.core.errors import NubisError
 
     cut = tmp_path / "cut.vdb"
@@ -62,7 +65,8 @@ def test_a_damaged_file_in_a_saved_blend_is_left_out_and_said(blender, make_scen
 def test_nothing_raises_from_the_draw_handler(blender, make_scene, monkeypatch):
     import types
 
-    from nubis_addon.blender import status, viewport
+    from nubis_addon.blender.host import status
+    from nubis_addon.blender.live import viewport
 
     scene = make_scene("default")
     context = types.SimpleNamespace(
@@ -86,7 +90,8 @@ def test_nothing_raises_from_the_draw_handler(blender, make_scene, monkeypatch):
 
 
 def test_a_fifth_marked_volume_is_left_out_and_said(blender, make_scene, small_cloud, capfd):
-    from nubis_addon.blender import scene_io, status, vdbclouds
+    from nubis_addon.blender.host import status
+    from nubis_addon.blender.scene import scene_io, vdbclouds
     from nubis_addon.core import console
 
     scene, objs = _scene_with(blender, make_scene, [(f"Cloud {n}", small_cloud) for n in range(1, 6)])
@@ -117,7 +122,9 @@ def test_a_fifth_marked_volume_is_left_out_and_said(blender, make_scene, small_c
 
 
 def test_an_object_scaled_to_zero_is_one_sentence(blender, make_scene, small_cloud):
-    from nubis_addon.blender import pipeline, scene_io, status
+    from nubis_addon.blender.host import status
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.scene import scene_io
     from nubis_addon.core.errors import NubisError
 
     scene, (obj,) = _scene_with(blender, make_scene, [("Flat", small_cloud)])
@@ -138,7 +145,9 @@ def test_a_refused_upload_leaves_no_half_made_textures(blender, make_scene, smal
     without them draws (a refused cloud used to raise a TypeError on the redraw after)."""
     import dataclasses
 
-    from nubis_addon.blender import pipeline, runtime, scene_io
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.scene import scene_io
     from nubis_addon.core.errors import NubisError
 
     scene, _objs = _scene_with(blender, make_scene, [("Cloud", small_cloud)])

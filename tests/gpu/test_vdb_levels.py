@@ -41,7 +41,8 @@ def _scene(blender, make_scene, path: Path):
 
 
 def test_over_the_budget_the_viewport_draws_a_coarser_level_and_says_so(blender, make_scene, fine_cumulus, monkeypatch):
-    from nubis_addon.blender import pipeline, vdbclouds
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.scene import vdbclouds
 
     scene, obj = _scene(blender, make_scene, fine_cumulus)
     finest = pipeline.render_viewport(scene, W, H)
@@ -65,7 +66,7 @@ def test_over_the_budget_the_viewport_draws_a_coarser_level_and_says_so(blender,
 
 
 def test_f12_draws_the_level_that_fits(blender, make_scene, fine_cumulus, tmp_path, monkeypatch):
-    from nubis_addon.blender import vdbclouds
+    from nubis_addon.blender.scene import vdbclouds
     from nubis_addon.core import imageio
 
     scene, obj = _scene(blender, make_scene, fine_cumulus)

@@ -57,7 +57,7 @@ def _scene(blender, make_scene, path: Path, density: float = 1.0, space: str = "
 
 def _against_cycles(blender, scene, out: Path) -> dict:
     """compare's single scattering at 32x18 (its viewport four times supersampled), Cycles at 64 samples."""
-    from nubis_addon.blender import comparison
+    from nubis_addon.blender.jobs import comparison
 
     blender.context.view_layer.update()
     options = CompareOptions(width=32, height=18, samples=64, mode="single", reference=False)
@@ -81,7 +81,7 @@ def test_a_scaled_object_is_the_cloud_cycles_renders(blender, make_scene, files,
     """The quarter-size file on an object scaled x4. Space = World: the file's values per metre; Space =
     Object: per unit of the object, so Density x4 gives the same cloud. Both are the 50 m file's cloud in
     the viewport, and Cycles renders them so too."""
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
 
     scene, _obj = _scene(blender, make_scene, files["full"])
     want = pipeline.render_viewport(scene, W, H)
@@ -96,7 +96,7 @@ def test_a_scaled_object_is_the_cloud_cycles_renders(blender, make_scene, files,
 
 
 def test_object_space_without_its_density_is_four_times_thinner(blender, make_scene, files):
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
 
     scene, obj = _scene(blender, make_scene, files["quarter"], 1.0, "OBJECT")
     obj.scale = (SCALE, SCALE, SCALE)
@@ -145,7 +145,7 @@ def test_a_moved_object_is_where_cycles_renders_it(blender, make_scene, files, m
     not where the object alone would put it). Its light is the scaled cases' comparison; here its
     opacity, pixel by pixel, against Cycles' (single scattering, 128 samples). Measured alpha RMSE
     0.011-0.014 on 5.3; 0.012-0.021 on 4.5, whose Cycles reads the delta-scaled cloud 0.02 apart."""
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
     from nubis_addon.core import metrics
 
     scene, obj = _scene(blender, make_scene, files["full"], 1.0, "OBJECT")

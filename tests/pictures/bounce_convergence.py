@@ -35,7 +35,9 @@ def luminance(rgba: np.ndarray) -> np.ndarray:
 def measure(name: str, args) -> dict:
     import bpy
 
-    from nubis_addon.blender import comparison, ensure_registered, pipeline, scenepresets
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.jobs import comparison, pipeline
+    from nubis_addon.blender.scene import scenepresets
     from nubis_addon.core.presets import load_preset
 
     bpy.ops.wm.read_factory_settings(use_empty=True)

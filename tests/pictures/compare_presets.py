@@ -21,7 +21,9 @@ def compare_preset(name: str, out_dir: Path, width: int, height: int, samples: i
     """A fresh scene with the preset, compared in full mode with Cycles' noise measured: (scene, metrics)."""
     import bpy
 
-    from nubis_addon.blender import comparison, ensure_registered, scenepresets
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.jobs import comparison
+    from nubis_addon.blender.scene import scenepresets
     from nubis_addon.core.presets import load_preset
 
     bpy.ops.wm.read_factory_settings(use_empty=True)

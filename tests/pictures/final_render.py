@@ -1,6 +1,6 @@
 """Make the README's final-render pictures: New Cloudscape (default preset) plus a 40 km grey ground
 plane and an 800 m cube, rendered with bpy.ops.render.render() in EEVEE and in Cycles at frames 1 and 240
-(the clouds behind the cube, their shadows on the ground, moved by the wind; blender/scene_render.py).
+(the clouds behind the cube, their shadows on the ground, moved by the wind; blender/f12/scene_render.py).
 
 Run from the repository root:  .venv-5.3/bin/python tests/pictures/final_render.py OUT.png [WIDTH HEIGHT]
 """

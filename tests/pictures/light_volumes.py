@@ -30,7 +30,10 @@ SAVE = os.environ.get(
 def measure(name: str, width: int, height: int, passes: int) -> dict:
     import bpy
 
-    from nubis_addon.blender import ensure_registered, pipeline, runtime, scenepresets
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.host import runtime
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.scene import scenepresets
     from nubis_addon.core import metrics
     from nubis_addon.core.presets import load_preset
 

@@ -1,8 +1,8 @@
 """Make the README's peak-through-the-clouds picture: New Cloudscape (default preset), a 5 km rocky peak
 16 km ahead of a camera 1 km up, piercing the cloud layer, and a ground plane; F12
 (bpy.ops.render.render()) in EEVEE (left) and Cycles (right). The clouds in front of the peak's flanks
-veil them, the peak stands above the layer, and the clouds' shadows fall on it (blender/composition.py,
-blender/shadows.py).
+veil them, the peak stands above the layer, and the clouds' shadows fall on it (blender/f12/composition.py,
+blender/f12/shadows.py).
 
 Run from the repository root:  .venv-5.3/bin/python tests/pictures/peak_render.py OUT.png [WIDTH HEIGHT]
 """

@@ -34,7 +34,9 @@ def main(out: str) -> None:
     from mathutils import Euler, Vector
 
     import nubis_addon
-    from nubis_addon.blender import ensure_registered, pipeline, scenepresets
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.scene import scenepresets
     from nubis_addon.core import imageio
     from nubis_addon.core.state import sun_vector
     from nubis_addon.render.gpu_context import ensure_gpu_context

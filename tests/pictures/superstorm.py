@@ -19,7 +19,9 @@ def main(out_dir: str) -> None:
     import bpy
 
     import nubis_addon
-    from nubis_addon.blender import ensure_registered, pipeline, scenepresets
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.scene import scenepresets
     from nubis_addon.core import imageio
     from nubis_addon.core.presets import load_preset
     from nubis_addon.render.gpu_context import ensure_gpu_context

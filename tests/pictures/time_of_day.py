@@ -2,7 +2,7 @@
 then only the Sun lamp is turned through sunset, from 6 degrees above the horizon to 4 below it, seen
 towards the sun (top row) and away from it (bottom row). The sky, the lamp's colour (the atmosphere's
 transmittance at the ground), the sun each cloud sees at its own altitude (Earth's shadow included) and
-the clouds' sky light follow the lamp by themselves (blender/sky.py, docs/sky.md#the-sun-each-cloud-sees);
+the clouds' sky light follow the lamp by themselves (blender/scene/sky.py, docs/sky.md#the-sun-each-cloud-sees);
 the camera turns to frame each shot.
 
 Run from the repository root:  .venv-5.3/bin/python tests/pictures/time_of_day.py OUT.png
@@ -36,7 +36,9 @@ def main(out: str) -> None:
     from mathutils import Euler, Vector
 
     import nubis_addon
-    from nubis_addon.blender import ensure_registered, pipeline, scenepresets
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.scene import scenepresets
     from nubis_addon.core import imageio
     from nubis_addon.core.state import sun_vector
     from nubis_addon.render.gpu_context import ensure_gpu_context

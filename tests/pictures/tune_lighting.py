@@ -88,7 +88,7 @@ def reference(name: str, out: Path, width: int, height: int, samples: int) -> di
     set of references); otherwise one is made, without the reference-march diagnostic."""
     import bpy
 
-    from nubis_addon.blender import comparison
+    from nubis_addon.blender.jobs import comparison
 
     try:
         m = json.loads((out / name / "metrics.json").read_text(encoding="utf-8"))
@@ -126,7 +126,9 @@ def prepare(out: Path, width: int, height: int, samples: int) -> dict:
     """Each preset's converged Cycles reference (reference()) and its viewport shot."""
     import bpy
 
-    from nubis_addon.blender import ensure_registered, pipeline, scenepresets
+    from nubis_addon.blender import ensure_registered
+    from nubis_addon.blender.jobs import pipeline
+    from nubis_addon.blender.scene import scenepresets
     from nubis_addon.core import imageio
     from nubis_addon.core.presets import find_preset, list_presets, load_preset
 
@@ -167,7 +169,7 @@ def _blocks(image: np.ndarray) -> np.ndarray:
 
 def evaluate(shots: dict, values: dict) -> dict:
     """Each preset's metrics (per pixel) with the block error added as `block_error`."""
-    from nubis_addon.blender import pipeline
+    from nubis_addon.blender.jobs import pipeline
     from nubis_addon.core import metrics
 
     result = {}
