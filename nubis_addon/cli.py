@@ -36,7 +36,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from .core import console as terminal
-from .core import distributed, interrupt, limits, sequence, vdbcloud
+from .core import distributed, interrupt, limits, sequence, vdbplacement, vdbread
 from .core.console import Console
 from .core.errors import NubisError
 from .core.fsutil import check_output_dir, check_output_path, check_utf8_name
@@ -361,10 +361,12 @@ def check_arguments(args) -> None:
     if args.command == "preview" and args.frames:
         sequence.parse_frames(args.frames, limits.PREVIEW_FRAMES_MAX, "preview")
     files = getattr(args, "vdb", None) or []
-    if len(files) > vdbcloud.MAX_CLOUDS:
-        raise NubisError(f"--vdb names {len(files)} files: at most {vdbcloud.MAX_CLOUDS} VDB clouds are drawn at once")
+    if len(files) > vdbplacement.MAX_CLOUDS:
+        raise NubisError(
+            f"--vdb names {len(files)} files: at most {vdbplacement.MAX_CLOUDS} VDB clouds are drawn at once"
+        )
     for path in files:
-        vdbcloud.check_fits(path)  # missing, damaged, no float grid, too large to draw: said before any work
+        vdbread.check_fits(path)  # missing, damaged, no float grid, too large to draw: said before any work
     if getattr(args, "with_cloudscape", False) and not files:
         raise NubisError("--with-cloudscape goes with --vdb: the procedural clouds are on without it")
     limits.check_noise_target("--noise-target", getattr(args, "noise_target", None))

@@ -1,4 +1,4 @@
-/* Artists' OpenVDB clouds (core/vdbcloud.py), sparse on the GPU as Nubis³ keeps its voxel clouds
+/* Artists' OpenVDB clouds (core/vdbread.py), sparse on the GPU as Nubis³ keeps its voxel clouds
  * (Schneider, SIGGRAPH 2023): each cloud's active leaves are bricks of 9x9x9 values in one 3D atlas
  * (vdb_atlas), and an index texture (vdb_index) names the brick of every leaf of its box, or -1 for
  * an empty one, which is also the level the march skips empty space by (core/bricks.py). Compiled in

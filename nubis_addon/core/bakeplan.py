@@ -424,7 +424,7 @@ def plan_tiles(state: CloudState, plan: BakePlan, tile: int = TILE) -> list[Tile
 
 
 def _vdb_spans(state: CloudState, rect: tuple[float, float, float, float], v: float, oz: float, nz: int) -> list:
-    """The slices of the artists' VDB clouds' world boxes (core/vdbcloud.py) over a tile's rectangle, with
+    """The slices of the artists' VDB clouds' world boxes (core/vdbread.py) over a tile's rectangle, with
     the half voxel a sample reads."""
     xa, xb, ya, yb = rect
     spans = []

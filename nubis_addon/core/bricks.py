@@ -14,7 +14,7 @@ kept when any of its 9x9x9 voxels holds cloud, so a sample near an empty leaf's 
 cloud in the next one.
 
 This module has no Blender and no GPU: it turns dense blocks of a grid (copied out of OpenVDB block by
-block where the grid's tree has nodes, core/vdbcloud.py) into the atlas and index arrays, and back for
+block where the grid's tree has nodes, core/vdbread.py) into the atlas and index arrays, and back for
 the tests.
 """
 

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from . import coverage, paint
+from . import coverage, paintraster
 from . import fields as fieldgen
 from . import storms as stormgen
 
@@ -28,7 +28,7 @@ class StackInputs:
     horizon: float | None = None  # the horizon rule's start (metres), None with the rule off
     camera_xy: tuple[float, float] = (0.0, 0.0)  # where the horizon rule measures from
     cover: float = 0.5  # the Coverage slider: the fraction of the sky covered, seen from above
-    painted: Sequence[paint.PaintLayer] = ()  # its enabled paint layers, rasterized
+    painted: Sequence[paintraster.PaintLayer] = ()  # its enabled paint layers, rasterized
     has_paint: bool = False  # whether its stack holds paint layers at all (a live stroke re-applies onto pre)
     storms: Sequence[stormgen.Storm] = ()  # superstorm stencils (the first layer's: GDC22)
     progress: Callable[[float], None] | None = None
@@ -63,7 +63,7 @@ def composite_stack(inputs: StackInputs) -> StackResult:
     # them, which are kept so a live stroke re-applies its paint to a rectangle only.
     pre = None
     if inputs.has_paint or inputs.painted:
-        planes = paint.pre_planes(result)
-        paint.apply(result, planes, inputs.painted, m)
+        planes = paintraster.pre_planes(result)
+        paintraster.apply(result, planes, inputs.painted, m)
         pre = (planes, m)
-    return StackResult(result, hist, m, paint.effective_multiplier(m, inputs.painted), pre)
+    return StackResult(result, hist, m, paintraster.effective_multiplier(m, inputs.painted), pre)

@@ -76,7 +76,7 @@ class CloudState:
     # metres (orthographic). 0 reads the full-resolution noise everywhere, as the bake does.
     pixel_angle: float = 0.0
     pixel_size: float = 0.0
-    # Artists' OpenVDB clouds drawn with the sky (core/vdbcloud.py Placement), at most vdbcloud.MAX_CLOUDS.
+    # Artists' OpenVDB clouds drawn with the sky (core/vdbplacement.py Placement), at most MAX_CLOUDS of them.
     vdb_clouds: tuple = ()
     vdb_gpu_budget: int = DEFAULT_GPU_LIMIT  # bytes the VDB clouds may take on the GPU (the preference)
     # A layered sky (core/cloudlayers.py): the further layers drawn with the first, in the artist's order,

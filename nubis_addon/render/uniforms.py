@@ -16,7 +16,7 @@ from functools import cache
 
 import numpy as np
 
-from ..core import cloudlayers, lightvolume, march, schema, sky, storms, vdbcloud
+from ..core import cloudlayers, lightvolume, march, schema, sky, storms, vdbplacement
 from ..core.errors import NubisError
 from ..core.state import MAX_STORMS, CloudState, wind_vector
 
@@ -26,7 +26,7 @@ def _volume_row(volume, row: int):
 
 
 def _vdb_atlas(st: CloudState) -> tuple:
-    per_side = vdbcloud.gpu_layout(st.vdb_clouds).per_side if st.vdb_clouds else (1, 1, 1)
+    per_side = vdbplacement.gpu_layout(st.vdb_clouds).per_side if st.vdb_clouds else (1, 1, 1)
     return (*map(float, per_side), 0.0)
 
 
@@ -152,31 +152,31 @@ _ARRAYS: tuple[tuple[str, int, str, Callable[[CloudState], list]], ...] = (
         _storm_rows(lambda st, s: (s.flash_x, s.flash_y, s.flash_ground, _storm_time(_vortex_time(st, s), s.spin))),
     ),
     *(
-        (f"vdb_index_{axis}", vdbcloud.MAX_CLOUDS, f"world to the VDB cloud's leaf-relative index {axis}", fn)
+        (f"vdb_index_{axis}", vdbplacement.MAX_CLOUDS, f"world to the VDB cloud's leaf-relative index {axis}", fn)
         for axis, fn in (("x", _vdb_rows(0)), ("y", _vdb_rows(1)), ("z", _vdb_rows(2)))
     ),
     (
         "vdb_leaves",
-        vdbcloud.MAX_CLOUDS,
+        vdbplacement.MAX_CLOUDS,
         "the VDB cloud's index: leaves x, y, z, its first z in the index texture",
         lambda st: [
             (*p.cloud.bricks.index.shape[::-1], z)
-            for p, z in zip(st.vdb_clouds, vdbcloud.gpu_layout(st.vdb_clouds).first_slice, strict=True)
+            for p, z in zip(st.vdb_clouds, vdbplacement.gpu_layout(st.vdb_clouds).first_slice, strict=True)
         ],
     ),
     (
         "vdb_box_lo",
-        vdbcloud.MAX_CLOUDS,
+        vdbplacement.MAX_CLOUDS,
         "the VDB cloud's world box, low corner; density per value (extinction scale / density sigma)",
         lambda st: [(*p.world_box[0], p.extinction_scale / st.params["density_sigma"]) for p in st.vdb_clouds],
     ),
     (
         "vdb_box_hi",
-        vdbcloud.MAX_CLOUDS,
+        vdbplacement.MAX_CLOUDS,
         "the VDB cloud's world box, high corner; its first brick in the atlas",
         lambda st: [
             (*p.world_box[1], first)
-            for p, first in zip(st.vdb_clouds, vdbcloud.gpu_layout(st.vdb_clouds).first_brick, strict=True)
+            for p, first in zip(st.vdb_clouds, vdbplacement.gpu_layout(st.vdb_clouds).first_brick, strict=True)
         ],
     ),
     (
@@ -212,7 +212,7 @@ def struct_source() -> str:
     lines = ["/* Generated from core/schema.py by render/uniforms.py: one member per setting, by its key. */"]
     lines.append(f"#define NUBIS_MAX_STORMS {MAX_STORMS}")
     lines.append(f"#define NUBIS_MAX_LIGHT_TAPS {march.MAX_LIGHT_TAPS}")
-    lines.append(f"#define NUBIS_MAX_VDB {vdbcloud.MAX_CLOUDS}")
+    lines.append(f"#define NUBIS_MAX_VDB {vdbplacement.MAX_CLOUDS}")
     lines.append(f"#define NUBIS_MAX_CLOUD_LAYERS {cloudlayers.MAX_CLOUD_LAYERS}")
 
     def size_name(name: str) -> str:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import gpu
 import numpy as np
 
-from ..core import bricks, vdbcloud
+from ..core import bricks, vdbplacement
 from ..core.errors import NubisError
 from ..core.sequence import human_bytes
 
@@ -39,7 +39,7 @@ def _texture(arr: np.ndarray, fmt: str) -> gpu.types.GPUTexture:
 def _atlas_texture(placements) -> gpu.types.GPUTexture:
     """The bricks written straight into the upload's own float buffer (a numpy view of it): the atlas is
     never held twice on the host (docs/measurements.md#vdb-import)."""
-    bx, by, bz = vdbcloud.gpu_layout(placements).per_side
+    bx, by, bz = vdbplacement.gpu_layout(placements).per_side
     size = (bx * bricks.BRICK, by * bricks.BRICK, bz * bricks.BRICK)
     _check_size(size, ATLAS_FORMAT)
     buf = gpu.types.Buffer("FLOAT", size[0] * size[1] * size[2])
@@ -47,7 +47,7 @@ def _atlas_texture(placements) -> gpu.types.GPUTexture:
     return gpu.types.GPUTexture(size, format=ATLAS_FORMAT, data=buf)
 
 
-def combined_index(placements, layout: vdbcloud.GpuLayout) -> np.ndarray:
+def combined_index(placements, layout: vdbplacement.GpuLayout) -> np.ndarray:
     """Every cloud's leaf index at its first slice of the shared index texture, brick numbers as they are
     within each cloud (the shader adds the cloud's first brick), -1 where a leaf is empty."""
     out = np.full(layout.index_shape, -1.0, np.float32)
@@ -59,7 +59,7 @@ def combined_index(placements, layout: vdbcloud.GpuLayout) -> np.ndarray:
 
 def gpu_bytes(placements) -> int:
     """What the clouds' textures take on the GPU (half-float atlas, float index)."""
-    return vdbcloud.shared_gpu_bytes(placements)
+    return vdbplacement.shared_gpu_bytes(placements)
 
 
 class VdbTextures:
@@ -89,5 +89,5 @@ class VdbTextures:
                 "may take: draw fewer of them, or coarser ones, or raise the budget in the preferences"
             )
         atlas_texture = _atlas_texture(placements)
-        index_texture = _texture(combined_index(placements, vdbcloud.gpu_layout(placements)), INDEX_FORMAT)
+        index_texture = _texture(combined_index(placements, vdbplacement.gpu_layout(placements)), INDEX_FORMAT)
         self.atlas, self.index, self.bytes, self.key = atlas_texture, index_texture, need, key

@@ -1052,7 +1052,7 @@ def s_bake_disturbed(step: Step):
     Erosion slider moves while it bakes; the file equals a bake of the starting state made afterwards, its
     metadata names the starting frame, and Ctrl-Z takes the imported Volume away and leaves the file."""
     pipeline, snapshot = ext_module("jobs.pipeline"), ext_module("jobs.snapshot")
-    vdbio = _core_module("vdbio")
+    vdbwrite = _core_module("vdbwrite")
     bake_options = _core_module("jobs").BakeOptions
     scene = bpy.context.scene
     start_frame, erosion = scene.frame_current, scene.nubis.density_erosion
@@ -1096,11 +1096,14 @@ def s_bake_disturbed(step: Step):
     scene.frame_set(start_frame)
     scene.nubis.density_erosion = erosion
     pipeline.bake(scene, ref, bake_options(voxel_size=voxel))
-    a, lo_a = vdbio.read_grid_array(path, "density")
-    b, lo_b = vdbio.read_grid_array(ref, "density")
+    a, lo_a = vdbwrite.read_grid_array(path, "density")
+    b, lo_b = vdbwrite.read_grid_array(ref, "density")
     same = lo_a == lo_b and a.shape == b.shape
     diff = float(abs(a - b).max()) if same else float("inf")
-    na, nb = vdbio.read_grid_info(path)["density"].active_voxels, vdbio.read_grid_info(ref)["density"].active_voxels
+    na, nb = (
+        vdbwrite.read_grid_info(path)["density"].active_voxels,
+        vdbwrite.read_grid_info(ref)["density"].active_voxels,
+    )
     step.check(
         same and na == nb and diff <= 1e-6,
         f"the disturbed bake equals the start state's: {na} vs {nb} voxels, max diff {diff:g}",

@@ -47,7 +47,7 @@ def vdb_print_reads(path: Path) -> str:
 
 
 def main() -> None:
-    from nubis_addon.core import vdbio
+    from nubis_addon.core import vdbwrite
 
     quick = "--quick" in sys.argv
     cases = [
@@ -64,7 +64,7 @@ def main() -> None:
         for label, args in cases:
             path = Path(tmp) / "clouds.vdb"
             seconds, rss, summary = run_bake([*args, "--out", str(path)])
-            info = vdbio.read_grid_info(path)["density"]
+            info = vdbwrite.read_grid_info(path)["density"]
             (x0, y0, z0), (x1, y1, z1) = info.index_bbox
             bbox = (x1 - x0 + 1) * (y1 - y0 + 1) * (z1 - z0 + 1)
             box = summary.split(": ", 1)[1].split(" voxels")[0]

@@ -82,13 +82,13 @@ def test_compare_draft_is_half_the_scene_size_without_the_reference_march(tmp_pa
 
 
 def test_bake_and_cycles_commands(tmp_path):
-    from nubis_addon.core import imageio, vdbio
+    from nubis_addon.core import imageio, vdbwrite
 
     vdb = tmp_path / "c.vdb"
     r = run_cli("bake", "--out", str(vdb), "--voxel-size", "500")
     assert r.returncode == 0, r.stderr
     assert "baked default" in _one_line(r.stdout)
-    assert vdbio.read_grid_info(vdb)["density"].active_voxels > 0
+    assert vdbwrite.read_grid_info(vdb)["density"].active_voxels > 0
     png = tmp_path / "c.png"
     r = run_cli("cycles", "--out", str(png), "--width", "32", "--height", "18", "--samples", "2", "--voxel-size", "500")
     assert r.returncode == 0, r.stderr
@@ -104,7 +104,7 @@ def test_openvdb_10_reads_the_bake_of_this_line(tmp_path):
     import struct
     import subprocess
 
-    from nubis_addon.core import bundled, vdbio
+    from nubis_addon.core import bundled, vdbwrite
 
     tool = shutil.which("vdb_print")
     assert tool, "vdb_print is missing: ./.ci/setup installs it (Debian's libopenvdb-tools)"
@@ -114,7 +114,7 @@ def test_openvdb_10_reads_the_bake_of_this_line(tmp_path):
     assert version == bundled.openvdb().FILE_FORMAT_VERSION
     r = subprocess.run([tool, "-l", str(vdb)], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
-    ours = vdbio.read_grid_info(vdb)["density"]
+    ours = vdbwrite.read_grid_info(vdb)["density"]
     active = int(re.search(r"Number of active voxels:\s+([\d,]+)", r.stdout).group(1).replace(",", ""))
     low = float(re.search(r"Min value:\s+(\S+)", r.stdout).group(1))
     high = float(re.search(r"Max value:\s+(\S+)", r.stdout).group(1))

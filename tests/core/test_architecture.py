@@ -185,7 +185,7 @@ LONG_MODULES = {
     "core.schema": None,
     "core.noise": None,
     "core.paint": 786,
-    "core.vdbcloud": 651,
+    "core.vdbread": 651,
     "blender.scene.sky": 627,
     "blender.sidebar.paint": 601,
 }

@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nubis_addon.core import fields, imageio, metrics, vdbio
+from nubis_addon.core import fields, imageio, metrics, vdbwrite
 from nubis_addon.core.bakeplan import plan_bake
 from nubis_addon.core.errors import NubisError
 from nubis_addon.core.fsutil import atomic_path, check_output_path
@@ -128,14 +128,14 @@ def test_output_path_checks(tmp_path: Path):
 def test_vdb_round_trip(tmp_path: Path):
     vol = np.zeros((4, 5, 6), np.float32)  # z, y, x
     vol[1, 2, 3] = 0.75
-    path = vdbio.write_vdb(tmp_path / "t.vdb", {"density": vol}, 50.0, (100.0, 200.0, 1500.0))
-    info = vdbio.read_grid_info(path)["density"]
+    path = vdbwrite.write_vdb(tmp_path / "t.vdb", {"density": vol}, 50.0, (100.0, 200.0, 1500.0))
+    info = vdbwrite.read_grid_info(path)["density"]
     assert info.active_voxels == 1 and info.voxel_size == pytest.approx(50.0)
     assert info.origin == pytest.approx((100.0, 200.0, 1500.0))
     assert info.index_bbox == ((3, 2, 1), (3, 2, 1))  # x, y, z
     with pytest.raises(NubisError, match="NaN"):
-        vdbio.write_vdb(tmp_path / "t.vdb", {"density": vol * np.nan}, 50.0, (0, 0, 0))
-    assert vdbio.read_grid_info(path)["density"].active_voxels == 1  # the good file survived
+        vdbwrite.write_vdb(tmp_path / "t.vdb", {"density": vol * np.nan}, 50.0, (0, 0, 0))
+    assert vdbwrite.read_grid_info(path)["density"].active_voxels == 1  # the good file survived
 
 
 def test_image_round_trip(tmp_path: Path):

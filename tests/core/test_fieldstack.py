@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from nubis_addon.core import coverage, fieldstack, paint, presets, schema
+from nubis_addon.core import coverage, fieldstack, paint, paintraster, presets, schema
 from nubis_addon.core import storms as stormgen
 
 
@@ -32,7 +32,7 @@ def test_painted_cover_on_a_clear_sky_is_the_paint_alone():
     res = 64
     values = np.zeros((res, res), np.float32)
     values[20:30, 20:30] = 1.0
-    stroke = paint.PaintLayer("coverage", 1.0, values)
+    stroke = paintraster.PaintLayer("coverage", 1.0, values)
     done = fieldstack.composite_stack(_inputs(cover=0.0, painted=[stroke], has_paint=True))
     assert done.multiplier == 0.0 and done.stored_multiplier == paint.MULTIPLIER_FLOOR
     seen = done.planes["a"][..., 0] * done.stored_multiplier  # what the shader reads

@@ -11,7 +11,7 @@ import time
 import numpy as np
 import pytest
 
-from nubis_addon.core import paint, presets
+from nubis_addon.core import paint, paintraster, presets
 from nubis_addon.core.errors import NubisError
 
 GRID = paint.Grid(512, 70000.0, 0.0, 0.0)  # the default field: 136.7 m pixels
@@ -141,7 +141,7 @@ def test_the_brush_radius_and_strength_sentences():
 
 
 def test_a_stored_dab_too_small_for_float32_is_skipped_by_the_raster():
-    r = paint.Raster(GRID)
+    r = paintraster.Raster(GRID)
     for dab in ((0.0, 0.0, 0.0, 1.0, 0, 0, 1), (0.0, 0.0, 1e-300, 1.0, 0, 0, 1), (FLT_MAX, 0.0, 2500.0, 1.0, 0, 0, 1)):
         assert r.add(dab) is None
     assert r.values.max() == 0.0 and np.isfinite(r.values).all()
@@ -220,26 +220,26 @@ def test_a_long_composite_is_announced_with_its_time_and_an_absurd_one_refused()
     dabs[:, 2] = 2500.0
     dabs[::100, 6] = 1  # 10,000 strokes of 100 dabs
     start = time.perf_counter()
-    cost = paint.raster_cost(dabs, GRID)
+    cost = paintraster.raster_cost(dabs, GRID)
     assert time.perf_counter() - start < 0.5  # arithmetic, nothing rasterized
     # Measured here: 33 s for such a layer (core/paint.py's comment); the estimate says about 40-45 s.
     assert 30.0 < cost.seconds < 60.0
-    assert paint.notice(cost) == f"compositing 1,000,000 dabs takes about {cost.seconds:.0f} s"
-    assert paint.notice(paint.raster_cost(dabs[:1000], GRID)) is None  # 40 ms: no notice
-    paint.check_cost(cost)
-    huge = paint.Cost(128_000_000, 5000.0, 30 * 2**30)
-    assert refused(lambda: paint.check_cost(huge)) == (
+    assert paintraster.notice(cost) == f"compositing 1,000,000 dabs takes about {cost.seconds:.0f} s"
+    assert paintraster.notice(paintraster.raster_cost(dabs[:1000], GRID)) is None  # 40 ms: no notice
+    paintraster.check_cost(cost)
+    huge = paintraster.Cost(128_000_000, 5000.0, 30 * 2**30)
+    assert refused(lambda: paintraster.check_cost(huge)) == (
         "compositing 128,000,000 dabs would hold about 30.0 GB, over the 8 GB Nubis allows: clear or disable "
         "paint layers, or lower the field resolution"
     )
     # A cached raster counts as done: only a stroke's new dabs are still to rasterize.
-    paint.forget()
+    paintraster.forget()
     some = dabs[:2000]
-    paint.raster(11, some, GRID)
+    paintraster.raster(11, some, GRID)
     grown = np.vstack([some, dabs[:500]])
-    assert paint.composite_cost([(11, grown)], GRID).dabs == 500
-    assert paint.composite_cost([(11, dabs[:10])], GRID).dabs == 10  # an undo: from scratch
-    paint.forget()
+    assert paintraster.composite_cost([(11, grown)], GRID).dabs == 500
+    assert paintraster.composite_cost([(11, dabs[:10])], GRID).dabs == 10  # an undo: from scratch
+    paintraster.forget()
 
 
 def test_the_raster_prints_the_notice_before_a_long_composite(monkeypatch):
@@ -248,9 +248,9 @@ def test_the_raster_prints_the_notice_before_a_long_composite(monkeypatch):
     lines = []
     monkeypatch.setattr(paint, "NOTICE_S", 0.0)
     monkeypatch.setattr(console, "current", lambda: type("C", (), {"line": staticmethod(lines.append)})())
-    paint.forget()
-    paint.raster(12, paint.stroke_dabs([(0.0, 0.0, 1.0, True), (5000.0, 0.0, 1.0, False)], 2500.0, 1.0), GRID)
-    paint.forget()
+    paintraster.forget()
+    paintraster.raster(12, paint.stroke_dabs([(0.0, 0.0, 1.0, True), (5000.0, 0.0, 1.0, False)], 2500.0, 1.0), GRID)
+    paintraster.forget()
     assert len(lines) == 1 and lines[0].startswith("Nubis: compositing 11 dabs takes about ")
 
 

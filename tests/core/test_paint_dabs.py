@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from nubis_addon.core import paint, presets, userpresets
+from nubis_addon.core import paint, paintraster, presets, userpresets
 from nubis_addon.core.errors import NubisError
 
 GRID = paint.Grid(256, 64000.0, 0.0, 0.0)  # 250 m pixels
@@ -30,7 +30,7 @@ def test_dabs_are_spaced_along_the_stroke_with_the_pressure_interpolated():
 def test_overlapping_dabs_of_one_stroke_take_the_larger_weight_not_the_sum():
     slow = paint.stroke_dabs([(0, 0, 1, True), (4000, 0, 1, False)], 2000.0, 0.7, spacing=0.05)
     fast = paint.stroke_dabs([(0, 0, 1, True), (4000, 0, 1, False)], 2000.0, 0.7, spacing=0.5)
-    r_slow, r_fast = paint.Raster(GRID), paint.Raster(GRID)
+    r_slow, r_fast = paintraster.Raster(GRID), paintraster.Raster(GRID)
     r_slow.add_all(slow)
     r_fast.add_all(fast)
     assert r_slow.values.max() == pytest.approx(0.7, abs=0.01)  # the sum of 81 dabs would pass 1
@@ -40,13 +40,13 @@ def test_overlapping_dabs_of_one_stroke_take_the_larger_weight_not_the_sum():
     r_slow.add_all(slow)
     assert r_slow.values.max() == pytest.approx(1.0)
     # Subtracting lowers, to -1 at most.
-    r = paint.Raster(GRID)
+    r = paintraster.Raster(GRID)
     r.add_all(paint.stroke_dabs([(0, 0, 1, True)], 2000.0, -1.0))
     assert r.values.min() == pytest.approx(-1.0, abs=0.03) and r.values.max() == 0.0
 
 
 def test_a_dab_touches_only_its_disc():
-    r = paint.Raster(GRID)
+    r = paintraster.Raster(GRID)
     rect = r.add((1000.0, -2000.0, 1500.0, 1.0, 0, 0, 1))
     xs = (np.arange(256) + 0.5) / 256 * 64000.0 - 32000.0
     gx, gy = np.meshgrid(xs, xs)
@@ -61,11 +61,11 @@ def test_a_dab_touches_only_its_disc():
 
 def test_falloffs_and_smoothing():
     for falloff, edge in (("constant", 1.0), ("linear", 0.5), ("smooth", 0.5)):
-        r = paint.Raster(GRID)
+        r = paintraster.Raster(GRID)
         x0 = -32000.0 + 128.5 * 250.0  # a pixel centre
         r.add((x0, x0, 1000.0, 1.0, paint.FALLOFFS.index(falloff), 0, 1))
         assert r.values[128, 130] == pytest.approx(edge, abs=1e-6)  # 500 m from the centre
-    r = paint.Raster(GRID)
+    r = paintraster.Raster(GRID)
     r.add_all(paint.stroke_dabs([(0, 0, 1, True)], 1500.0, 1.0, falloff="constant"))
     hard_edge = np.abs(np.diff(r.values, axis=1)).max()
     r.add_all(paint.stroke_dabs([(0, 0, 1, True)], 3000.0, 1.0, mode="smooth"))
@@ -73,19 +73,19 @@ def test_falloffs_and_smoothing():
 
 
 def test_the_cached_raster_grows_with_new_strokes_and_rebuilds_after_an_undo():
-    paint.forget()
+    paintraster.forget()
     a = paint.stroke_dabs([(0, 0, 1, True), (5000, 0, 1, False)], 2000.0, 1.0)
     b = paint.stroke_dabs([(0, 4000, 1, True), (5000, 4000, 1, False)], 2000.0, -0.5)
     both = np.vstack([a, b])
-    fresh = paint.Raster(GRID)
+    fresh = paintraster.Raster(GRID)
     fresh.add_all(both)
-    r1 = paint.raster(7, a, GRID)
-    r2 = paint.raster(7, both, GRID)
+    r1 = paintraster.raster(7, a, GRID)
+    r2 = paintraster.raster(7, both, GRID)
     assert r2 is r1 and r2.count == len(both)  # only the new stroke was rasterized
     np.testing.assert_array_equal(r2.values, fresh.values)
-    r3 = paint.raster(7, a, GRID)  # undo: fewer dabs
+    r3 = paintraster.raster(7, a, GRID)  # undo: fewer dabs
     assert r3 is not r2
-    only_a = paint.Raster(GRID)
+    only_a = paintraster.Raster(GRID)
     only_a.add_all(a)
     np.testing.assert_array_equal(r3.values, only_a.values)
 
@@ -94,23 +94,23 @@ def test_painted_coverage_adds_after_the_multiplier_and_is_stored_divided_by_it(
     pre = np.full((4, 4), 0.2, np.float32)
     values = np.zeros((4, 4), np.float32)
     values[1, 1], values[2, 2] = 1.0, -0.5
-    layer = paint.PaintLayer("coverage", 1.0, values)
+    layer = paintraster.PaintLayer("coverage", 1.0, values)
     for m in (0.5, 2.0, 0.0):
-        out = paint.paint_plane("coverage", pre, [layer], m)
-        m_eff = paint.effective_multiplier(m, [layer])
+        out = paintraster.paint_plane("coverage", pre, [layer], m)
+        m_eff = paintraster.effective_multiplier(m, [layer])
         seen = np.clip(out * m_eff, 0, 1)
         assert seen[1, 1] == pytest.approx(1.0)
         assert seen[0, 0] == pytest.approx(min(0.2 * m, 1.0), abs=1e-6)  # unpainted: as the slider had it
         assert seen[2, 2] == pytest.approx(max(min(0.2 * m, 1.0) - 0.5, 0.0), abs=1e-6)
-    assert paint.effective_multiplier(0.0, [layer]) == paint.MULTIPLIER_FLOOR
-    assert paint.effective_multiplier(0.0, [paint.PaintLayer("type", 1.0, values)]) == 0.0
+    assert paintraster.effective_multiplier(0.0, [layer]) == paint.MULTIPLIER_FLOOR
+    assert paintraster.effective_multiplier(0.0, [paintraster.PaintLayer("type", 1.0, values)]) == 0.0
     # Other channels add to their value, clamped.
-    typ = paint.paint_plane("type", pre, [paint.PaintLayer("type", 0.5, values)], 1.0)
+    typ = paintraster.paint_plane("type", pre, [paintraster.PaintLayer("type", 0.5, values)], 1.0)
     assert typ[1, 1] == pytest.approx(0.7) and typ[2, 2] == pytest.approx(0.0) and typ[0, 0] == pytest.approx(0.2)
     # A rectangle re-composites just that part, identically.
     rect = (1, 3, 0, 2)
-    part = paint.paint_plane("coverage", pre, [layer], 0.5, rect)
-    np.testing.assert_array_equal(part, paint.paint_plane("coverage", pre, [layer], 0.5)[1:3, 0:2])
+    part = paintraster.paint_plane("coverage", pre, [layer], 0.5, rect)
+    np.testing.assert_array_equal(part, paintraster.paint_plane("coverage", pre, [layer], 0.5)[1:3, 0:2])
 
 
 def test_bad_brushes_and_strokes_are_refused_with_what_to_do():

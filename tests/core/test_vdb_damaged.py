@@ -14,7 +14,7 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from nubis_addon.core import bricks, vdbcheck, vdbcloud
+from nubis_addon.core import bricks, vdbcheck, vdbplacement, vdbread
 from nubis_addon.core.errors import NubisError
 from tests.vdb_helpers import _openvdb, ball, write_cumulus, write_grid, write_two_voxels
 
@@ -43,14 +43,14 @@ def small_vdb(tmp_path_factory):
 
 def test_a_file_cut_at_every_length_is_refused_in_one_sentence(small_vdb, tmp_path):
     data = small_vdb.read_bytes()
-    assert vdbcloud.read_cloud(small_vdb).active_voxels > 0  # whole, it reads
+    assert vdbread.read_cloud(small_vdb).active_voxels > 0  # whole, it reads
     cut = tmp_path / "cut.vdb"
     cut.write_bytes(data)
     seen = set()
     for n in range(len(data) - 1, 0, -1):
         os.truncate(cut, n)  # (writing each cut anew takes a millisecond on some file systems)
         with pytest.raises(NubisError) as err:
-            vdbcloud.read_cloud(cut)
+            vdbread.read_cloud(cut)
         text = one_sentence(err.value)
         assert "is damaged (" in text and ("cut short" in text or "more than" in text), (n, text)
         seen.add(text.split("is damaged (")[1][:12])
@@ -63,7 +63,7 @@ def test_a_true_header_followed_by_garbage_is_refused(small_vdb, tmp_path, seed)
     bad = tmp_path / "garbage.vdb"
     bad.write_bytes(small_vdb.read_bytes()[:64] + bytes(rng.randrange(256) for _ in range(rng.randrange(10, 9000))))
     with pytest.raises(NubisError, match="is damaged") as err:
-        vdbcloud.read_cloud(bad)
+        vdbread.read_cloud(bad)
     one_sentence(err.value)
 
 
@@ -81,7 +81,7 @@ def test_bytes_changed_in_place_never_allocate_what_they_state(small_vdb, tmp_pa
             b[rng.randrange(0, span)] = rng.randrange(256)
         bad.write_bytes(bytes(b))
         try:
-            vdbcloud.read_cloud(bad)
+            vdbread.read_cloud(bad)
             read += 1
         except NubisError as err:
             one_sentence(err)
@@ -93,7 +93,7 @@ def test_bytes_changed_in_place_never_allocate_what_they_state(small_vdb, tmp_pa
     b[at : at + 4] = (3_200_000_000).to_bytes(4, "little")
     bad.write_bytes(bytes(b))
     with pytest.raises(NubisError, match=r"delayed-load table .* states more than its \d+ bytes hold"):
-        vdbcloud.read_cloud(bad)
+        vdbread.read_cloud(bad)
 
 
 def test_what_is_not_a_vdb_file_is_named_for_what_it_is(tmp_path):
@@ -109,7 +109,7 @@ def test_what_is_not_a_vdb_file_is_named_for_what_it_is(tmp_path):
     cases[tmp_path / "text.vdb"] = "is not an OpenVDB file"
     for path, words in cases.items():
         with pytest.raises(NubisError, match=words) as err:
-            vdbcloud.choose_grid(path)
+            vdbread.choose_grid(path)
         text = one_sentence(err.value)
         assert len(text) < 400  # the 300-character name is shortened
 
@@ -124,7 +124,7 @@ def test_two_voxels_far_apart_are_drawn_within_the_memory_bound(tmp_path):
         path = write_two_voxels(tmp_path / f"{name}.vdb", far)
         tracemalloc.start()
         try:
-            cloud = vdbcloud.read_cloud(path, dtype=np.float32)
+            cloud = vdbread.read_cloud(path, dtype=np.float32)
             peak = tracemalloc.get_traced_memory()[1]
         finally:
             tracemalloc.stop()
@@ -138,7 +138,7 @@ def test_two_voxels_far_apart_are_drawn_within_the_memory_bound(tmp_path):
     path = write_two_voxels(tmp_path / "widest.vdb", (16_400 * 16, 0, 0))
     too_wide = "spans 262401 voxels along x, more than the 262144 .* averaged 16 x 16 x 16 voxels to one"
     with pytest.raises(NubisError, match=too_wide) as err:
-        vdbcloud.read_cloud(path)
+        vdbread.read_cloud(path)
     one_sentence(err.value)
 
 
@@ -153,26 +153,26 @@ def test_active_tiles_count_in_the_estimate(tmp_path):
     vdb.write(str(path), grids=[grid])
     # A coarser level's bricks would fit, but it would be averaged from 69 billion voxels: refused.
     with pytest.raises(NubisError, match="needs at least .* on the GPU as bricks.*68.7 billion voxels") as err:
-        vdbcloud.check_fits(path)
+        vdbread.check_fits(path)
     one_sentence(err.value)
-    assert vdbcloud.estimate_gpu_bytes(path)[1] > 131072 * 729 * 2  # 16^3 leaves of tile per node, 32 nodes
+    assert vdbread.estimate_gpu_bytes(path)[1] > 131072 * 729 * 2  # 16^3 leaves of tile per node, 32 nodes
 
 
 def test_values_beyond_half_floats_stay_finite_and_exact_in_ratio(tmp_path):
     dense = ball() * 1e7 / 0.02  # a peak of 1e7 per metre: half floats end at 65504
-    cloud = vdbcloud.read_cloud(write_grid(tmp_path / "hot.vdb", dense))
+    cloud = vdbread.read_cloud(write_grid(tmp_path / "hot.vdb", dense))
     assert np.isfinite(cloud.bricks.data.astype(np.float32)).all()
     assert cloud.storage_scale > 1.0
     stored = bricks.unpack(cloud.bricks).max() * cloud.storage_scale
     assert stored == pytest.approx(dense.max(), rel=2e-3)
-    placed = vdbcloud.Placement(cloud, np.eye(4), 2.0)
+    placed = vdbplacement.Placement(cloud, np.eye(4), 2.0)
     assert placed.extinction_scale == pytest.approx(2.0 * cloud.storage_scale)
 
 
 def test_a_nameless_grid_is_refused_as_blender_cannot_draw_it(tmp_path):
     path = write_grid(tmp_path / "nameless.vdb", ball(), name="")
     with pytest.raises(NubisError, match="one float grid with no name, which Blender's renderers cannot draw"):
-        vdbcloud.choose_grid(path)
+        vdbread.choose_grid(path)
 
 
 @pytest.mark.parametrize(
@@ -184,9 +184,9 @@ def test_a_nameless_grid_is_refused_as_blender_cannot_draw_it(tmp_path):
     ],
 )
 def test_a_placement_that_cannot_be_inverted_is_one_sentence(tmp_path, matrix, words):
-    cloud = vdbcloud.read_cloud(write_grid(tmp_path / "ball.vdb", ball()))
+    cloud = vdbread.read_cloud(write_grid(tmp_path / "ball.vdb", ball()))
     with pytest.raises(NubisError, match=words) as err:
-        vdbcloud.Placement(cloud, matrix, 1.0).check("Cloud")
+        vdbplacement.Placement(cloud, matrix, 1.0).check("Cloud")
     one_sentence(err.value)
 
 
@@ -194,8 +194,8 @@ def test_a_placement_that_cannot_be_inverted_is_one_sentence(tmp_path, matrix, w
 def test_a_uniform_scale_of_any_size_is_drawn(tmp_path, scale):
     """The limit is the matrix's shape, not its size: a Volume scaled 1e-6 was refused as 'scaled to zero'
     (an absolute determinant test), though its matrix inverts exactly."""
-    cloud = vdbcloud.read_cloud(write_grid(tmp_path / "ball.vdb", ball()))
-    placed = vdbcloud.Placement(cloud, np.diag([scale, scale, scale, 1.0]), 1.0)
+    cloud = vdbread.read_cloud(write_grid(tmp_path / "ball.vdb", ball()))
+    placed = vdbplacement.Placement(cloud, np.diag([scale, scale, scale, 1.0]), 1.0)
     placed.check("Cloud")
     assert np.allclose(placed.world_to_leaf_index[:, :3] @ placed.index_to_world[:3, :3], np.eye(3))
 

@@ -17,17 +17,17 @@ def baked(make_scene, tmp_path):
 
 
 def test_vdb_has_density_grid_transform_and_voxels(baked):
-    from nubis_addon.core import vdbio
+    from nubis_addon.core import vdbwrite
 
     scene, result = baked
-    info = vdbio.read_grid_info(result.path)
+    info = vdbwrite.read_grid_info(result.path)
     assert list(info) == ["density"]
     grid = info["density"]
     assert grid.voxel_size == pytest.approx(400.0)
     assert grid.origin == pytest.approx(result.plan.origin)
     assert grid.active_voxels > 1000 and grid.active_voxels == result.active_voxels
     assert 0.0 < grid.min_max[1] <= 1.0
-    dense, lo = vdbio.read_grid_array(result.path, "density")
+    dense, lo = vdbwrite.read_grid_array(result.path, "density")
     z, y, x = np.nonzero(dense > 0)
     world_x = result.plan.origin[0] + (x + lo[0]) * 400.0
     world_z = result.plan.origin[2] + (z + lo[2]) * 400.0
@@ -116,7 +116,7 @@ def test_rain_absorbs_in_the_viewport_the_bake_and_cycles(make_scene, tmp_path):
     and Cycles adds it."""
     from nubis_addon.blender.jobs import pipeline
     from nubis_addon.blender.scene import cycles_setup, datafield
-    from nubis_addon.core import metrics, vdbio
+    from nubis_addon.core import metrics, vdbwrite
 
     scene = split_coverage_scene(make_scene)
     scene.nubis.lighting_rain_absorption = 4.0
@@ -132,9 +132,9 @@ def test_rain_absorbs_in_the_viewport_the_bake_and_cycles(make_scene, tmp_path):
     assert metrics.luminance(wet)[covered].mean() < 0.8 * metrics.luminance(dry)[covered].mean()
 
     result = pipeline.bake(scene, tmp_path / "rain.vdb", BakeOptions(voxel_size=400.0))
-    assert set(vdbio.read_grid_info(result.path)) == {"density", "absorption"}
-    density, lo = vdbio.read_grid_array(result.path, "density")
-    absorption, lo_abs = vdbio.read_grid_array(result.path, "absorption")
+    assert set(vdbwrite.read_grid_info(result.path)) == {"density", "absorption"}
+    density, lo = vdbwrite.read_grid_array(result.path, "density")
+    absorption, lo_abs = vdbwrite.read_grid_array(result.path, "absorption")
     assert lo == lo_abs and density.shape == absorption.shape
     assert absorption == pytest.approx(3.0 * density, abs=1e-4)
     obj = cycles_setup.import_volume(scene, str(result.path))

@@ -46,7 +46,7 @@ def test_cli_sequence_with_velocity_matches_the_motion_vectors(make_scene, tmp_p
     from nubis_addon import cli
     from nubis_addon.blender.jobs import pipeline
     from nubis_addon.blender.scene import scene_io
-    from nubis_addon.core import vdbio
+    from nubis_addon.core import vdbwrite
 
     out = tmp_path / "clouds_####.vdb"
     code = cli.run(["bake", "--voxel-size", "400", "--frames", "1-4", "--velocity", "--out", str(out)])
@@ -54,7 +54,7 @@ def test_cli_sequence_with_velocity_matches_the_motion_vectors(make_scene, tmp_p
     files = sorted(p.name for p in tmp_path.iterdir())
     assert files == ["clouds_0001.vdb", "clouds_0002.vdb", "clouds_0003.vdb", "clouds_0004.vdb"]
     for name in files:
-        info = vdbio.read_grid_info(tmp_path / name)
+        info = vdbwrite.read_grid_info(tmp_path / name)
         assert set(info) == {"density", "velocity"}
         assert info["velocity"].active_voxels == info["density"].active_voxels > 1000
 
@@ -120,19 +120,19 @@ def distributed_bakes(tmp_path_factory, blender):
 
 
 def test_distributed_bakes_equal_the_serial_bake_voxel_for_voxel(distributed_bakes):
-    from nubis_addon.core import vdbio
+    from nubis_addon.core import vdbwrite
 
     serial = {r.frame: r.path for r in distributed_bakes["serial"].results}
     pairs = [(r.path, serial[r.frame]) for kind in ("frames", "tiles") for r in distributed_bakes[kind].results]
     assert len(pairs) == 3 and distributed_bakes["tiles"].engine == "local:2"
     for a, b in pairs:
         assert a.name == b.name and a.name.startswith("c_0")
-        ia, ib = vdbio.read_grid_info(a), vdbio.read_grid_info(b)
+        ia, ib = vdbwrite.read_grid_info(a), vdbwrite.read_grid_info(b)
         assert set(ia) == set(ib) == {"density", "velocity"}
         assert ia["density"].active_voxels == ib["density"].active_voxels > 1000
         assert ia["velocity"].active_voxels == ib["velocity"].active_voxels
-        da, la = vdbio.read_grid_array(a, "density")
-        db, lb = vdbio.read_grid_array(b, "density")
+        da, la = vdbwrite.read_grid_array(a, "density")
+        db, lb = vdbwrite.read_grid_array(b, "density")
         assert la == lb and np.array_equal(da, db)
 
 

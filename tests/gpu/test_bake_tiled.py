@@ -99,7 +99,7 @@ def test_spans_bound_the_cloud_and_the_cirrus_slab(make_scene):
 
 def test_bake_writes_half_floats_and_pipeline_metadata(make_scene, tmp_path):
     from nubis_addon.blender.jobs import pipeline
-    from nubis_addon.core import bundled, vdbio
+    from nubis_addon.core import bundled, vdbwrite
 
     scene = split_coverage_scene(make_scene)
     full = pipeline.bake(scene, tmp_path / "full.vdb", BakeOptions(voxel_size=400.0))
@@ -110,8 +110,8 @@ def test_bake_writes_half_floats_and_pipeline_metadata(make_scene, tmp_path):
     assert density.saveFloatAsHalf is True
     assert density.gridClass == vdb.GridClass.FOG_VOLUME
     assert half.path.stat().st_size < 0.75 * full.path.stat().st_size
-    a, lo = vdbio.read_grid_array(full.path, "density")
-    b, lo_b = vdbio.read_grid_array(half.path, "density")
+    a, lo = vdbwrite.read_grid_array(full.path, "density")
+    b, lo_b = vdbwrite.read_grid_array(half.path, "density")
     assert lo == lo_b and np.allclose(a, b, rtol=1e-3, atol=1e-4)
     assert meta["nubis_units"] == "metres" and meta["nubis_frame"] == scene.frame_current
     assert meta["nubis_preset"] == "default" and meta["nubis_density_scale"] == pytest.approx(scene.nubis.density_sigma)

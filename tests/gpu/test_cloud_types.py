@@ -9,7 +9,7 @@ from nubis_addon.core.jobs import BakeOptions
 def _band(make_scene, tmp_path, cloud_type: float) -> float:
     from nubis_addon.blender.jobs import pipeline
     from nubis_addon.blender.scene import datafield
-    from nubis_addon.core import vdbio
+    from nubis_addon.core import vdbwrite
 
     scene = make_scene("default", cirrus_coverage=0.0)
     res = scene.nubis.field_resolution
@@ -18,7 +18,7 @@ def _band(make_scene, tmp_path, cloud_type: float) -> float:
     a[..., 2] = cloud_type
     datafield.write_field_image(scene.nubis, "a", a)
     result = pipeline.bake(scene, tmp_path / f"type_{cloud_type}.vdb", BakeOptions(voxel_size=250.0))
-    dense, lo = vdbio.read_grid_array(result.path, "density")
+    dense, lo = vdbwrite.read_grid_array(result.path, "density")
     z = np.nonzero(dense > 1e-3)[0] + lo[2]
     altitude = result.plan.origin[2] + z * result.plan.voxel_size
     assert len(altitude) > 1000

@@ -246,7 +246,7 @@ def four_layers(make_scene, tmp_path):
 def test_four_layers_draw_and_bake_into_one_vdb(four_layers, tmp_path):
     from nubis_addon.blender.jobs import pipeline
     from nubis_addon.blender.scene import scene_io
-    from nubis_addon.core import vdbio
+    from nubis_addon.core import vdbwrite
     from nubis_addon.core.jobs import BakeOptions
 
     scene = four_layers
@@ -256,7 +256,7 @@ def test_four_layers_draw_and_bake_into_one_vdb(four_layers, tmp_path):
     image = _render(scene)
     assert np.isfinite(image).all() and image[..., 3].max() > 0.5
     result = pipeline.bake(scene, tmp_path / "four.vdb", BakeOptions(voxel_size=250.0))
-    dense, lo = vdbio.read_grid_array(result.path, "density")
+    dense, lo = vdbwrite.read_grid_array(result.path, "density")
     z = np.nonzero(dense.max(axis=(1, 2)) > 0)[0]
     altitudes = result.plan.origin[2] + (z + lo[2]) * 250.0
     # Every layer's altitudes hold cloud, and the air between them none (curvature lowers the far corners).

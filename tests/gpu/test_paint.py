@@ -427,7 +427,7 @@ def test_a_scenes_runtime_state_lives_in_one_object_and_ends_in_one_place(blende
     with forget_stale (a file load, unregister); core/paint.py caches rasters under scene_io's numbers."""
     from nubis_addon.blender.live import events
     from nubis_addon.blender.scene import datafield, sceneparams
-    from nubis_addon.core import paint
+    from nubis_addon.core import paintraster
 
     scene = make_scene("default")
     blender.ops.nubis.paint_field(channel="COVERAGE", radius=RADIUS, strength=1.0, stroke=stroke([0, 2000]))
@@ -436,11 +436,11 @@ def test_a_scenes_runtime_state_lives_in_one_object_and_ends_in_one_place(blende
     assert state.cover_hist is not None and state.cover_painted and state.pre_paint is not None
     key = datafield.raster_key(layer)
     assert key == datafield.raster_key(layer) and key != layer.as_pointer()
-    assert key in paint._RASTERS and layer.as_pointer() not in paint._RASTERS
+    assert key in paintraster._RASTERS and layer.as_pointer() not in paintraster._RASTERS
     events.request_composite(scene)
     assert sceneparams.field_stale(scene) and sceneparams.stale_scenes() == [scene]
     sceneparams.forget_stale()
-    assert not sceneparams.field_stale(scene) and datafield.pre_paint(scene) is None and not paint._RASTERS
+    assert not sceneparams.field_stale(scene) and datafield.pre_paint(scene) is None and not paintraster._RASTERS
     assert datafield.coverage_multiplier(scene) == scene.nubis.density_coverage  # the saved one, until a composite
     assert datafield.raster_key(layer) != key  # a new lifetime: new keys
     datafield.generate_fields(scene)

@@ -55,12 +55,12 @@ def _step_all(jobs, disturb, least: int = 4) -> list:
 
 
 def _same_grid(a: Path, b: Path) -> None:
-    from nubis_addon.core import vdbio
+    from nubis_addon.core import vdbwrite
 
-    ia, ib = vdbio.read_grid_info(a)["density"], vdbio.read_grid_info(b)["density"]
+    ia, ib = vdbwrite.read_grid_info(a)["density"], vdbwrite.read_grid_info(b)["density"]
     assert ia.active_voxels == ib.active_voxels > 1000
-    da, lo_a = vdbio.read_grid_array(a, "density")
-    db, lo_b = vdbio.read_grid_array(b, "density")
+    da, lo_a = vdbwrite.read_grid_array(a, "density")
+    db, lo_b = vdbwrite.read_grid_array(b, "density")
     assert lo_a == lo_b and da.shape == db.shape
     assert float(np.abs(da - db).max()) <= 1e-6
 

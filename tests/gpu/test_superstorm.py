@@ -109,14 +109,14 @@ def test_lightning_keyframe_lights_its_frame_only(storm_scene, blender):
 def test_baked_glow_grid_stays_inside_the_storm(storm_scene, tmp_path):
     from nubis_addon.blender.jobs import pipeline
     from nubis_addon.blender.scene import superstorms
-    from nubis_addon.core import vdbio
+    from nubis_addon.core import vdbwrite
 
     scene, storm = storm_scene
     result = pipeline.bake(scene, tmp_path / "storm.vdb", BakeOptions(voxel_size=500.0))
-    info = vdbio.read_grid_info(result.path)
+    info = vdbwrite.read_grid_info(result.path)
     # The storm's darkening bakes as absorption (GDC22; docs/sources.md#storm-darkening), its glow as emission.
     assert set(info) == {"density", "glow", "absorption"}
-    glow, lo = vdbio.read_grid_array(result.path, "glow")
+    glow, lo = vdbwrite.read_grid_array(result.path, "glow")
     z, y, x = np.nonzero(glow > 0)
     assert len(x) > 10
     cx, cy = superstorms.storm_centre(storm)

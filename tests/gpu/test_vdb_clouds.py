@@ -47,7 +47,7 @@ def test_the_shader_reads_the_grid_where_its_object_puts_it(blender, make_scene,
 
     from nubis_addon.blender.host import runtime
     from nubis_addon.blender.jobs import pipeline
-    from nubis_addon.core import bundled, vdbcloud
+    from nubis_addon.core import bundled, vdbplacement
 
     scene = _vdb_only(make_scene)
     obj = _import(blender, scene, cumulus_file, density=1.5)
@@ -73,7 +73,7 @@ def test_the_shader_reads_the_grid_where_its_object_puts_it(blender, make_scene,
     # Half floats in the atlas and the GPU's filter weights: within 1 % of the cloud's peak.
     np.testing.assert_allclose(got[:, 0], want, atol=0.01 * want.max())
     assert np.all(got[:, 1] >= got[:, 0] - 1e-6)  # the coarse value holds the cloud too
-    assert vdbcloud.MAX_CLOUDS >= 1 and clouds.vdb.bytes > 0
+    assert vdbplacement.MAX_CLOUDS >= 1 and clouds.vdb.bytes > 0
 
 
 def _centroid_x(img: np.ndarray) -> float:
@@ -123,7 +123,7 @@ def test_the_bake_holds_the_vdb_cloud_as_the_viewport_draws_it(blender, make_sce
     """What the artist sees is what Cycles renders: the extension's bake of a sky with a VDB cloud holds
     its density; a comparison's bake leaves it out (Cycles renders the cloud's own file)."""
     from nubis_addon.blender.jobs import pipeline
-    from nubis_addon.core import vdbio
+    from nubis_addon.core import vdbwrite
 
     scene = _vdb_only(make_scene)
     _import(blender, scene, cumulus_file)
@@ -134,9 +134,9 @@ def test_the_bake_holds_the_vdb_cloud_as_the_viewport_draws_it(blender, make_sce
         scene, tmp_path / "without.vdb", BakeOptions(voxel_size=100.0, camera_only=True, size=(64, 36), vdb=False)
     )
     assert without.active_voxels == 0
-    info = vdbio.read_grid_info(with_cloud.path)["density"]
+    info = vdbwrite.read_grid_info(with_cloud.path)["density"]
     # 50 m voxels resampled at 100 m: about an eighth as many, the peak (0.04 / sigma) kept within the filter.
-    source = vdbio.read_grid_info(Path(cumulus_file))["density"]
+    source = vdbwrite.read_grid_info(Path(cumulus_file))["density"]
     assert 0.08 * source.active_voxels < with_cloud.active_voxels < 0.4 * source.active_voxels
     assert info.min_max[1] == pytest.approx(0.04 / scene.nubis.density_sigma, rel=0.15)
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import bpy
 
-from ...core import bundled, distributed, interrupt, sequence, vdbio
+from ...core import bundled, distributed, interrupt, sequence, vdbwrite
 from ...core.distributed import SceneSource
 from ...core.errors import NubisError
 from ...core.fsutil import check_output_path, shown, sync_to_disk
@@ -176,7 +176,7 @@ def _bake_tiles_distributed(client, engine, scene, source, frame, options, stage
         for ids in groups
     ]
     vdb = bundled.openvdb()
-    merged = vdbio.SparseGrids(plan.voxel_size, plan.origin)
+    merged = vdbwrite.SparseGrids(plan.voxel_size, plan.origin)
     merged.grid("density")
     done = 0
     ids_of = {fut.key: ids for fut, ids in zip(futures, groups, strict=True)}

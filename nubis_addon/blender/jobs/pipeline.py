@@ -12,7 +12,7 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-from ...core import bakeplan, camera, imageio, interrupt, limits, staging, vdbio
+from ...core import bakeplan, camera, imageio, interrupt, limits, staging, vdbwrite
 from ...core import sky as skymath
 from ...core.bakeplan import BakePlan, measured_share
 from ...core.errors import NubisError
@@ -259,7 +259,7 @@ def _bake_evaluator(snap: BakeSnapshot):
     inputs of the bake's own (uploaded from the snapshot once: the viewport's redraws cannot reach them)."""
     plan = snap.plan
     clouds = snap.gpu_inputs()
-    grids = vdbio.SparseGrids(plan.voxel_size, plan.origin)
+    grids = vdbwrite.SparseGrids(plan.voxel_size, plan.origin)
     grids.grid("density")
     # Skies whose field can hold no glow or absorption read back the density alone.
     packed = plan.extra_grids == 0 and not plan.velocity
@@ -351,7 +351,7 @@ def bake_estimate(scene, voxel_size: float | None = None) -> tuple[int, int]:
 
 def _active_voxels(block: np.ndarray, packed: bool) -> int:
     """Cloudy voxels of a block bake_tiles hands over (the density: the block itself when packed)."""
-    return int(np.count_nonzero((block if packed else block[..., 0]) > vdbio.DEFAULT_TOLERANCE))
+    return int(np.count_nonzero((block if packed else block[..., 0]) > vdbwrite.DEFAULT_TOLERANCE))
 
 
 def _guarded_sink(sink, plan: BakePlan, packed: bool):
@@ -394,7 +394,7 @@ def probe_share(scene, voxel_size: float, size: tuple[int, int], thin_cirrus: bo
 
 
 def _grid_sink(grids, velocity: bool, fps: float, packed: bool = False):
-    tol = vdbio.DEFAULT_TOLERANCE
+    tol = vdbwrite.DEFAULT_TOLERANCE
 
     def sink(ijk, block):
         if packed:

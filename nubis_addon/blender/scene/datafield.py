@@ -8,7 +8,7 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from ...core import bundled, cloudlayers, coverage, fieldstack, limits, paint, schema, userpresets
+from ...core import bundled, cloudlayers, coverage, fieldstack, limits, paint, paintraster, schema, userpresets
 from ...core import fields as fieldgen
 from ...core.errors import NubisError
 from ...core.fsutil import not_a_file
@@ -135,7 +135,7 @@ def copy_dabs(src, dst) -> None:
     add_dabs(dst, paint_dabs(src))
 
 
-def paint_layers(settings, params=None) -> list[paint.PaintLayer]:
+def paint_layers(settings, params=None) -> list[paintraster.PaintLayer]:
     """The enabled paint layers, top of the stack first, rasterized on the field's grid."""
     grid = paint.Grid.of(params or sceneparams.params_from_scene(settings))
     out = []
@@ -144,8 +144,8 @@ def paint_layers(settings, params=None) -> list[paint.PaintLayer]:
             continue
         channel = layer.channel.lower()
         paint.check_paint_channel(layer.name, channel)
-        r = paint.raster(raster_key(layer), paint_dabs(layer), grid)
-        out.append(paint.PaintLayer(channel, float(layer.opacity), r.values))
+        r = paintraster.raster(raster_key(layer), paint_dabs(layer), grid)
+        out.append(paintraster.PaintLayer(channel, float(layer.opacity), r.values))
     return out
 
 

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import bpy
 
-from ...core import paint, schema
+from ...core import paintraster, schema
 
 
 def scene_fps(scene) -> float:
@@ -104,7 +104,7 @@ def forget_stale() -> None:
     per-scene memory ends (blender/live/events.py calls it on file loads, on unregister, and after a failed
     debounced composite)."""
     _scenes.clear()
-    paint.forget()
+    paintraster.forget()
 
 
 # F-curve paths on the scene whose values feed the field: the layers, the storms and the scene settings

@@ -1,7 +1,7 @@
 """Any Volume object as a Nubis cloud: File > Import > OpenVDB (or a VDB sequence, the extension's own
 bake, a Mesh to Volume result), then Nubis Cloud on in the Volume's properties or the sidebar.
 
-A marked Volume is drawn by the real-time renderer with the procedural clouds (core/vdbcloud.py,
+A marked Volume is drawn by the real-time renderer with the procedural clouds (core/vdbread.py,
 render/vdbatlas.py): the same light model, its object's transform live, its frame's file for a
 sequence. Its values are extinction as Blender's Principled Volume reads them at Density 1, per unit of
 its Render > Space (as Cycles reads them), times the Density here; a file too large for the GPU budget
@@ -20,7 +20,7 @@ from collections import OrderedDict
 import bpy
 from bpy.props import BoolProperty, FloatProperty, StringProperty
 
-from ...core import console, vdbcheck, vdbcloud
+from ...core import console, vdbcheck, vdbplacement, vdbread
 from ...core.errors import NubisError
 from ...core.sequence import human_bytes
 from ...render import vdbatlas as gpu_side
@@ -83,17 +83,17 @@ def all_marked(scene) -> list:
 
 
 def marked(scene) -> list:
-    """The marked Volumes that are drawn: the first vdbcloud.MAX_CLOUDS by name (left_out() says the rest)."""
-    return all_marked(scene)[: vdbcloud.MAX_CLOUDS]
+    """The marked Volumes that are drawn: the first vdbplacement.MAX_CLOUDS by name (left_out() says the rest)."""
+    return all_marked(scene)[: vdbplacement.MAX_CLOUDS]
 
 
 def left_out(scene) -> list:
-    return all_marked(scene)[vdbcloud.MAX_CLOUDS :]
+    return all_marked(scene)[vdbplacement.MAX_CLOUDS :]
 
 
 def left_out_sentence(obj) -> str:
     return (
-        f"the Nubis cloud '{obj.name}' is left out: at most {vdbcloud.MAX_CLOUDS} VDB clouds are drawn at once "
+        f"the Nubis cloud '{obj.name}' is left out: at most {vdbplacement.MAX_CLOUDS} VDB clouds are drawn at once "
         "(the first by name); unmark one, or join clouds into one file"
     )
 
@@ -203,9 +203,9 @@ def gpu_budget() -> int:
     return runtime.vdb_gpu_budget()
 
 
-def read(path: str, grid: str, budget: int | None = None) -> vdbcloud.VdbCloud:
+def read(path: str, grid: str, budget: int | None = None) -> vdbread.VdbCloud:
     """The packed cloud of a file, read once per change of the file on disk or of the GPU budget (the
-    preference's by default): the finest level of it that fits the budget (core/vdbcloud.py)."""
+    preference's by default): the finest level of it that fits the budget (core/vdbread.py)."""
     vdbcheck.check(path)  # missing, a folder, damaged: one sentence before OpenVDB opens it
     st = os.stat(path)
     budget = gpu_budget() if budget is None else budget
@@ -213,7 +213,7 @@ def read(path: str, grid: str, budget: int | None = None) -> vdbcloud.VdbCloud:
     if key in _cache:
         _cache.move_to_end(key)
         return _cache[key]
-    cloud = vdbcloud.read_cloud(path, grid, budget)
+    cloud = vdbread.read_cloud(path, grid, budget)
     _cache[key] = cloud
     while len(_cache) > _CACHE_ENTRIES:
         _cache.popitem(last=False)
@@ -253,9 +253,9 @@ def placements(scene, strict: bool = True) -> tuple:
         try:
             cloud = read(path, settings.grid.strip(), budget)
             matrix = [list(r) for r in obj.matrix_world]
-            placed = vdbcloud.Placement(cloud, matrix, float(settings.density), obj.data.render.space)
+            placed = vdbplacement.Placement(cloud, matrix, float(settings.density), obj.data.render.space)
             placed.check(obj.name)
-            crowded = vdbcloud.why_not_together([*out, placed], budget)
+            crowded = vdbplacement.why_not_together([*out, placed], budget)
             if crowded:
                 raise NubisError(f"it is left out: {crowded}; unmark a cloud or use coarser ones")
         except NubisError as err:
@@ -288,7 +288,7 @@ def add_files(scene, paths) -> list:
     objects = []
     for path in paths:
         path = os.path.abspath(os.path.expanduser(str(path)))
-        vdbcloud.check_fits(path)
+        vdbread.check_fits(path)
         name = os.path.splitext(os.path.basename(path))[0] or "VDB Cloud"
         volume = bpy.data.volumes.new(name)
         volume.filepath = path

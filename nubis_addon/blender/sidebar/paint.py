@@ -19,7 +19,7 @@ from bpy.props import CollectionProperty, EnumProperty, FloatProperty, StringPro
 from bpy_extras import view3d_utils
 from gpu_extras.batch import batch_for_shader
 
-from ...core import fieldstats, paint
+from ...core import fieldstats, paint, paintraster
 from ...core.errors import NubisError
 from ..host import runtime, ui
 from ..host.ui import NeedsCloudscape, SidebarPanel
@@ -124,9 +124,9 @@ def composite_notice(owner, layer, dabs: np.ndarray, grid: paint.Grid) -> str | 
             continue
         held = datafield.paint_dabs(other)
         todo.append((datafield.raster_key(other), np.vstack([held, dabs]) if other == layer else held))
-    cost = paint.composite_cost(todo, grid)
-    paint.check_cost(cost)
-    return paint.notice(cost)
+    cost = paintraster.composite_cost(todo, grid)
+    paintraster.check_cost(cost)
+    return paintraster.notice(cost)
 
 
 def check_channel(scene, channel: str) -> None:
@@ -183,8 +183,8 @@ class LiveStroke:
         self.image, self.plane = paint.PAINT_CHANNELS[self.channel]
         self.which = tuple(datafield.FIELD_IMAGES).index(self.image)  # the viewport's arrays are in this order
         # The layer's raster as it stands, copied: a cancelled drag leaves the cached one untouched.
-        base = paint.raster(self.layer_key, datafield.paint_dabs(layer), self.grid)
-        self.raster = paint.Raster(self.grid)
+        base = paintraster.raster(self.layer_key, datafield.paint_dabs(layer), self.grid)
+        self.raster = paintraster.Raster(self.grid)
         self.raster.values = base.values.copy()
         self.raster.count = base.count
         self.layers = []
@@ -194,9 +194,9 @@ class LiveStroke:
             values = (
                 self.raster.values
                 if other == layer
-                else paint.raster(datafield.raster_key(other), datafield.paint_dabs(other), self.grid).values
+                else paintraster.raster(datafield.raster_key(other), datafield.paint_dabs(other), self.grid).values
             )
-            self.layers.append(paint.PaintLayer(other.channel.lower(), float(other.opacity), values))
+            self.layers.append(paintraster.PaintLayer(other.channel.lower(), float(other.opacity), values))
 
     def add(self, x: float, y: float, pressure: float, start: bool) -> tuple | None:
         """Dab along the stroke to (x, y); returns the field rectangle changed. The stretch is clipped to the
@@ -222,7 +222,7 @@ class LiveStroke:
         """Re-composite `rect` into the viewport's field arrays and, when it has uploaded them, its texture
         (otherwise its next redraw uploads them whole, this rectangle included)."""
         arrays = viewport.field_arrays(self.scene)
-        plane = paint.paint_plane(self.channel, self.pre[self.channel], self.layers, self.multiplier, rect)
+        plane = paintraster.paint_plane(self.channel, self.pre[self.channel], self.layers, self.multiplier, rect)
         r0, r1, c0, c1 = rect
         arrays[self.which][r0:r1, c0:c1, self.plane] = plane
         fieldstats.edited(arrays[self.which])
@@ -238,7 +238,7 @@ class LiveStroke:
         dabs = np.concatenate(self.dabs) if self.dabs else paint.as_dabs([])
         append_dabs(layer, dabs)
         if self.live:
-            paint.remember(datafield.raster_key(layer), datafield.paint_dabs(layer), self.raster)
+            paintraster.remember(datafield.raster_key(layer), datafield.paint_dabs(layer), self.raster)
         return len(dabs)
 
 
