@@ -34,7 +34,7 @@ def main() -> None:
     from nubis_addon.blender import ensure_registered
     from nubis_addon.blender.host import runtime
     from nubis_addon.blender.jobs import preview
-    from nubis_addon.blender.scene import scene_io, scenepresets, sky
+    from nubis_addon.blender.scene import scene_io, scenepresets, skyground
     from nubis_addon.core import camera
     from nubis_addon.core.presets import load_preset
     from nubis_addon.render.gpu_context import ensure_gpu_context, renderer_name
@@ -52,7 +52,7 @@ def main() -> None:
     view = preview.camera_view(scene, width, height)
     air = scene_io.state_from_scene(scene)
     air.pixel_angle, air.pixel_size = camera.pixel_footprint(np.array(view.inv_view_proj), width, height)
-    lamp = sky.find_sun(scene)
+    lamp = skyground.find_sun(scene)
     plain = dataclasses.replace(air, sun_air=None, sun_radiance=tuple(c * lamp.data.energy for c in lamp.data.color))
     states = dict(zip(WAYS, (plain, air), strict=True))
     clouds = runtime.cloud_gpu(s.noise_seed)

@@ -71,7 +71,7 @@ def test_a_keyed_layer_value_changes_the_field_on_frame_change(blender, make_sce
 
 def test_new_cloudscape_keeps_the_artists_camera_and_world_when_asked(blender):
     from nubis_addon.blender import ensure_registered
-    from nubis_addon.blender.scene import scenepresets, sky
+    from nubis_addon.blender.scene import scenepresets, skyground
 
     blender.ops.wm.read_factory_settings(use_empty=True)
     ensure_registered()
@@ -90,7 +90,7 @@ def test_new_cloudscape_keeps_the_artists_camera_and_world_when_asked(blender):
     ) == {"FINISHED"}
     assert scene.camera == cam and tuple(cam.location) == (1.0, 2.0, 3.0) and cam.data.lens == 85.0
     assert scene.world == world and scene.render.resolution_x == 1234
-    assert scene.nubis.sun == sun and sky.find_sun(scene) == sun
+    assert scene.nubis.sun == sun and skyground.find_sun(scene) == sun
     # Not kept: the preset's camera and sky, the artist's still in the file.
     assert blender.ops.nubis.new_cloudscape(preset="default") == {"FINISHED"}
     assert scene.camera.name == scenepresets.CAMERA_NAME and tuple(cam.location) == (1.0, 2.0, 3.0)

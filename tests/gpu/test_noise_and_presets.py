@@ -159,7 +159,7 @@ def _f32(x):
 def _edit_everything(scene, blender):
     """Move every setting of the cloudscape off the preset's value: scene settings, a layer, a storm and
     its Empty, the sun, the World, the camera and the render settings."""
-    from nubis_addon.blender.scene import sceneparams, sky
+    from nubis_addon.blender.scene import sceneparams, sky, skyground
     from nubis_addon.core import schema
 
     s = scene.nubis
@@ -183,10 +183,10 @@ def _edit_everything(scene, blender):
         layer.opacity, layer.seed, layer.blend, layer.remap = 0.7, 99, "MAX", (0.1, 0.8, 0.05, 0.95)
         s.storms[0].radius, s.storms[0].glow_color = 9876.5, (0.2, 0.4, 0.6)
     s.storms[0].empty.location = (3210.0, -4567.5, 0.0)
-    sun = sky.find_sun(scene)
+    sun = skyground.find_sun(scene)
     sun.rotation_euler = (math.radians(30.0), math.radians(10.0), math.radians(200.0))
     sun.data.color, sun.data.energy, sun.data.angle = (0.9, 0.8, 0.7), 7.5, math.radians(1.5)
-    from nubis_addon.blender.scene import sky
+    from nubis_addon.blender.scene import skyground
 
     assert sky.is_nubis_sky(scene.world)  # the preset's physically based sky: its atmosphere round-trips
     scene.world.color = (0.1, 0.2, 0.3)
@@ -205,13 +205,13 @@ def _edit_everything(scene, blender):
 
 def _snapshot(scene):
     """Every setting as Blender holds it: the schema's, the layers', the storms', and the objects'."""
-    from nubis_addon.blender.scene import datafield, sceneparams, sky, superstorms
+    from nubis_addon.blender.scene import datafield, sceneparams, sky, skyground, superstorms
     from nubis_addon.core import schema
 
     s = scene.nubis
-    sun = sky.find_sun(scene)
+    sun = skyground.find_sun(scene)
     direction = sceneparams.evaluated_matrix(sun).to_3x3().col[2]
-    from nubis_addon.blender.scene import sky
+    from nubis_addon.blender.scene import skyground
 
     return {
         "settings": {k.key: sceneparams.from_blender(k, getattr(s, k.key)) for k in schema.PRESET_SCENE},

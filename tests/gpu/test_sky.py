@@ -43,7 +43,7 @@ def test_equirectangular_layout_and_hemispheres():
 
 
 def test_new_cloudscape_builds_a_sky_tied_to_the_sun(make_scene, blender):
-    from nubis_addon.blender.scene import scenepresets, sky
+    from nubis_addon.blender.scene import scenepresets, sky, skycapture
 
     scene = make_scene("default")
     world = scene.world
@@ -65,10 +65,10 @@ def test_new_cloudscape_builds_a_sky_tied_to_the_sun(make_scene, blender):
     assert math.degrees(tex.sun_elevation) == pytest.approx(4.0, abs=0.01)
     assert high[2] > low[2] * 2 and high[0] / high[2] < low[0] / low[2] and noon != high
     # The sky light follows: the clouds' ambient from above is dimmer and redder at a low sun.
-    env_low = sky.environment(scene)
+    env_low = skycapture.environment(scene)
     sun.rotation_euler = (math.radians(10.0), 0.0, 0.3)
     blender.context.view_layer.update()
-    env_high = sky.environment(scene)
+    env_high = skycapture.environment(scene)
     a_low, a_high = skymath.hemisphere_radiance(env_low)[0], skymath.hemisphere_radiance(env_high)[0]
     assert sum(a_high) > 2 * sum(a_low)
 
@@ -78,18 +78,18 @@ def test_the_ground_below_the_horizon_is_lit_by_the_sun_and_the_sky(make_scene, 
     E_sky the sky's own irradiance (the exact integral over the capture's upper half), in step with the
     lamp and the Ground setting; the capture's lower half, made without a second render, is what a
     render of the World shows there."""
-    from nubis_addon.blender.scene import sky
+    from nubis_addon.blender.scene import skycapture, skyground
 
     scene = make_scene("default")
-    sun = sky.find_sun(scene)
-    h, w = sky.ENV_WIDTH // 2, sky.ENV_WIDTH
+    sun = skyground.find_sun(scene)
+    h, w = skycapture.ENV_WIDTH // 2, skycapture.ENV_WIDTH
     dirs, solid = skymath.directions(w, h), skymath.solid_angles(w, h)
     cosine = (np.clip(dirs[..., 2], 0.0, None) * solid)[..., None]
     nadir = dirs[..., 2] < -0.3  # well below the soft horizon
 
     def ground_and_expected():
         blender.context.view_layer.update()
-        env = sky.environment(scene)
+        env = skycapture.environment(scene)
         sky_irradiance = (env * cosine).sum(axis=(0, 1))  # exact, from the capture
         sine = max(0.0, sun.matrix_world.to_3x3().col[2].normalized().z)
         sun_irradiance = np.array(sun.data.color) * sun.data.energy * sine
@@ -105,8 +105,8 @@ def test_the_ground_below_the_horizon_is_lit_by_the_sun_and_the_sky(make_scene, 
     scene.nubis.sky_ground = (0.4, 0.2, 0.1)
     tinted, expected_tinted = ground_and_expected()
     assert np.allclose(tinted, expected_tinted, rtol=0.03) and tinted[0] > 2.5 * tinted[2], tinted
-    rendered = sky._render_world(scene.world, w, h, sky.ENV_SAMPLES)
-    patched = sky.environment(scene)
+    rendered = skycapture._render_world(scene.world, w, h, skycapture.ENV_SAMPLES)
+    patched = skycapture.environment(scene)
     assert np.allclose(rendered[nadir].mean(axis=0), patched[nadir].mean(axis=0), rtol=0.02)
     # The hazy horizon with the ground below it (a single row would compare Cycles' pixel filter, which
     # blurs the bright horizon a row down, with the row's centre).
@@ -137,7 +137,7 @@ def test_a_sky_capture_is_kept_between_sessions_and_a_damaged_one_is_rendered_ag
     """Every headless command rendered the same sky again (about a second each); the capture is now kept in
     the cache by the World's settings, a damaged file is rendered again, and Clear Cache removes them."""
     from nubis_addon.blender.host import runtime
-    from nubis_addon.blender.scene import sky
+    from nubis_addon.blender.scene import sky, skycapture
 
     world = blender.data.worlds.new("Stored Sky")
     if world.node_tree is None:
@@ -145,24 +145,24 @@ def test_a_sky_capture_is_kept_between_sessions_and_a_damaged_one_is_rendered_ag
     background = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
     background.inputs["Color"].default_value = (0.2, 0.3, 0.5, 1.0)
     renders = []
-    real = sky._render_world
+    real = skycapture._render_world
     monkeypatch.setattr(sky, "_render_world", lambda *a: renders.append(a) or real(*a))
-    first = sky._stored_render(world, 16, 8, 2)
-    again = sky._stored_render(world, 16, 8, 2)
+    first = skycapture._stored_render(world, 16, 8, 2)
+    again = skycapture._stored_render(world, 16, 8, 2)
     assert len(renders) == 1 and np.array_equal(first, again) and first.shape == (8, 16, 3)
     stored = list((runtime.cache_dir() / "worlds").glob("*.npy"))
     newest = max(stored, key=lambda p: p.stat().st_mtime_ns)
     newest.write_bytes(b"not a capture")
-    assert np.array_equal(sky._stored_render(world, 16, 8, 2), first) and len(renders) == 2
+    assert np.array_equal(skycapture._stored_render(world, 16, 8, 2), first) and len(renders) == 2
     background.inputs["Color"].default_value = (0.5, 0.3, 0.2, 1.0)  # another sky: another capture
-    assert not np.array_equal(sky._stored_render(world, 16, 8, 2), first) and len(renders) == 3
-    assert sky.clear_stored() >= 2 and not list((runtime.cache_dir() / "worlds").glob("*.npy"))
+    assert not np.array_equal(skycapture._stored_render(world, 16, 8, 2), first) and len(renders) == 3
+    assert skycapture.clear_stored() >= 2 and not list((runtime.cache_dir() / "worlds").glob("*.npy"))
     blender.data.worlds.remove(world)
 
 
 def test_an_artists_world_is_kept_and_lights_the_clouds(blender):
     from nubis_addon.blender import ensure_registered
-    from nubis_addon.blender.scene import scene_io, sky
+    from nubis_addon.blender.scene import scene_io, sky, skycapture
 
     blender.ops.wm.read_factory_settings(use_empty=True)
     ensure_registered()
@@ -185,17 +185,20 @@ def test_an_artists_world_is_kept_and_lights_the_clouds(blender):
     nt.links.new(grad.outputs["Fac"], ramp.inputs["Fac"])
     nt.links.new(ramp.outputs["Color"], bg.inputs["Color"])
     scene.world = mine
-    before = sky.fingerprint(mine)
+    before = skycapture.fingerprint(mine)
     assert blender.ops.nubis.new_cloudscape(preset="default", keep_world=True) == {"FINISHED"}
-    assert scene.world == mine and sky.fingerprint(mine) == before and not sky.is_nubis_sky(mine)
+    assert scene.world == mine and skycapture.fingerprint(mine) == before and not sky.is_nubis_sky(mine)
     state = scene_io.state_from_scene(scene)
     above, below = state.ambient, state.ambient_below
-    assert state.sky_env.shape == (sky.ENV_WIDTH // 2, sky.ENV_WIDTH, 3) and float(state.sky_env.std()) > 0.05
+    assert (
+        state.sky_env.shape == (skycapture.ENV_WIDTH // 2, skycapture.ENV_WIDTH, 3)
+        and float(state.sky_env.std()) > 0.05
+    )
     assert above != below  # lit by the artist's World, from above and below differently
     # Asked to build the sky, New Cloudscape makes a new World and keeps the artist's in the file.
     assert blender.ops.nubis.new_cloudscape(preset="default", build_sky=True) == {"FINISHED"}
     assert sky.is_nubis_sky(scene.world) and scene.world != mine
-    assert mine.name in blender.data.worlds and mine.use_fake_user and sky.fingerprint(mine) == before
+    assert mine.name in blender.data.worlds and mine.use_fake_user and skycapture.fingerprint(mine) == before
 
 
 # ---- final renders (F12 path) -------------------------------------------------------------------------

@@ -100,11 +100,11 @@ def test_without_a_nubis_sky_every_cloud_takes_the_lamp_s_colour(make_scene):
     from gpu_probe import probe_sun
 
     from nubis_addon.blender.host import runtime
-    from nubis_addon.blender.scene import scene_io, sky
+    from nubis_addon.blender.scene import scene_io, skyground
 
     scene = make_scene("default", sun__elevation=2.0)
     scene.nubis.sky_sun_color = False
-    lamp = sky.find_sun(scene)
+    lamp = skyground.find_sun(scene)
     lamp.data.color = (1.0, 0.5, 0.25)
     state = scene_io.state_from_scene(scene)
     assert state.sun_air is None
@@ -119,7 +119,7 @@ def test_f12_at_minus_one_degree_shows_lit_clouds_over_an_unlit_ground(make_scen
     """The sun 1 degree below the horizon, a 200 km ground, the camera 400 m up looking 8 degrees down:
     F12 with the sun's strength at 5 against F12 with it at 0. Above the horizon the clouds (over 1.5 km,
     above the shadow line) gain the sun's red light; the ground, in Earth's shadow, gains nothing."""
-    from nubis_addon.blender.scene import scene_io, sky
+    from nubis_addon.blender.scene import scene_io, skyground
     from nubis_addon.core import imageio
     from nubis_addon.core import sky as skymath
 
@@ -141,7 +141,7 @@ def test_f12_at_minus_one_degree_shows_lit_clouds_over_an_unlit_ground(make_scen
     scene.render.engine = (
         engine if engine == "CYCLES" else next(e for e in ("BLENDER_EEVEE_NEXT", "BLENDER_EEVEE") if e in names)
     )
-    lamp = sky.find_sun(scene)
+    lamp = skyground.find_sun(scene)
     assert max(lamp.data.color) == 0.0  # the ground's transmittance: Earth's shadow
     images = {}
     for energy in (5.0, 0.0):
@@ -177,11 +177,11 @@ def test_cycles_lights_the_bake_through_the_same_air(make_scene, blender, elevat
     from mathutils import Vector
 
     from nubis_addon.blender.jobs import sun_air
-    from nubis_addon.blender.scene import scene_io, sky
+    from nubis_addon.blender.scene import scene_io, skyground
     from nubis_addon.core import imageio
 
     scene = make_scene("default", sun__elevation=elevation, sun__azimuth=90.0)
-    lamp = sky.find_sun(scene)
+    lamp = skyground.find_sun(scene)
     ground_colour = tuple(lamp.data.color)
     state = scene_io.state_from_scene(scene)
     sun = Vector(state.sun_direction).normalized()

@@ -35,7 +35,7 @@ from ...core.staging import output_set
 from ...render import engine
 from ..host import handlers, mainthread, runtime
 from ..jobs import pipeline
-from ..scene import cycles_setup, scene_io, sky, vdbclouds
+from ..scene import cycles_setup, scene_io, sky, skycapture, vdbclouds
 from . import composition, shadows
 from .composition import write_image
 
@@ -141,7 +141,7 @@ def render_world(base) -> bpy.types.World:
     are refilled in place, and a new World would make EEVEE compile its shader again, for every frame of
     an animation (minutes each on a software rasterizer)."""
     old = bpy.data.worlds.get(RENDER_WORLD)
-    made_from = hashlib.sha1(repr(sky.fingerprint(base)).encode()).hexdigest()
+    made_from = hashlib.sha1(repr(skycapture.fingerprint(base)).encode()).hexdigest()
     if old is not None and old.get(_MADE_FROM) == made_from and old.node_tree is not None:
         used = {n.image.name for n in old.node_tree.nodes if getattr(n, "image", None) is not None}
         if {CAMERA_IMAGE, PANORAMA_IMAGE, PANORAMA_ALPHA} <= used:
@@ -255,7 +255,7 @@ def on_render_pre(scene, _depsgraph=None) -> None:
     """Every frame of every render, on the thread that renders it. In the interface that is a job thread
     without a GPU context: the frame is prepared on the main thread (blender/host/mainthread.py) while the
     render thread waits, before its engine reads the scene."""
-    if sky.capturing():
+    if skycapture.capturing():
         return
     try:
         mainthread.call(lambda: _before_frame(scene))
@@ -297,7 +297,7 @@ def finish(scene) -> None:
 def _on_main_thread(fn, scene) -> None:
     """`fn(scene)` on the main thread when it responds, else here (Blender quitting: the main thread takes
     no work)."""
-    if sky.capturing():
+    if skycapture.capturing():
         return
     try:
         mainthread.call(lambda: fn(scene), timeout=60.0)
@@ -363,11 +363,11 @@ def panorama(scene, out: str | os.PathLike, width: int) -> Path:
     eye = scene_io.camera_eye(scene) if scene.camera is not None else (0.0, 0.0, 2.0, 1.0)
     rgba = engine.render_panorama(clouds, eye, width, height)  # bottom row first
     # The sky behind the clouds is the World's (the ambient colour, when set, only lights the clouds).
-    flat = sky.flat_colour(scene.world) if scene.world is not None else (0.0, 0.0, 0.0)
+    flat = skycapture.flat_colour(scene.world) if scene.world is not None else (0.0, 0.0, 0.0)
     if flat is not None:
         background = np.broadcast_to(np.asarray(flat, np.float32), (height, width, 3))
     else:
-        env = sky.capture_world(scene, min(width, sky.BACKGROUND_WIDTH * 2), samples=4)
+        env = skycapture.capture_world(scene, min(width, skycapture.BACKGROUND_WIDTH * 2), samples=4)
         background = skymath.sample(env, skymath.directions(width, height)).astype(np.float32)
     image = rgba[..., :3] + (1.0 - rgba[..., 3:4]) * background
     with output_set() as outputs:

@@ -22,7 +22,7 @@ from ...core.state import MAX_STORMS, CloudState
 from ...render import bake as gpu_bake
 from ...render import engine, offscreens
 from ..host import runtime
-from ..scene import cycles_setup, datafield, scene_io, sceneparams, sky, vdbclouds
+from ..scene import cycles_setup, datafield, scene_io, sceneparams, skycapture, vdbclouds
 from . import snapshot, sun_air
 from .snapshot import BakeSnapshot
 
@@ -38,9 +38,9 @@ def sky_background(scene, width: int, height: int) -> np.ndarray:
     capture (blender/scene/sky.py) looked up along each pixel's view ray."""
     if scene.camera is None:
         return np.broadcast_to(np.asarray(scene_io.world_ambient(scene), np.float32), (height, width, 3))
-    env = sky.environment(scene)
+    env = skycapture.environment(scene)
     if env.shape[0] > 4 or env.shape[1] > 8:  # not one colour: a sharper capture for pictures
-        env = sky.capture_world(scene, sky.BACKGROUND_WIDTH, samples=4)
+        env = skycapture.capture_world(scene, skycapture.BACKGROUND_WIDTH, samples=4)
     inv = scene_io.camera_inv_view_proj(scene, width, height)
     dirs = skymath.camera_directions(inv, scene_io.camera_eye(scene), width, height)
     return skymath.sample(env, dirs).astype(np.float32)

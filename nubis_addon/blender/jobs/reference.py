@@ -23,7 +23,7 @@ import numpy as np
 
 from ...core import imageio, metrics
 from ...core.errors import NubisError
-from ..scene import cycles_setup, sky
+from ..scene import cycles_setup, sky, skycapture
 
 # The most samples a noise target may ask of Cycles: 16384 at 160x90 is several hours on a 2-core machine.
 MAX_SAMPLES = 16384
@@ -171,7 +171,7 @@ def key(scene, vdb_path: Path, width: int, height: int, bounces: int) -> str:
     items = {
         "vdb": _digest_vdb(vdb_path),
         "material": material,
-        "world": repr(sky.fingerprint(scene.world)),
+        "world": repr(skycapture.fingerprint(scene.world)),
         # How the sun reaches the clouds: through the air (blender/jobs/sun_air.py), which a reference made
         # before it did not do, or the lamp's colour.
         "sun": ["through the air, per shadow ray", sky.sun_air(scene)],

@@ -23,7 +23,7 @@ import bpy
 import numpy as np
 
 from ...core import sky as skymath
-from ..scene import sky
+from ..scene import sky, skyground
 
 SHELL_NAME = "Nubis Air Shell"
 TABLE_NAME = "Nubis Air Table"
@@ -166,7 +166,7 @@ def above_the_air(scene) -> Iterator[bool]:
     shines with the sun above the atmosphere and the shell gives every shadow ray towards it the air's
     transmittance from where it started; both are put back afterwards, whatever happens. Yields whether
     the air is in."""
-    air, lamp = sky.sun_air(scene), sky.find_sun(scene)
+    air, lamp = sky.sun_air(scene), skyground.find_sun(scene)
     if air is None or lamp is None:
         yield False
         return

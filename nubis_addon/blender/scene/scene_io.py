@@ -11,7 +11,7 @@ from ...core import camera
 from ...core import sky as skymath
 from ...core.errors import NubisError
 from ...core.state import CloudState
-from . import datafield, sceneparams, sky, superstorms, vdbclouds
+from . import datafield, sceneparams, sky, skycapture, skyground, superstorms, vdbclouds
 
 
 def world_ambient(scene) -> tuple[float, float, float]:
@@ -37,7 +37,7 @@ def state_from_scene(scene, camera_location=None, fields: tuple | None = None, w
     params = sceneparams.params_from_scene(settings)
     params["density_coverage"] = datafield.coverage_multiplier(scene)
     further, first_drawn = datafield.drawn_cloud_layers(scene)
-    sun = sky.find_sun(scene)
+    sun = skyground.find_sun(scene)
     if sun is not None:
         direction = tuple(sceneparams.evaluated_matrix(sun).to_3x3() @ Vector((0.0, 0.0, 1.0)))
         radiance = tuple(c * sun.data.energy for c in sun.data.color)
@@ -50,7 +50,7 @@ def state_from_scene(scene, camera_location=None, fields: tuple | None = None, w
         camera_location = sceneparams.evaluated_matrix(scene.camera).translation if scene.camera else (0.0, 0.0, 0.0)
     fps = sceneparams.scene_fps(scene)
     time = (scene.frame_current + scene.frame_subframe) / fps * params["wind_time_scale"] + params["wind_time_offset"]
-    env = sky.environment(scene, wait)
+    env = skycapture.environment(scene, wait)
     above, below, flank = skymath.hemisphere_radiance_cached(env)
     return CloudState(
         params=params,

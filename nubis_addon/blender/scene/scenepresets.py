@@ -12,7 +12,7 @@ from mathutils import Euler, Vector
 from ...core import coverage, schema, userpresets
 from ...core.presets import Preset
 from ...core.state import MAX_STORMS, sun_vector
-from . import datafield, sceneparams, sky, superstorms
+from . import datafield, sceneparams, sky, skyground, superstorms
 
 SUN_NAME = "Nubis Sun"
 
@@ -41,7 +41,9 @@ def apply_preset(scene, preset: Preset, progress=None, keep: Keep = Keep()) -> N
     `[world] sky` (or `keep.sky`) asks for one, else the preset's flat color; an artist's World stays in
     the file. Storm Empties an artist made stay in the scene; those Nubis made for the old storms go."""
     settings = scene.nubis
-    own_sun = settings.sun if keep.sun and settings.sun is not None else (sky.find_sun(scene) if keep.sun else None)
+    own_sun = (
+        settings.sun if keep.sun and settings.sun is not None else (skyground.find_sun(scene) if keep.sun else None)
+    )
     with sceneparams.batch_edit():
         for key, value in preset.params.items():
             s = schema.BY_KEY[key]
@@ -110,7 +112,7 @@ def preset_from_scene(scene, name: str, description: str = "") -> Preset:
         data["x"], data["y"] = (tidy(v) for v in superstorms.storm_centre(storm))
         storms.append(data)
     extra = {sec: schema.table_defaults(t.values()) for sec, t in schema.EXTRA_SECTIONS.items() if sec != "preset"}
-    sun = sky.find_sun(scene)
+    sun = skyground.find_sun(scene)
     if sun is not None:
         d = sceneparams.evaluated_matrix(sun).to_3x3() @ Vector((0.0, 0.0, 1.0))
         d.normalize()

@@ -17,7 +17,7 @@ from ..host.presetlist import active_preset, find_preset_entry, preset_entries
 from ..host.ui import NeedsCloudscape
 from ..jobs import preview, work
 from ..live import viewport
-from ..scene import cycles_setup, datafield, sceneparams, scenepresets, sky
+from ..scene import cycles_setup, datafield, sceneparams, scenepresets, skycapture
 
 _PRESET_ITEMS: dict = {}  # id(entries) -> items: Blender keeps pointers to these strings
 
@@ -450,7 +450,7 @@ class NUBIS_OT_clear_cache(NubisOperator, bpy.types.Operator):
 
     def run(self, context):
         freed = noise.clear_cache(runtime.cache_dir())
-        skies = sky.clear_stored()
+        skies = skycapture.clear_stored()
         return f"Cleared {freed.sets} cached noise sets ({freed.nbytes / 2**20:.1f} MB) and {skies} sky captures"
 
 
