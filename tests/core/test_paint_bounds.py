@@ -246,7 +246,7 @@ def test_the_raster_prints_the_notice_before_a_long_composite(monkeypatch):
     from nubis_addon.core import console
 
     lines = []
-    monkeypatch.setattr(paint, "NOTICE_S", 0.0)
+    monkeypatch.setattr(paintraster, "NOTICE_S", 0.0)
     monkeypatch.setattr(console, "current", lambda: type("C", (), {"line": staticmethod(lines.append)})())
     paintraster.forget()
     paintraster.raster(12, paint.stroke_dabs([(0.0, 0.0, 1.0, True), (5000.0, 0.0, 1.0, False)], 2500.0, 1.0), GRID)

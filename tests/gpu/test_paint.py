@@ -128,9 +128,8 @@ def test_the_live_stroke_shows_what_the_full_composite_makes(blender, make_scene
     import gpu
 
     from nubis_addon.blender.host import runtime
-    from nubis_addon.blender.live import viewport
+    from nubis_addon.blender.live import paintstroke, viewport
     from nubis_addon.blender.scene import datafield, sceneparams
-    from nubis_addon.blender.sidebar import paint as blender_paint
     from nubis_addon.render.offscreens import read_pixels
 
     scene = make_scene("default")
@@ -138,9 +137,9 @@ def test_the_live_stroke_shows_what_the_full_composite_makes(blender, make_scene
     w, h = 48, 27
     rv3d = camera_view(blender, scene, w, h)
     s.viewport_samples = 1
-    layer = blender_paint.paint_layer(s, "COVERAGE")
+    layer = paintstroke.paint_layer(s, "COVERAGE")
     cam_xy = sceneparams.evaluated_matrix(scene.camera).translation
-    live = blender_paint.LiveStroke(scene, layer, RADIUS, 1.0, "SMOOTH", "ADD")
+    live = paintstroke.LiveStroke(scene, layer, RADIUS, 1.0, "SMOOTH", "ADD")
     live.hold_light = False  # the 3D view holds the shadows during a drag; here they follow at once
     clouds = runtime.cloud_gpu(s.noise_seed)
 
@@ -184,8 +183,8 @@ def test_the_live_stroke_shows_what_the_full_composite_makes(blender, make_scene
     # As the 3D view drags: the shadows wait while samples come, and follow once the drag pauses.
     # (The hold made long here: how long the view waits is a setting, not what is tested, and a busy
     # machine may take longer than 0.4 s for these redraws.)
-    monkeypatch.setattr(blender_paint, "LIGHT_HOLD_S", 600.0)
-    held = blender_paint.LiveStroke(scene, layer, RADIUS, 1.0, "SMOOTH", "ADD")
+    monkeypatch.setattr(paintstroke, "LIGHT_HOLD_S", 600.0)
+    held = paintstroke.LiveStroke(scene, layer, RADIUS, 1.0, "SMOOTH", "ADD")
     converge(7004)
     fills = clouds.volume_fills
     held.add(float(cam_xy.x), y - 3000.0, 1.0, True)
@@ -322,17 +321,17 @@ def test_a_long_composite_is_announced_and_an_absurd_one_refused(blender, make_s
     say how long the composite takes; a composite over the memory bound is refused and changes nothing."""
     import re
 
+    from nubis_addon.blender.live import paintstroke
     from nubis_addon.blender.scene import sceneparams
-    from nubis_addon.blender.sidebar import paint as blender_paint
-    from nubis_addon.core import console, paint
+    from nubis_addon.core import console, paint, paintraster
 
     scene = make_scene("default")
     grid = paint.Grid.of(sceneparams.params_from_scene(scene.nubis))
-    layer = blender_paint.paint_layer(scene.nubis, "COVERAGE")
+    layer = paintstroke.paint_layer(scene.nubis, "COVERAGE")
     dabs = paint.stroke_dabs([(0.0, 0.0, 1.0, True), (5000.0, 0.0, 1.0, False)], RADIUS, 1.0, grid=grid)
-    monkeypatch.setattr(paint, "NOTICE_S", 0.0)
+    monkeypatch.setattr(paintraster, "NOTICE_S", 0.0)
     assert re.fullmatch(
-        r"compositing 11 dabs takes about \d+ s", blender_paint.composite_notice(scene.nubis, layer, dabs, grid)
+        r"compositing 11 dabs takes about \d+ s", paintstroke.composite_notice(scene.nubis, layer, dabs, grid)
     )
     printed = []
     monkeypatch.setattr(console, "current", lambda: type("C", (), {"line": staticmethod(printed.append)})())
@@ -343,7 +342,7 @@ def test_a_long_composite_is_announced_and_an_absurd_one_refused(blender, make_s
     assert printed == [f"Nubis: {info[0]}"]  # the console's line, from core/paint.py's raster
     monkeypatch.undo()
     n = len(layer.dabs)
-    monkeypatch.setattr(paint, "MEMORY_MAX", 1000)
+    monkeypatch.setattr(paintraster, "MEMORY_MAX", 1000)
     assert re.fullmatch(
         r"compositing 11 dabs would hold about [\d.]+ GB, over the 0 GB Nubis allows: clear or disable paint "
         r"layers, or lower the field resolution",
@@ -355,14 +354,14 @@ def test_a_long_composite_is_announced_and_an_absurd_one_refused(blender, make_s
 def test_a_live_drag_to_far_away_lays_its_part_and_a_full_layer_stops_it(blender, make_scene, monkeypatch):
     """A grazing view ray can land a drag's sample 1e12 m away: the drag lays the part over the field; a
     sample past the float range is no sample; the dabs are counted against the layer's cap before laying."""
-    from nubis_addon.blender.sidebar import paint as blender_paint
+    from nubis_addon.blender.live import paintstroke
     from nubis_addon.core import paint
     from nubis_addon.core.errors import NubisError
 
     scene = make_scene("default")
-    layer = blender_paint.paint_layer(scene.nubis, "COVERAGE")
-    monkeypatch.setattr(blender_paint.LiveStroke, "show", lambda _self, _rect: None)  # no view to draw into
-    live = blender_paint.LiveStroke(scene, layer, RADIUS, 1.0, "SMOOTH", "ADD")
+    layer = paintstroke.paint_layer(scene.nubis, "COVERAGE")
+    monkeypatch.setattr(paintstroke.LiveStroke, "show", lambda _self, _rect: None)  # no view to draw into
+    live = paintstroke.LiveStroke(scene, layer, RADIUS, 1.0, "SMOOTH", "ADD")
     live.add(0.0, 0.0, 1.0, True)
     live.add(1e12, 0.0, 1.0, False)
     assert live.laid == 76
@@ -450,15 +449,16 @@ def test_a_scenes_runtime_state_lives_in_one_object_and_ends_in_one_place(blende
 def test_the_modifier_keys_pick_the_brush_mode(blender):
     from types import SimpleNamespace
 
+    from nubis_addon.blender.live import paintstroke
     from nubis_addon.blender.sidebar import paint as blender_paint
 
     def event(ctrl=False, shift=False):
         return SimpleNamespace(ctrl=ctrl, shift=shift)
 
-    assert blender_paint.mode_of_event(event(), "SMOOTH") == "SMOOTH"
-    assert blender_paint.mode_of_event(event(ctrl=True), "ADD") == "SUBTRACT"
-    assert blender_paint.mode_of_event(event(shift=True), "ADD") == "SMOOTH"
-    assert blender_paint.mode_of_event(event(ctrl=True, shift=True), "ADD") == "SUBTRACT"
+    assert paintstroke.mode_of_event(event(), "SMOOTH") == "SMOOTH"
+    assert paintstroke.mode_of_event(event(ctrl=True), "ADD") == "SUBTRACT"
+    assert paintstroke.mode_of_event(event(shift=True), "ADD") == "SMOOTH"
+    assert paintstroke.mode_of_event(event(ctrl=True, shift=True), "ADD") == "SUBTRACT"
     assert blender_paint.DRAG_HINT == "Drag: add · Ctrl: subtract · Shift: smooth"
     assert blender_paint.NubisPaintSkyTool.bl_description == (
         "Paint where the clouds are, from above: drag to add, Ctrl-drag to subtract, Shift-drag to smooth"

@@ -137,7 +137,7 @@ def test_a_sky_capture_is_kept_between_sessions_and_a_damaged_one_is_rendered_ag
     """Every headless command rendered the same sky again (about a second each); the capture is now kept in
     the cache by the World's settings, a damaged file is rendered again, and Clear Cache removes them."""
     from nubis_addon.blender.host import runtime
-    from nubis_addon.blender.scene import sky, skycapture
+    from nubis_addon.blender.scene import skycapture
 
     world = blender.data.worlds.new("Stored Sky")
     if world.node_tree is None:
@@ -146,7 +146,7 @@ def test_a_sky_capture_is_kept_between_sessions_and_a_damaged_one_is_rendered_ag
     background.inputs["Color"].default_value = (0.2, 0.3, 0.5, 1.0)
     renders = []
     real = skycapture._render_world
-    monkeypatch.setattr(sky, "_render_world", lambda *a: renders.append(a) or real(*a))
+    monkeypatch.setattr(skycapture, "_render_world", lambda *a: renders.append(a) or real(*a))
     first = skycapture._stored_render(world, 16, 8, 2)
     again = skycapture._stored_render(world, 16, 8, 2)
     assert len(renders) == 1 and np.array_equal(first, again) and first.shape == (8, 16, 3)
