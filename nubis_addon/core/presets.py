@@ -312,7 +312,7 @@ def _parse_layers(value: Any, where: str) -> list[dict[str, Any]]:
         value = [{k: v for k, v in raw.items() if k != "dabs"} if isinstance(raw, dict) else raw for raw in value]
     else:
         dabs = []
-    layers = _parse_tables(value, where, "field.layers", schema.LAYER)
+    layers = _parse_tables(value, where, "field.layers", schema.FIELD_LAYER)
     for i, layer in enumerate(layers):
         here = f"{where}: field.layers[{i}]"
         if layer["kind"] == "paint" and layer["channel"] not in paint.PAINT_CHANNELS:

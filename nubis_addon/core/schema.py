@@ -1292,7 +1292,7 @@ def _table(group: str, section: str, rows: list[tuple]) -> tuple[Setting, ...]:
 
 # A field layer's setting: drawn in the Data Field panel, a change re-composites the field.
 _LAYER_KW = {"panel": "field", "trigger": "field"}
-LAYER: tuple[Setting, ...] = _table(
+FIELD_LAYER: tuple[Setting, ...] = _table(
     "layer",
     "field.layers",
     [
@@ -1671,13 +1671,13 @@ EXTRA: tuple[Setting, ...] = (
     ),
 )
 
-ALL: tuple[Setting, ...] = SCENE + LAYER + STORM + EXTRA
+ALL: tuple[Setting, ...] = SCENE + FIELD_LAYER + STORM + EXTRA
 BY_KEY: dict[str, Setting] = {s.key: s for s in SCENE}
 PRESET_SCENE: tuple[Setting, ...] = tuple(s for s in SCENE if s.in_preset)
 EXTRA_SECTIONS: dict[str, dict[str, Setting]] = {}
 for _s in EXTRA:
     EXTRA_SECTIONS.setdefault(_s.section, {})[_s.name] = _s
-LAYER_BY_NAME: dict[str, Setting] = {s.name: s for s in LAYER}
+FIELD_LAYER_BY_NAME: dict[str, Setting] = {s.name: s for s in FIELD_LAYER}
 # The settings each cloud layer holds its own value of (their `cloud_layer` flag): its altitudes, noise
 # periods, density, wind and weather rules. Every other scene setting is the sky's, shared by its layers.
 CLOUD_LAYER_SETTINGS: tuple[Setting, ...] = tuple(s for s in SCENE if s.cloud_layer)
@@ -1703,7 +1703,7 @@ def gpu_settings() -> tuple[Setting, ...]:
 def check_schema() -> None:
     """The table's own consistency (a test calls it): unique keys, known panels and triggers, a panel or a
     reason for every setting, defaults inside their ranges and among their choices."""
-    for group in (SCENE, LAYER, STORM):
+    for group in (SCENE, FIELD_LAYER, STORM):
         keys = [s.key for s in group]
         dupes = {k for k in keys if keys.count(k) > 1}
         assert not dupes, f"duplicate keys {dupes}"

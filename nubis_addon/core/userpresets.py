@@ -55,7 +55,7 @@ def _field_layers(layers: list[dict[str, Any]], header: str) -> list[str]:
     out = []
     for layer in layers:
         out.append(f"\n[[{header}]]\n")
-        out.extend(_table(layer, schema.LAYER))
+        out.extend(_table(layer, schema.FIELD_LAYER))
         if layer.get("dabs"):  # a paint layer's strokes, one dab a line
             rows = ",\n".join("  " + toml_literal(row) for row in layer["dabs"])
             out.append(f"dabs = [\n{rows},\n]\n")

@@ -1316,7 +1316,7 @@ def s_paint(step: Step):
     painted = _paint_layer_dabs()
     step.check(painted > dabs_before, f"the stroke is in a paint layer: {painted - dabs_before} dabs")
     # Where the stroke went on the cloud layer: the view ray of the drag's middle at the layer's base.
-    paint_mod = ext_module("sidebar.paint")
+    paint_mod = ext_module("live.paintstroke")
     with override():
         ctx = bpy.context
         rx = xs[8] - left

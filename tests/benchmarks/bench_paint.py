@@ -38,9 +38,9 @@ def main() -> None:
     import nubis_addon
     from nubis_addon.blender import ensure_registered
     from nubis_addon.blender.host import runtime
-    from nubis_addon.blender.live import viewport
+    from nubis_addon.blender.live import paintstroke, viewport
     from nubis_addon.blender.scene import datafield, sceneparams, scenepresets
-    from nubis_addon.blender.sidebar import paint as blender_paint
+    from nubis_addon.core import paint
     from nubis_addon.core.presets import load_preset
     from nubis_addon.render.gpu_context import ensure_gpu_context, renderer_name
     from nubis_addon.render.offscreens import read_pixels
@@ -72,7 +72,7 @@ def main() -> None:
 
         with offscreen.bind():
             fb = gpu.state.active_framebuffer_get()
-            layer = blender_paint.paint_layer(s, "COVERAGE")
+            layer = paintstroke.paint_layer(s, "COVERAGE")
             datafield.generate_fields(scene)
             redraw(fb)
             redraw(fb)
@@ -80,7 +80,7 @@ def main() -> None:
             # Live: the dirty rectangle, in place; the shadows held while dragging, then refilled each sample.
             timing = {}
             for held, dy in ((True, 0.0), (False, -3000.0)):
-                live = blender_paint.LiveStroke(scene, layer, RADIUS, 1.0, "SMOOTH", "ADD")
+                live = paintstroke.LiveStroke(scene, layer, RADIUS, 1.0, "SMOOTH", "ADD")
                 live.hold_light = held
                 redraw(fb)
                 total, cpu, fills = [], [], clouds.volume_fills
@@ -99,9 +99,7 @@ def main() -> None:
             whole_t = []
             for i, x in enumerate(xs):
                 t0 = time.perf_counter()
-                blender_paint.append_dabs(
-                    layer, blender_paint.paint.stroke_dabs([(float(x), y + 3000.0, 1.0, i == 0)], RADIUS, 1.0)
-                )
+                paintstroke.append_dabs(layer, paint.stroke_dabs([(float(x), y + 3000.0, 1.0, i == 0)], RADIUS, 1.0))
                 datafield.generate_fields(scene)
                 viewport.invalidate()
                 redraw(fb)

@@ -350,7 +350,7 @@ def test_composite_reports_progress_and_estimates_by_cost():
     from nubis_addon.core import fields, schema
     from nubis_addon.core.schema import defaults
 
-    base = schema.table_defaults(schema.LAYER)
+    base = schema.table_defaults(schema.FIELD_LAYER)
     layers = [dict(base, name=f"l{i}", kind=k) for i, k in enumerate(("perlin", "constant", "worley"))]
     params = defaults()
     params["field_resolution"] = 64

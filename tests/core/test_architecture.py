@@ -216,7 +216,7 @@ def test_schema_is_consistent_and_every_setting_has_a_panel_or_a_reason():
     from nubis_addon.core import schema
 
     schema.check_schema()
-    assert len(schema.SCENE) > 60 and len(schema.LAYER) > 15 and len(schema.STORM) > 15
+    assert len(schema.SCENE) > 60 and len(schema.FIELD_LAYER) > 15 and len(schema.STORM) > 15
     drawn = [s for s in schema.ALL if s.panel]
     internal = [s for s in schema.ALL if s.internal]
     assert len(drawn) + len(internal) == len(schema.ALL)

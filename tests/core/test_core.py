@@ -35,7 +35,7 @@ def test_composite_default_preset_is_in_range_and_deterministic():
 def _layer(**kw):
     from nubis_addon.core import schema
 
-    layer = schema.table_defaults(schema.LAYER)
+    layer = schema.table_defaults(schema.FIELD_LAYER)
     layer.update(kw)
     return layer
 

@@ -43,7 +43,7 @@ def test_painted_cover_on_a_clear_sky_is_the_paint_alone():
 def test_the_weather_rules_apply_only_when_on():
     off = fieldstack.composite_stack(_inputs())
     wet = _inputs(rain=1.0)
-    drizzle = schema.table_defaults(schema.LAYER)
+    drizzle = schema.table_defaults(schema.FIELD_LAYER)
     drizzle.update(name="Rain", kind="constant", channel="precipitation", value=0.8)
     wet.layers = [*wet.layers, drizzle]
     rain = fieldstack.composite_stack(wet)

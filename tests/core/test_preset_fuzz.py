@@ -143,7 +143,13 @@ def _mutate(template: bytes, paths: list, rng: random.Random) -> dict:
             section = rng.choice([*KNOWN, "bogus", "storms", "field"])
             table = data.setdefault(section, {}) if rng.random() < 0.9 else data
             name = rng.choice(
-                [*rng.choice(list(KNOWN.values())), "bogus", "layers", *schema.LAYER_BY_NAME, *schema.STORM_BY_NAME]
+                [
+                    *rng.choice(list(KNOWN.values())),
+                    "bogus",
+                    "layers",
+                    *schema.FIELD_LAYER_BY_NAME,
+                    *schema.STORM_BY_NAME,
+                ]
             )
             if isinstance(table, dict):
                 table[name] = _odd_value(rng)
@@ -154,7 +160,7 @@ def _mutate(template: bytes, paths: list, rng: random.Random) -> dict:
             if rng.random() < 0.5:
                 data["storms"] = [{"x": rng.uniform(-1e7, 1e7)} for _ in range(count)]
             else:
-                layer = {k: _odd_value(rng) for k in rng.sample(list(schema.LAYER_BY_NAME), 3)}
+                layer = {k: _odd_value(rng) for k in rng.sample(list(schema.FIELD_LAYER_BY_NAME), 3)}
                 if not isinstance(data.get("field"), dict):
                     data["field"] = {}
                 data["field"]["layers"] = [_copy(layer) for _ in range(count)]

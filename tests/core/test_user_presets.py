@@ -69,8 +69,8 @@ def test_every_setting_off_its_default_round_trips() -> None:
     preset.name, preset.description = 'My "best" sky', "Line one\twith a tab"
     preset.layers = []
     for i, kind in enumerate(schema.LAYER_KINDS):
-        layer = schema.table_defaults(schema.LAYER)
-        for j, s in enumerate(schema.LAYER):
+        layer = schema.table_defaults(schema.FIELD_LAYER)
+        for j, s in enumerate(schema.FIELD_LAYER):
             if s.name not in ("name", "kind", "mask", "image", "remap", "center"):
                 layer[s.name] = _off_default(s, i + j)
         layer.update(name=f"L{i}", kind=kind, mask="L0" if i else "", image="painted.png" if kind == "image" else "")

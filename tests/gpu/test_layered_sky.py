@@ -355,13 +355,13 @@ def test_a_stroke_paints_the_cloud_layer_chosen_in_the_list(make_scene):
 
 
 def test_a_drag_is_live_on_the_first_layer_and_composited_at_its_end_on_a_further_one(make_scene):
-    from nubis_addon.blender.sidebar import paint as blender_paint
+    from nubis_addon.blender.live import paintstroke
 
     scene = make_scene(PRESET)
     brush = (2000.0, 1.0, "SMOOTH", "ADD")
-    owner, name, stroke = blender_paint.begin_stroke(scene, "COVERAGE", "", brush)
+    owner, name, stroke = paintstroke.begin_stroke(scene, "COVERAGE", "", brush)
     assert (owner, stroke.live) == (-1, True) and name in scene.nubis.layers
     scene.nubis.active_further_layer = 0
-    owner, name, stroke = blender_paint.begin_stroke(scene, "COVERAGE", "", brush)
+    owner, name, stroke = paintstroke.begin_stroke(scene, "COVERAGE", "", brush)
     assert (owner, stroke.live) == (0, False) and name in scene.nubis.cloud_layers[0].layers
     assert stroke.add(0.0, 0.0, 1.0, True) is None and stroke.laid > 0

@@ -86,7 +86,7 @@ def test_every_setting_with_a_panel_is_drawn(blender, make_scene):
                 type(owner).__name__, "other"
             )
             drawn_keys.add((group, key))
-    for setting in (*schema.SCENE, *schema.LAYER, *schema.STORM):
+    for setting in (*schema.SCENE, *schema.FIELD_LAYER, *schema.STORM):
         if setting.panel:
             assert (setting.group if setting.group != "scene" else "scene", setting.key) in drawn_keys, (
                 f"{setting.group} setting {setting.key} is assigned to panel '{setting.panel}' but not drawn"
@@ -111,7 +111,7 @@ def test_every_label_fits_the_default_sidebar(blender, make_scene):
     scene = make_scene("default")
     texts: list = []
     _draw_all(panels, types.SimpleNamespace(scene=scene), texts)
-    for setting in (*schema.SCENE, *schema.LAYER, *schema.STORM):
+    for setting in (*schema.SCENE, *schema.FIELD_LAYER, *schema.STORM):
         if setting.panel:
             assert len(setting.label) <= SPLIT_LABEL, f"{setting.key}: '{setting.label}' is cut in the sidebar"
     for kind, text in texts:

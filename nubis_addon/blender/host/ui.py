@@ -15,6 +15,12 @@ def has_cloudscape(scene) -> bool:
     return settings is not None and getattr(settings, "field_a", None) is not None
 
 
+# `scene.nubis.active_further_layer` is the row chosen in the Cloud Layers list of further layers (the
+# list Blender's UIList draws needs an index property); FIRST_LAYER there, no row of it: the panels act on
+# the first cloud layer, the scene's own settings.
+FIRST_LAYER = -1
+
+
 def active_cloud_layer(scene):
     """What the sidebar's per-layer panels act on (docs/layers.md): the scene's own settings for the first
     cloud layer, or the further layer chosen in the Cloud Layers list. Both hold the layer's settings under

@@ -205,10 +205,10 @@ class LiveStroke:
 
 def begin_stroke(scene, channel: str, name: str, brush: tuple) -> tuple[int, str, LiveStroke]:
     """A drag's start on the cloud layer chosen in the Cloud Layers list: (that layer's index among the
-    further layers, -1 for the first; the paint layer's name; the stroke, live on the first layer only).
+    further layers, ui.FIRST_LAYER for the first; the paint layer's name; the stroke, live on the first layer only).
     `brush` is (radius, strength, falloff, mode)."""
     owner = ui.active_cloud_layer(scene)
     live = ui.first_layer_chosen(scene)
     layer = paint_layer(owner, channel, name)
     stroke = LiveStroke(scene, layer, *brush, live=live)
-    return (-1 if live else scene.nubis.active_further_layer), layer.name, stroke
+    return (ui.FIRST_LAYER if live else scene.nubis.active_further_layer), layer.name, stroke

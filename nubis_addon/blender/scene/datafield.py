@@ -22,7 +22,7 @@ FIELD_IMAGES = {
 
 
 def layer_to_dict(layer) -> dict:
-    return sceneparams.table_to_dict(layer, schema.LAYER)
+    return sceneparams.table_to_dict(layer, schema.FIELD_LAYER)
 
 
 def layer_from_dict(layer, data: dict) -> None:
@@ -38,7 +38,7 @@ def layer_from_dict(layer, data: dict) -> None:
             layer.dabs.clear()
             add_dabs(layer, value)
             continue
-        s = schema.LAYER_BY_NAME[key]
+        s = schema.FIELD_LAYER_BY_NAME[key]
         if s.kind == "image":
             layer.image = bpy.data.images.get(value) if value else None
         elif s.kind == "enum":

@@ -12,6 +12,7 @@ from mathutils import Euler, Vector
 from ...core import coverage, schema, userpresets
 from ...core.presets import Preset
 from ...core.state import MAX_STORMS, sun_vector
+from ..host import ui
 from . import datafield, sceneparams, sky, skyground, superstorms
 
 SUN_NAME = "Nubis Sun"
@@ -58,7 +59,7 @@ def apply_preset(scene, preset: Preset, progress=None, keep: Keep = Keep()) -> N
         settings.cloud_layers.clear()
         for data in preset.cloud_layers:
             datafield.add_cloud_layer(settings, data, preset.path)
-        settings.active_further_layer = -1
+        settings.active_further_layer = ui.FIRST_LAYER
         settings.first_layer_enabled, settings.first_layer_solo = True, False
         settings.sun = own_sun or _setup_sun(scene, preset.extra["sun"])
         if not keep.camera or scene.camera is None:

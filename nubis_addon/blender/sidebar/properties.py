@@ -154,8 +154,8 @@ def _layer_channel_prop(s: schema.Setting):
 
 
 def _layer_annotations() -> dict:
-    ann = _annotations(schema.LAYER)
-    ann["channel"] = _layer_channel_prop(schema.LAYER_BY_NAME["channel"])
+    ann = _annotations(schema.FIELD_LAYER)
+    ann["channel"] = _layer_channel_prop(schema.FIELD_LAYER_BY_NAME["channel"])
     # A paint layer's strokes: plain data, so Blender saves and undoes them like any setting.
     ann["dabs"] = CollectionProperty(type=NubisPaintDab)
     return ann
@@ -206,9 +206,12 @@ def _scene_annotations() -> dict:
     redraw = events.update_callback("redraw")
     # A layered sky (docs/layers.md): the first layer is these settings; the further ones follow.
     ann["cloud_layers"] = CollectionProperty(type=NubisCloudLayer)
-    # The further layer the per-layer panels act on; -1: the first layer (ui.active_cloud_layer).
+    # The further layer the per-layer panels act on; ui.FIRST_LAYER: the first layer (ui.active_cloud_layer).
     ann["active_further_layer"] = IntProperty(
-        name="Active Cloud Layer", description="The cloud layer the panels below act on", min=-1, default=-1
+        name="Active Cloud Layer",
+        description="The cloud layer the panels below act on",
+        min=ui.FIRST_LAYER,
+        default=ui.FIRST_LAYER,
     )
     ann["first_layer_name"] = StringProperty(name="Name", description="The first cloud layer's name", default="Layer 1")
     ann["first_layer_enabled"] = BoolProperty(

@@ -120,7 +120,7 @@ class NUBIS_OT_cloud_layer_first(ui.NeedsCloudscape, NubisOperator, bpy.types.Op
     bl_options = {"REGISTER", "UNDO"}
 
     def run(self, context):
-        context.scene.nubis.active_further_layer = -1
+        context.scene.nubis.active_further_layer = ui.FIRST_LAYER
         return None
 
 
