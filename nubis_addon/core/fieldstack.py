@@ -1,7 +1,7 @@
 """A cloud layer's data field, composited in one pipeline (GDC22's Data Field Generator; docs/painting.md,
 docs/layers.md): the layer stack, the weather rules, the coverage slider's multiplier found from the field
 before the storms, the superstorm stencils, then the artist's strokes. The cloudscape's own layer and every
-further cloud layer go through it alike; blender/scene/scene_io.py gathers the inputs and stores what it returns.
+further cloud layer go through it alike; blender/scene/cloudstate.py gathers the inputs and stores what it returns.
 No bpy here."""
 
 from __future__ import annotations

@@ -110,7 +110,7 @@ class Raster:
         return rect
 
 
-# layer key -> (grid, dabs, raster). A layer key is a number the caller gives each layer (blender/scene/scene_io.py
+# layer key -> (grid, dabs, raster). A layer key is a number the caller gives each layer (blender/scene/cloudstate.py
 # mints them), never a Blender pointer: core holds no Blender identity. A cached raster is used only for the
 # dabs it was made from, so a key that comes to name another layer costs a raster from scratch, no more.
 _RASTERS: dict[int, tuple[paint.Grid, np.ndarray, Raster]] = {}

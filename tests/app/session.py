@@ -1438,7 +1438,7 @@ def s_reopen(step: Step):
             names = json.load(f)["names"]
         kept = [c.name for c in scene.nubis.cloud_layers]
         step.check(kept == names, f"the cloud layers came back with the file: {kept}")
-        drawn = ext_module("scene.scene_io").state_from_scene(scene).drawn_layers()
+        drawn = ext_module("scene.cloudstate").state_from_scene(scene).drawn_layers()
         step.check(len(drawn) == 2, f"{len(drawn)} cloud layers drawn after reopening")
     default = type(scene.nubis).bl_rna.properties["viewport_samples"].default
     samples = scene.nubis.viewport_samples

@@ -41,7 +41,7 @@ def main() -> None:
     from nubis_addon.blender.headless.commands import load_scene
     from nubis_addon.blender.host import runtime
     from nubis_addon.blender.jobs import preview
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
     from nubis_addon.core import camera
     from nubis_addon.render import engine
     from nubis_addon.render.gpu_context import ensure_gpu_context, renderer_name
@@ -57,7 +57,7 @@ def main() -> None:
     states = {}
     for which in DRAWN:
         _draw(scene, which)
-        state = scene_io.state_from_scene(scene)
+        state = cloudstate.state_from_scene(scene)
         state.pixel_angle, state.pixel_size = camera.pixel_footprint(np.array(view.inv_view_proj), width, height)
         states[which] = state
         clouds.update(state)

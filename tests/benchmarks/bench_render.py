@@ -33,7 +33,7 @@ def main() -> None:
     import nubis_addon
     from nubis_addon.blender import ensure_registered
     from nubis_addon.blender.jobs import pipeline
-    from nubis_addon.blender.scene import scene_io, scenepresets
+    from nubis_addon.blender.scene import cloudstate, scenepresets
     from nubis_addon.core import noise
     from nubis_addon.core.presets import load_preset
     from nubis_addon.render import engine
@@ -56,15 +56,15 @@ def main() -> None:
     ensure_registered()
     scene = bpy.context.scene
     scenepresets.apply_preset(scene, load_preset("default"))
-    state = scene_io.state_from_scene(scene)
+    state = cloudstate.state_from_scene(scene)
     from nubis_addon.blender.host import runtime
 
     clouds = runtime.cloud_gpu(0)
-    eye = scene_io.camera_eye(scene)
+    eye = cloudstate.camera_eye(scene)
     clouds.update(state)
     times = {}
     for w, h in ((480, 270), (960, 540), (240, 135)):
-        inv = scene_io.camera_inv_view_proj(scene, w, h)
+        inv = cloudstate.camera_inv_view_proj(scene, w, h)
         times[(w, h)] = best_of(lambda w=w, h=h, inv=inv: engine.render_offscreen(clouds, inv, eye, w, h))
         rows.append((f"frame {w}x{h}, default preset, real-time light march", f"{times[(w, h)] * 1000:.0f} ms"))
     rows.append(
@@ -72,7 +72,7 @@ def main() -> None:
     )
     state.light_mode = 1
     clouds.update(state)
-    inv = scene_io.camera_inv_view_proj(scene, 240, 135)
+    inv = cloudstate.camera_inv_view_proj(scene, 240, 135)
     ref = best_of(lambda: engine.render_offscreen(clouds, inv, eye, 240, 135), 1)
     rows.append(("frame 240x135, reference light march and sky visibility", f"{ref * 1000:.0f} ms"))
     rows.append(("  ratio reference / real-time at 240x135", f"{ref / times[(240, 135)]:.1f}x"))

@@ -34,7 +34,7 @@ def main() -> None:
     from nubis_addon.blender import ensure_registered
     from nubis_addon.blender.host import runtime
     from nubis_addon.blender.jobs import preview
-    from nubis_addon.blender.scene import scene_io, scenepresets, skyground
+    from nubis_addon.blender.scene import cloudstate, scenepresets, skyground
     from nubis_addon.core import camera
     from nubis_addon.core.presets import load_preset
     from nubis_addon.render.gpu_context import ensure_gpu_context, renderer_name
@@ -50,7 +50,7 @@ def main() -> None:
     scenepresets.apply_preset(scene, preset)
     s = scene.nubis
     view = preview.camera_view(scene, width, height)
-    air = scene_io.state_from_scene(scene)
+    air = cloudstate.state_from_scene(scene)
     air.pixel_angle, air.pixel_size = camera.pixel_footprint(np.array(view.inv_view_proj), width, height)
     lamp = skyground.find_sun(scene)
     plain = dataclasses.replace(air, sun_air=None, sun_radiance=tuple(c * lamp.data.energy for c in lamp.data.color))

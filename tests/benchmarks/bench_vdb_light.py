@@ -115,7 +115,7 @@ import sys
 sys.path.insert(0, sys.argv[-5])
 import bpy
 from nubis_addon.blender import ensure_registered
-from nubis_addon.blender.scene import datafield, scene_io, scenepresets, vdbclouds
+from nubis_addon.blender.scene import datafield, cloudstate, scenepresets, vdbclouds
 from nubis_addon.core.presets import load_preset
 vdb, blend, space, move = sys.argv[-4:]
 bpy.ops.wm.read_factory_settings(use_empty=True)

@@ -46,7 +46,7 @@ def main() -> None:
     from nubis_addon.blender.host import runtime
     from nubis_addon.blender.jobs import preview
     from nubis_addon.blender.live import viewport
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
     from nubis_addon.render import offscreens, temporal
     from nubis_addon.render.gpu_context import ensure_gpu_context, renderer_name
 
@@ -55,7 +55,7 @@ def main() -> None:
     ensure_gpu_context()
     scene = peak_scene()
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
-    state = scene_io.state_from_scene(scene)
+    state = cloudstate.state_from_scene(scene)
     view = preview.camera_view(scene, width, height)
     ways = ("behind the objects", "in front of the scene")
     rest: dict[str, list[float]] = {w: [] for w in ways}

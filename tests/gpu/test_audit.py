@@ -81,10 +81,10 @@ def test_the_anvil_takes_over_without_a_step(make_scene):
     from gpu_probe import probe_density
 
     from nubis_addon.blender.host import runtime
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
 
     scene = make_scene("superstorm")
-    state = scene_io.state_from_scene(scene)
+    state = cloudstate.state_from_scene(scene)
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
     clouds.update(state, light=False)  # densities only
     storm = state.storms[0]
@@ -116,7 +116,7 @@ def _vortex_angle(scene, frames, where):
     from gpu_probe import probe_vortex
 
     from nubis_addon.blender.host import runtime
-    from nubis_addon.blender.scene import scene_io, superstorms
+    from nubis_addon.blender.scene import cloudstate, superstorms
 
     storm = scene.nubis.storms[0]
     cx, cy = superstorms.storm_centre(storm)
@@ -124,7 +124,7 @@ def _vortex_angle(scene, frames, where):
     angles, blends, times = [], [], []
     for f in frames:
         scene.frame_set(int(f))
-        state = scene_io.state_from_scene(scene)
+        state = cloudstate.state_from_scene(scene)
         clouds.update(state, light=False)  # the vortex only: no light volumes to refill every frame
         moved = probe_vortex(clouds, where)[:, :2]
         angles.append(np.arctan2(moved[:, 1] - cy, moved[:, 0] - cx) - np.arctan2(where[:, 1] - cy, where[:, 0] - cx))

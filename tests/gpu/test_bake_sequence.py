@@ -45,7 +45,7 @@ def test_cli_sequence_with_velocity_matches_the_motion_vectors(make_scene, tmp_p
     viewport's motion pass draws for the same clouds (superstorm: wind and the vortex's turn)."""
     from nubis_addon import cli
     from nubis_addon.blender.jobs import pipeline
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
     from nubis_addon.core import vdbwrite
 
     out = tmp_path / "clouds_####.vdb"
@@ -66,9 +66,9 @@ def test_cli_sequence_with_velocity_matches_the_motion_vectors(make_scene, tmp_p
     )
     vel, lo = _velocity_array(baked.path)
     motion = pipeline.render_motion(scene, w, h)
-    inv = np.array(scene_io.camera_inv_view_proj(scene, w, h), np.float64)
+    inv = np.array(cloudstate.camera_inv_view_proj(scene, w, h), np.float64)
     vp = np.linalg.inv(inv)
-    eye = np.array(scene_io.camera_eye(scene)[:3])
+    eye = np.array(cloudstate.camera_eye(scene)[:3])
     fps = scene.render.fps / scene.render.fps_base
     rows, cols = np.nonzero(motion[..., 3] > 0.3)
     ndc = np.stack([(cols + 0.5) / w * 2 - 1, 1 - (rows + 0.5) / h * 2, np.ones_like(cols, float)], 1)

@@ -9,10 +9,10 @@ from nubis_addon.core.jobs import BakeOptions
 
 
 def _small_plan(scene, voxel=300.0, tile=8):
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
     from nubis_addon.core.bakeplan import plan_bake
 
-    state = scene_io.state_from_scene(scene)
+    state = cloudstate.state_from_scene(scene)
     # A small box around the split of the coverage, so a dense reference bake stays cheap.
     plan = plan_bake(state, voxel, region=(-6000.0, 6000.0, -4000.0, 4000.0), tile=tile)
     state.cirrus_slab = plan.cirrus_slab

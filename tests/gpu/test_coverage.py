@@ -15,11 +15,11 @@ def _top_view_cover(scene, size: int = 192) -> float:
     from mathutils import Matrix
 
     from nubis_addon.blender.host import runtime
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
     from nubis_addon.core import camera
     from nubis_addon.render import engine
 
-    state = scene_io.state_from_scene(scene)
+    state = cloudstate.state_from_scene(scene)
     p = state.params
     half = 0.9 * min(p["field_size"] / 2, p["layer_draw_radius"] / 2**0.5)
     x, y = state.draw_center
@@ -48,7 +48,7 @@ def test_coverage_is_the_fraction_of_the_sky_covered(make_scene):
 def test_a_preset_with_the_old_multiplier_keeps_its_look(make_scene, tmp_path):
     """`[density] coverage = 0.6` without `cover` (mixed_sky before the change) becomes the fraction of
     the sky 0.6 covered on its own field, so the shaders get 0.6 back."""
-    from nubis_addon.blender.scene import scene_io, scenepresets
+    from nubis_addon.blender.scene import cloudstate, scenepresets
     from nubis_addon.core.presets import find_preset, load_preset
 
     text = find_preset("mixed_sky").read_text(encoding="utf-8")
@@ -59,7 +59,7 @@ def test_a_preset_with_the_old_multiplier_keeps_its_look(make_scene, tmp_path):
     scene = make_scene("default")
     scenepresets.apply_preset(scene, preset)
     assert scene.nubis.density_cover == pytest.approx(0.41475, abs=0.002)
-    assert scene_io.state_from_scene(scene).params["density_coverage"] == pytest.approx(0.6, abs=0.005)
+    assert cloudstate.state_from_scene(scene).params["density_coverage"] == pytest.approx(0.6, abs=0.005)
 
 
 def test_the_multiplier_found_covers_the_fraction_asked():

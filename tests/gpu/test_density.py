@@ -20,11 +20,11 @@ _sampler_unorm8: dict[int, bool] = {}
 def _inputs(scene):
     """(CloudGPU updated to the scene, its CloudState, the NoiseSet behind the GPU textures)."""
     from nubis_addon.blender.host import runtime
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
     from nubis_addon.core import noise
 
     seed = scene.nubis.noise_seed
-    state = scene_io.state_from_scene(scene)
+    state = cloudstate.state_from_scene(scene)
     clouds = runtime.cloud_gpu(seed)
     clouds.update(state, light=False)  # densities only
     if seed not in _noise_sets:

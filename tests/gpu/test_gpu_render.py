@@ -52,14 +52,14 @@ def test_viewport_draw_uses_the_render_code(make_scene):
     from nubis_addon.blender.host import status
     from nubis_addon.blender.jobs import pipeline
     from nubis_addon.blender.live import viewport
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
     from nubis_addon.render.offscreens import read_pixels
 
     assert viewport.is_registered()
     scene = make_scene("default")
     w, h = 64, 36
     expected = pipeline.render_viewport(scene, w, h)
-    inv = scene_io.camera_inv_view_proj(scene, w, h)
+    inv = cloudstate.camera_inv_view_proj(scene, w, h)
     offscreen = gpu.types.GPUOffScreen(w, h, format="RGBA32F")
     with offscreen.bind():
         fb = gpu.state.active_framebuffer_get()
@@ -109,13 +109,13 @@ def test_solid_shading_draws_the_worlds_sky_behind_the_clouds(make_scene):
 
     from nubis_addon.blender.jobs import pipeline
     from nubis_addon.blender.live import viewport
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
     from nubis_addon.render.offscreens import read_pixels
 
     scene = make_scene("default")
     assert scene.nubis.viewport_solid_sky  # on by default
     w, h = 64, 36
-    inv = scene_io.camera_inv_view_proj(scene, w, h)
+    inv = cloudstate.camera_inv_view_proj(scene, w, h)
     eye = scene.camera.matrix_world.translation
     offscreen = gpu.types.GPUOffScreen(w, h, format="RGBA32F")
     with offscreen.bind():

@@ -105,13 +105,13 @@ def _view_samples(scene, width=64, height=36) -> tuple[float, float]:
 
     from nubis_addon.blender.host import runtime
     from nubis_addon.blender.jobs import preview
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
     from nubis_addon.core import camera
     from nubis_addon.render import engine
 
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
     view = preview.camera_view(scene, width, height)
-    state = scene_io.state_from_scene(scene)
+    state = cloudstate.state_from_scene(scene)
     state.pixel_angle, state.pixel_size = camera.pixel_footprint(np.array(view.inv_view_proj), width, height)
     clouds.update(state)
     inv = mathutils.Matrix(view.inv_view_proj)
@@ -174,11 +174,11 @@ def test_no_cloud_stands_above_where_the_view_march_ends_a_layer(make_scene):
     from oracle import top_ramp_end
 
     from nubis_addon.blender.host import runtime
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
     from nubis_addon.core import cloudlayers
 
     scene = make_scene(PRESET)
-    state = scene_io.state_from_scene(scene)
+    state = cloudstate.state_from_scene(scene)
     first, upper = state.drawn_layers()
     fa, fb = _with_tall_columns(first, 0.7, (0.0, 0.0))
     ua, ub = _with_tall_columns(upper, 0.4, (0.0, 0.0))
@@ -245,12 +245,12 @@ def four_layers(make_scene, tmp_path):
 
 def test_four_layers_draw_and_bake_into_one_vdb(four_layers, tmp_path):
     from nubis_addon.blender.jobs import pipeline
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
     from nubis_addon.core import vdbwrite
     from nubis_addon.core.jobs import BakeOptions
 
     scene = four_layers
-    state = scene_io.state_from_scene(scene)
+    state = cloudstate.state_from_scene(scene)
     assert len(state.drawn_layers()) == 4
     assert state.shell()[0] <= 1000.0 and state.shell()[1] >= 7500.0
     image = _render(scene)
@@ -300,7 +300,7 @@ def _run_operator(name: str) -> None:
 def test_a_layer_added_in_the_sidebar_is_saved_and_read_back(make_scene, tmp_path):
     import bpy
 
-    from nubis_addon.blender.scene import scene_io, scenepresets
+    from nubis_addon.blender.scene import cloudstate, scenepresets
     from nubis_addon.core import presets, userpresets
 
     scene = make_scene("stratocumulus")
@@ -324,7 +324,7 @@ def test_a_layer_added_in_the_sidebar_is_saved_and_read_back(make_scene, tmp_pat
     assert [c.name for c in scene.nubis.cloud_layers] == ["Upper"]
     cloud = scene.nubis.cloud_layers[0]
     assert cloud.field_a is not None and cloud.field_a.packed_file is not None
-    state = scene_io.state_from_scene(scene)
+    state = cloudstate.state_from_scene(scene)
     assert len(state.drawn_layers()) == 2
 
 
@@ -333,19 +333,19 @@ def test_a_stroke_paints_the_cloud_layer_chosen_in_the_list(make_scene):
     its field, and the first layer's field is left as it was."""
     import bpy
 
-    from nubis_addon.blender.scene import datafield, scene_io
+    from nubis_addon.blender.scene import cloudstate, datafield
 
     scene = make_scene(PRESET)
     s = scene.nubis
     s.active_further_layer = 0
     cloud = s.cloud_layers[0]
     before_first = datafield.read_fields(s)[0].copy()
-    before = scene_io.state_from_scene(scene).cloud_layers[0].field_a.copy()
+    before = cloudstate.state_from_scene(scene).cloud_layers[0].field_a.copy()
     stroke = stroke_elements([-3000.0, 0.0, 3000.0], z=cloud.layer_bottom)
     assert bpy.ops.nubis.paint_field(stroke=stroke, channel="COVERAGE", radius=2000.0, strength=1.0) == {"FINISHED"}
     assert [x.kind for x in cloud.layers][-1] == "PAINT" and len(cloud.layers[-1].dabs) > 0
     assert not any(x.kind == "PAINT" for x in s.layers)
-    painted = scene_io.state_from_scene(scene).cloud_layers[0]
+    painted = cloudstate.state_from_scene(scene).cloud_layers[0]
     after = painted.field_a
     res = s.field_resolution
     # The coverage the shader sees under the stroke (the field times the layer's multiplier): full.

@@ -11,10 +11,10 @@ import pytest
 @pytest.fixture
 def clouds(make_scene):
     from nubis_addon.blender.host import runtime
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
 
     scene = make_scene("default")
-    state = scene_io.state_from_scene(scene)
+    state = cloudstate.state_from_scene(scene)
     gpu_inputs = runtime.cloud_gpu(scene.nubis.noise_seed)
     gpu_inputs.update(state)
     p = state.params

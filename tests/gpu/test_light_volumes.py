@@ -9,12 +9,12 @@ import numpy as np
 
 def test_volumes_are_refilled_only_when_what_they_hold_changes(make_scene):
     from nubis_addon.blender.host import runtime
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
     from nubis_addon.core import lightvolume
 
     scene = make_scene("default")
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
-    state = scene_io.state_from_scene(scene)
+    state = cloudstate.state_from_scene(scene)
     clouds.update(state)
     fills = clouds.volume_fills
     # Accumulation passes, a small camera move and the reference switch leave them as they are.
@@ -128,14 +128,14 @@ def test_the_sky_volume_knows_a_towers_flank_from_a_decks_middle(make_scene):
     barely moves."""
     from nubis_addon.blender.host import runtime
     from nubis_addon.blender.jobs import pipeline
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
     from nubis_addon.core import metrics
 
     sides, lum = {}, {}
     for name in ("stratus_overcast", "cumulonimbus"):
         scene = make_scene(name, sun__strength=0.0)
         clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
-        clouds.update(scene_io.state_from_scene(scene))
+        clouds.update(cloudstate.state_from_scene(scene))
         volume = _sky_volume(clouds)
         depth_above, side = volume[..., 0], volume[..., 1]
         assert np.all(np.isfinite(volume)) and side.min() >= 0.99, side.min()

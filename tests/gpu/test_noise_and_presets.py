@@ -66,10 +66,10 @@ def _draw(scene, viewport, w=32, h=18):
     temporal view or None, the seconds it took and the drawn pixels."""
     import gpu
 
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
     from nubis_addon.render.offscreens import read_pixels
 
-    inv = scene_io.camera_inv_view_proj(scene, w, h)
+    inv = cloudstate.camera_inv_view_proj(scene, w, h)
     offscreen = gpu.types.GPUOffScreen(w, h, format="RGBA32F")
     try:
         with offscreen.bind():

@@ -270,7 +270,7 @@ def test_a_peak_in_the_layer_is_shaded_where_clouds_stand_between_it_and_the_sun
     sun: a stack of casters through the layer, not one above the peak (which left the flank unshaded)."""
     from mathutils import Vector
 
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
 
     scene, mountain = _scene(blender, "below", emission=False)
     # The sun from the side: the flank the camera sees is in sun, and the clouds' shadows fall beside them.
@@ -278,7 +278,7 @@ def test_a_peak_in_the_layer_is_shaded_where_clouds_stand_between_it_and_the_sun
     sun.rotation_euler = (0.0, 0.0, 0.0)
     sun.rotation_euler = Vector((0.8, -0.2, 0.55)).to_track_quat("Z", "Y").to_euler()
     lit = _render(blender, scene, engine, tmp_path / "shadows.png")
-    floor = scene_io.state_from_scene(scene).shell()[0]
+    floor = cloudstate.state_from_scene(scene).shell()[0]
     points = _visible_points(blender, scene, mountain)
     inside = ~np.isnan(points[..., 0]) & (points[..., 2] > floor) & (_veil_alpha(blender) < 0.1)
     transmittance = np.full(inside.shape, np.nan)
@@ -311,11 +311,11 @@ def _visible_points(blender, scene, obj) -> np.ndarray:
     """The point of `obj` each pixel's centre sees (top row first), NaN where the pixel sees anything else."""
     from mathutils import Vector
 
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
     from nubis_addon.core import sky as skymath
 
-    inv = scene_io.camera_inv_view_proj(scene, W, H)
-    eye = scene_io.camera_eye(scene)
+    inv = cloudstate.camera_inv_view_proj(scene, W, H)
+    eye = cloudstate.camera_eye(scene)
     dirs = skymath.camera_directions(inv, eye, W, H)
     depsgraph = blender.context.evaluated_depsgraph_get()
     points = np.full((H, W, 3), np.nan)
@@ -373,7 +373,7 @@ def test_the_viewport_veils_the_peak_as_f12_does(blender, tmp_path):
     (display-referred)."""
     from nubis_addon.blender.host import runtime
     from nubis_addon.blender.jobs import preview
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
     from nubis_addon.render import temporal
 
     scene, _obj = _scene(blender, "below")
@@ -388,7 +388,7 @@ def test_the_viewport_veils_the_peak_as_f12_does(blender, tmp_path):
         scene.nubis.sky_render_clouds = True
     view = preview.camera_view(scene, W, H)
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
-    state = scene_io.state_from_scene(scene)
+    state = cloudstate.state_from_scene(scene)
     tv = temporal.TemporalViewport()
     with preview.scene_depth(scene, view) as (deep, depth):
         for _ in range(16 * 8):
@@ -435,7 +435,7 @@ def test_an_orbit_around_the_peak_leaves_no_veil_behind_at_its_silhouette(blende
     before read +0.004 and 4.5 % (docs/viewport.md#clouds-in-front-of-the-scene)."""
     from nubis_addon.blender.host import runtime
     from nubis_addon.blender.jobs import preview
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
     from nubis_addon.render import temporal
 
     scene, _obj = _scene(blender, "below")
@@ -447,7 +447,7 @@ def test_an_orbit_around_the_peak_leaves_no_veil_behind_at_its_silhouette(blende
         if frame:
             _orbit(blender, scene, 0.5)
         view = preview.camera_view(scene, W, H)
-        state = scene_io.state_from_scene(scene)
+        state = cloudstate.state_from_scene(scene)
         with preview.scene_depth(scene, view) as (deep, depth):
             for _ in range(4):
                 moving.redraw(clouds, state, deep, 1.0, 1, depth=depth, depth_key=frame)

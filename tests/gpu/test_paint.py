@@ -423,7 +423,7 @@ def test_a_paint_layer_offers_only_the_channels_a_brush_paints_and_refuses_anoth
 
 def test_a_scenes_runtime_state_lives_in_one_object_and_ends_in_one_place(blender, make_scene):
     """Stale flag, coverage histogram, pre-paint planes and raster keys: one SceneState per scene, all gone
-    with forget_stale (a file load, unregister); core/paint.py caches rasters under scene_io's numbers."""
+    with forget_stale (a file load, unregister); core/paint.py caches rasters under cloudstate's numbers."""
     from nubis_addon.blender.live import events
     from nubis_addon.blender.scene import datafield, sceneparams
     from nubis_addon.core import paintraster

@@ -103,15 +103,15 @@ def test_a_memory_bound_comparison_bakes_finer_by_what_the_clouds_fill_and_falls
     """Where the bound (every evaluated voxel cloud) refuses the voxels the camera asks for, compare counts
     what the clouds fill with a probe and bakes at the camera's size; if the clouds then fill more than
     the probe said, the guarded bake stops and compare bakes at the size the bound allows."""
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
     from nubis_addon.core import bakeplan
 
     seen = {}
 
     def limit_to(bytes_of):
         def edit(scene):
-            state = scene_io.state_from_scene(scene)
-            inv = np.array(scene_io.camera_inv_view_proj(scene, 32, 18))
+            state = cloudstate.state_from_scene(scene)
+            inv = np.array(cloudstate.camera_inv_view_proj(scene, 32, 18))
             wanted = bakeplan.camera_footprint_voxel(state, inv, 32, 18, scene.nubis.bake_voxel_size)
             region = bakeplan.view_footprint(state, inv)
             plan = bakeplan.plan_bake(state, wanted, memory_limit=2**62, region=region)  # the bound, unlimited

@@ -162,7 +162,7 @@ def test_a_sky_capture_is_kept_between_sessions_and_a_damaged_one_is_rendered_ag
 
 def test_an_artists_world_is_kept_and_lights_the_clouds(blender):
     from nubis_addon.blender import ensure_registered
-    from nubis_addon.blender.scene import scene_io, sky, skycapture
+    from nubis_addon.blender.scene import cloudstate, sky, skycapture
 
     blender.ops.wm.read_factory_settings(use_empty=True)
     ensure_registered()
@@ -188,7 +188,7 @@ def test_an_artists_world_is_kept_and_lights_the_clouds(blender):
     before = skycapture.fingerprint(mine)
     assert blender.ops.nubis.new_cloudscape(preset="default", keep_world=True) == {"FINISHED"}
     assert scene.world == mine and skycapture.fingerprint(mine) == before and not sky.is_nubis_sky(mine)
-    state = scene_io.state_from_scene(scene)
+    state = cloudstate.state_from_scene(scene)
     above, below = state.ambient, state.ambient_below
     assert (
         state.sky_env.shape == (skycapture.ENV_WIDTH // 2, skycapture.ENV_WIDTH, 3)
@@ -266,10 +266,10 @@ CUBE_MIN, CUBE_MAX = np.array([-150.0, -1650.0, 0.0]), np.array([150.0, -1350.0,
 
 def _masks(scene):
     """Per pixel: where the camera sees the ground (and the point it sees), the cube, and open sky."""
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
 
-    inv = scene_io.camera_inv_view_proj(scene, W, H)
-    dirs = skymath.camera_directions(inv, scene_io.camera_eye(scene), W, H)
+    inv = cloudstate.camera_inv_view_proj(scene, W, H)
+    dirs = skymath.camera_directions(inv, cloudstate.camera_eye(scene), W, H)
     eye = np.array(scene.camera.location)
     t = np.where(dirs[..., 2] < -1e-3, -eye[2] / np.minimum(dirs[..., 2], -1e-3), np.inf)
     hit = eye + dirs * t[..., None]
@@ -452,13 +452,13 @@ def test_cloud_shadows_over_a_large_ground_start_below_the_clouds(make_scene, bl
     caster now sits under the clouds' floor and its map holds the shadows."""
     from nubis_addon.blender.f12 import shadows
     from nubis_addon.blender.host import runtime
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
 
     scene = make_scene("default")
     blender.ops.mesh.primitive_plane_add(size=200000.0)
     blender.ops.mesh.primitive_cube_add(size=100.0, location=(0.0, 0.0, 50.0))
     blender.context.view_layer.update()
-    state = scene_io.state_from_scene(scene)
+    state = cloudstate.state_from_scene(scene)
     floor = state.shell()[0]
     centre, _u, _v, size = shadows.shadow_frame(scene, state.sun_direction, floor)
     assert 100.0 < centre.z < floor, (centre.z, floor)
@@ -490,10 +490,10 @@ def test_f12_over_a_200_km_ground_seen_from_400_m_shows_cloud_shadows(make_scene
     finally:
         scene.nubis.sky_render_clouds = True
     weights = np.array([0.2126, 0.7152, 0.0722])
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
 
-    inv = scene_io.camera_inv_view_proj(scene, W, H)
-    ground = skymath.camera_directions(inv, scene_io.camera_eye(scene), W, H)[..., 2] < -0.05
+    inv = cloudstate.camera_inv_view_proj(scene, W, H)
+    ground = skymath.camera_directions(inv, cloudstate.camera_eye(scene), W, H)[..., 2] < -0.05
     assert ground.sum() > 500
     ratio = (on @ weights)[ground] / np.maximum((off @ weights)[ground], 1e-6)
     low, high = np.quantile(ratio, [0.1, 0.9])

@@ -30,9 +30,9 @@ def _viewport_redraw(scene, light: bool = True) -> None:
     reads the fields and the uniforms, never the light volumes: with `light` False the redraw leaves the
     volumes unfilled (over a second each on the suite's software rasterizer) and uploads the rest."""
     from nubis_addon.blender.host import runtime
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
 
-    runtime.cloud_gpu(scene.nubis.noise_seed).update(scene_io.state_from_scene(scene), light=light)
+    runtime.cloud_gpu(scene.nubis.noise_seed).update(cloudstate.state_from_scene(scene), light=light)
 
 
 def _step_all(jobs, disturb, least: int = 4) -> list:
@@ -338,7 +338,7 @@ def test_quitting_during_a_bake_cancels_it_and_keeps_the_earlier_file(cache_dir,
             from nubis_addon.render.gpu_context import ensure_gpu_context
             nubis_addon.register()
             ensure_gpu_context()
-            from nubis_addon.blender.scene import datafield, scene_io, scenepresets
+            from nubis_addon.blender.scene import datafield, cloudstate, scenepresets
             from nubis_addon.blender.jobs import pipeline, work
             from nubis_addon.core.jobs import BakeOptions
             from nubis_addon.core.presets import load_preset

@@ -14,10 +14,10 @@ ENERGY = 5.0  # the default preset's sun strength
 
 def _sun_scene(make_scene, elevation: float, azimuth: float = 230.0):
     from nubis_addon.blender.host import runtime
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
 
     scene = make_scene("default", sun__elevation=elevation, sun__azimuth=azimuth)
-    state = scene_io.state_from_scene(scene)
+    state = cloudstate.state_from_scene(scene)
     gpu_inputs = runtime.cloud_gpu(scene.nubis.noise_seed)
     gpu_inputs.update(state, light=False)
     return scene, state, gpu_inputs
@@ -100,13 +100,13 @@ def test_without_a_nubis_sky_every_cloud_takes_the_lamp_s_colour(make_scene):
     from gpu_probe import probe_sun
 
     from nubis_addon.blender.host import runtime
-    from nubis_addon.blender.scene import scene_io, skyground
+    from nubis_addon.blender.scene import cloudstate, skyground
 
     scene = make_scene("default", sun__elevation=2.0)
     scene.nubis.sky_sun_color = False
     lamp = skyground.find_sun(scene)
     lamp.data.color = (1.0, 0.5, 0.25)
-    state = scene_io.state_from_scene(scene)
+    state = cloudstate.state_from_scene(scene)
     assert state.sun_air is None
     gpu_inputs = runtime.cloud_gpu(scene.nubis.noise_seed)
     gpu_inputs.update(state, light=False)
@@ -119,7 +119,7 @@ def test_f12_at_minus_one_degree_shows_lit_clouds_over_an_unlit_ground(make_scen
     """The sun 1 degree below the horizon, a 200 km ground, the camera 400 m up looking 8 degrees down:
     F12 with the sun's strength at 5 against F12 with it at 0. Above the horizon the clouds (over 1.5 km,
     above the shadow line) gain the sun's red light; the ground, in Earth's shadow, gains nothing."""
-    from nubis_addon.blender.scene import scene_io, skyground
+    from nubis_addon.blender.scene import cloudstate, skyground
     from nubis_addon.core import imageio
     from nubis_addon.core import sky as skymath
 
@@ -149,8 +149,8 @@ def test_f12_at_minus_one_degree_shows_lit_clouds_over_an_unlit_ground(make_scen
         scene.render.filepath = str(tmp_path / f"sun_{energy:g}.exr")
         blender.ops.render.render(write_still=True)
         images[energy] = imageio.read_image(tmp_path / f"sun_{energy:g}.exr")[..., :3].astype(np.float64)
-    inv = scene_io.camera_inv_view_proj(scene, width, height)
-    up = skymath.camera_directions(inv, scene_io.camera_eye(scene), width, height)[..., 2]
+    inv = cloudstate.camera_inv_view_proj(scene, width, height)
+    up = skymath.camera_directions(inv, cloudstate.camera_eye(scene), width, height)[..., 2]
     gain = images[5.0] - images[0.0]
     sky_rows, ground_rows = up > 0.05, up < -0.05
     assert sky_rows.sum() > 300 and ground_rows.sum() > 300
@@ -177,13 +177,13 @@ def test_cycles_lights_the_bake_through_the_same_air(make_scene, blender, elevat
     from mathutils import Vector
 
     from nubis_addon.blender.jobs import sun_air
-    from nubis_addon.blender.scene import scene_io, skyground
+    from nubis_addon.blender.scene import cloudstate, skyground
     from nubis_addon.core import imageio
 
     scene = make_scene("default", sun__elevation=elevation, sun__azimuth=90.0)
     lamp = skyground.find_sun(scene)
     ground_colour = tuple(lamp.data.color)
-    state = scene_io.state_from_scene(scene)
+    state = cloudstate.state_from_scene(scene)
     sun = Vector(state.sun_direction).normalized()
     centres = [Vector((0.0, y, z)) for y, z in ((-3000.0, 300.0), (0.0, 2500.0), (3000.0, 6000.0))]
     white = blender.data.materials.new("white card")

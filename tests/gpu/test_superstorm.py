@@ -18,9 +18,9 @@ def storm_scene(make_scene):
 
 def _gpu(scene):
     from nubis_addon.blender.host import runtime
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
 
-    state = scene_io.state_from_scene(scene)
+    state = cloudstate.state_from_scene(scene)
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
     clouds.update(state, light=False)  # densities and the vortex only
     return clouds, state

@@ -94,7 +94,7 @@ def test_a_pan_fills_what_comes_in_from_off_screen(shot):
     from nubis_addon.blender.host import runtime
     from nubis_addon.blender.jobs import pipeline
     from nubis_addon.blender.jobs.preview import orbit_camera
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
     from nubis_addon.render import temporal
 
     scene, s = shot("stratocumulus", w=96, h=54)
@@ -118,7 +118,7 @@ def test_a_pan_fills_what_comes_in_from_off_screen(shot):
     # Reprojection, not a smear of the old frame: the interior still matches the new view.
     inner = slice(strip + 4, 96 - 4)
     assert np.abs(got[:, inner, 3] - expected[:, inner, 3]).mean() < 0.06
-    assert scene_io.camera_eye(scene)[3] == 1.0
+    assert cloudstate.camera_eye(scene)[3] == 1.0
     tv.free()
 
 

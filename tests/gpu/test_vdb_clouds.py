@@ -146,19 +146,19 @@ def test_a_file_that_vanishes_is_said_and_the_rest_still_draws(blender, make_sce
 
     from nubis_addon.blender.host import status
     from nubis_addon.blender.jobs import pipeline
-    from nubis_addon.blender.scene import scene_io, vdbclouds
+    from nubis_addon.blender.scene import cloudstate, vdbclouds
     from nubis_addon.core.errors import NubisError
 
     scene = make_scene("default")  # the procedural clouds on
     copy = tmp_path / "gone.vdb"
     shutil.copy(cumulus_file, copy)
     obj = _import(blender, scene, copy)
-    assert len(scene_io.state_from_scene(scene).vdb_clouds) == 1
+    assert len(cloudstate.state_from_scene(scene).vdb_clouds) == 1
     copy.unlink()
     status.clear_error()
     try:
         # The viewport's draw: the cloud is left out and the sidebar says why.
-        assert scene_io.state_from_scene(scene, wait=False).vdb_clouds == ()
+        assert cloudstate.state_from_scene(scene, wait=False).vdb_clouds == ()
         assert "is not there (moved or deleted?)" in status.last_error() and obj.name in status.last_error()
         assert "is not there" in vdbclouds.problem(obj)
         # A render or a bake stops with the sentence.
@@ -171,7 +171,7 @@ def test_a_file_that_vanishes_is_said_and_the_rest_still_draws(blender, make_sce
 @pytest.mark.parametrize("mode", ["CLIP", "EXTEND", "REPEAT", "PING_PONG"])
 def test_a_vdb_sequence_follows_the_timeline_as_blender_reads_it(blender, make_scene, tmp_path, mode):
     """The frame's file by Blender's own rule: the same file the evaluated Volume reads, every frame."""
-    from nubis_addon.blender.scene import scene_io, vdbclouds
+    from nubis_addon.blender.scene import cloudstate, vdbclouds
 
     scene = _vdb_only(make_scene)
     for n, x in ((3, -1500.0), (4, 0.0), (5, 1500.0)):
@@ -186,7 +186,7 @@ def test_a_vdb_sequence_follows_the_timeline_as_blender_reads_it(blender, make_s
         evaluated = obj.evaluated_get(blender.context.evaluated_depsgraph_get()).data.grids.frame_filepath
         mine = vdbclouds.volume_file(obj, frame)
         assert (mine or "") == (blender.path.abspath(evaluated) if evaluated else ""), (frame, mine, evaluated)
-        clouds = scene_io.state_from_scene(scene).vdb_clouds
+        clouds = cloudstate.state_from_scene(scene).vdb_clouds
         seen[frame] = round(float(clouds[0].world_box[0][0])) if clouds else None
     assert len({v for v in seen.values() if v is not None}) == 3  # the three files, moving across the sky
 

@@ -37,7 +37,7 @@ def test_a_damaged_file_in_a_saved_blend_is_left_out_and_said(blender, make_scen
     from nubis_addon.blender import ensure_registered
     from nubis_addon.blender.host import status
     from nubis_addon.blender.jobs import pipeline
-    from nubis_addon.blender.scene import scene_io, vdbclouds
+    from nubis_addon.blender.scene import cloudstate, vdbclouds
     from nubis_addon.core.errors import NubisError
 
     cut = tmp_path / "cut.vdb"
@@ -50,7 +50,7 @@ def test_a_damaged_file_in_a_saved_blend_is_left_out_and_said(blender, make_scen
     scene = blender.context.scene
     status.clear_error()
     try:
-        drawn = scene_io.state_from_scene(scene, wait=False).vdb_clouds
+        drawn = cloudstate.state_from_scene(scene, wait=False).vdb_clouds
         assert [Path(p.cloud.path).resolve() for p in drawn] == [small_cloud.resolve()]
         said = status.last_error()
         assert "the Nubis cloud 'B cut' is not drawn:" in said and "is damaged (cut short" in said, said
@@ -91,13 +91,13 @@ def test_nothing_raises_from_the_draw_handler(blender, make_scene, monkeypatch):
 
 def test_a_fifth_marked_volume_is_left_out_and_said(blender, make_scene, small_cloud, capfd):
     from nubis_addon.blender.host import status
-    from nubis_addon.blender.scene import scene_io, vdbclouds
+    from nubis_addon.blender.scene import cloudstate, vdbclouds
     from nubis_addon.core import console
 
     scene, objs = _scene_with(blender, make_scene, [(f"Cloud {n}", small_cloud) for n in range(1, 6)])
     status.clear_error()
     try:
-        assert len(scene_io.state_from_scene(scene, wait=False).vdb_clouds) == 4
+        assert len(cloudstate.state_from_scene(scene, wait=False).vdb_clouds) == 4
         words = "the Nubis cloud 'Cloud 5' is left out: at most 4 VDB clouds are drawn at once"
         assert status.last_error().startswith(words)
         assert vdbclouds.problem(objs[4]).startswith(words) and not vdbclouds.problem(objs[0])
@@ -124,7 +124,7 @@ def test_a_fifth_marked_volume_is_left_out_and_said(blender, make_scene, small_c
 def test_an_object_scaled_to_zero_is_one_sentence(blender, make_scene, small_cloud):
     from nubis_addon.blender.host import status
     from nubis_addon.blender.jobs import pipeline
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
     from nubis_addon.core.errors import NubisError
 
     scene, (obj,) = _scene_with(blender, make_scene, [("Flat", small_cloud)])
@@ -132,7 +132,7 @@ def test_an_object_scaled_to_zero_is_one_sentence(blender, make_scene, small_clo
     blender.context.view_layer.update()
     status.clear_error()
     try:
-        assert scene_io.state_from_scene(scene, wait=False).vdb_clouds == ()
+        assert cloudstate.state_from_scene(scene, wait=False).vdb_clouds == ()
         assert "is scaled to zero along an axis" in status.last_error()
         with pytest.raises(NubisError, match="the Nubis cloud 'Flat': the object of the Nubis cloud 'Flat' is scaled"):
             pipeline.render_viewport(scene, 32, 18)
@@ -147,11 +147,11 @@ def test_a_refused_upload_leaves_no_half_made_textures(blender, make_scene, smal
 
     from nubis_addon.blender.host import runtime
     from nubis_addon.blender.jobs import pipeline
-    from nubis_addon.blender.scene import scene_io
+    from nubis_addon.blender.scene import cloudstate
     from nubis_addon.core.errors import NubisError
 
     scene, _objs = _scene_with(blender, make_scene, [("Cloud", small_cloud)])
-    state = scene_io.state_from_scene(scene)
+    state = cloudstate.state_from_scene(scene)
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed).fork()
     with pytest.raises(NubisError, match="the VDB clouds need .* on the GPU together, over the 1.0 KB"):
         clouds.update(dataclasses.replace(state, vdb_gpu_budget=1024))

@@ -21,7 +21,7 @@ from mathutils import Matrix
 
 from ...core import composition
 from ...render import depthpass, engine
-from ..scene import scene_io, sceneparams, surfaces
+from ..scene import cloudstate, sceneparams, surfaces
 
 VEIL_NAME = "Nubis Cloud Veil"
 VEIL_IMAGE = "Nubis Veil Clouds"
@@ -93,7 +93,7 @@ def shutter_margin(scene, inv_view_proj, width: int, height: int) -> int:
         for offset in offsets:
             t = frame + sub + offset
             scene.frame_set(int(np.floor(t)), subframe=float(t - np.floor(t)))
-            invs.append(np.array(scene_io.camera_inv_view_proj(scene, width, height)))
+            invs.append(np.array(cloudstate.camera_inv_view_proj(scene, width, height)))
     finally:
         scene.frame_set(frame, subframe=sub)
     limit = int(MAX_BLUR_SHARE * max(width, height))

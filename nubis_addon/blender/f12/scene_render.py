@@ -35,7 +35,7 @@ from ...core.staging import output_set
 from ...render import engine
 from ..host import handlers, mainthread, runtime
 from ..jobs import pipeline
-from ..scene import cycles_setup, scene_io, sky, skycapture, vdbclouds
+from ..scene import cloudstate, cycles_setup, sky, skycapture, vdbclouds
 from . import composition, shadows
 from .composition import write_image
 
@@ -108,9 +108,9 @@ def prepare_frame(scene) -> None:
         parts = composition.last_frame
         last_seconds.update(depth=parts["depth_s"], march=parts["march_s"], veil=parts["veil_s"])
     t = time.perf_counter()
-    state = scene_io.state_from_scene(scene)
+    state = cloudstate.state_from_scene(scene)
     clouds.update(state)
-    eye = scene_io.camera_eye(scene)
+    eye = cloudstate.camera_eye(scene)
     pw = s.sky_environment_width
     pano = engine.render_panorama(clouds, eye, pw, max(pw // 2, 2))
     write_image(PANORAMA_IMAGE, pano)
@@ -357,10 +357,10 @@ def panorama(scene, out: str | os.PathLike, width: int) -> Path:
     height = max(width // 2, 2)
     sky.sync_sun(scene)
     pipeline.check_scene(scene)
-    state = scene_io.state_from_scene(scene)
+    state = cloudstate.state_from_scene(scene)
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
     clouds.update(state)
-    eye = scene_io.camera_eye(scene) if scene.camera is not None else (0.0, 0.0, 2.0, 1.0)
+    eye = cloudstate.camera_eye(scene) if scene.camera is not None else (0.0, 0.0, 2.0, 1.0)
     rgba = engine.render_panorama(clouds, eye, width, height)  # bottom row first
     # The sky behind the clouds is the World's (the ambient colour, when set, only lights the clouds).
     flat = skycapture.flat_colour(scene.world) if scene.world is not None else (0.0, 0.0, 0.0)

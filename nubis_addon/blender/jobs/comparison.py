@@ -18,7 +18,7 @@ from ...core.bakeplan import BakePlan, camera_fitting_voxel, camera_footprint_vo
 from ...core.errors import NubisError
 from ...core.fsutil import check_output_dir
 from ...core.jobs import BakeOptions, CompareOptions
-from ..scene import scene_io, superstorms
+from ..scene import cloudstate, superstorms
 from . import pipeline
 from . import reference as cycles_reference
 
@@ -115,8 +115,8 @@ def _compare_voxels(run: _CompareRun) -> tuple[float, float, float | None]:
     if o.voxel_size is not None:
         return o.voxel_size, 1.0, None
     # The sparse bake's memory follows the clouds, so the voxels can be as fine as the camera needs.
-    state = scene_io.state_from_scene(scene)
-    inv = np.array(scene_io.camera_inv_view_proj(scene, o.width, o.height))
+    state = cloudstate.state_from_scene(scene)
+    inv = np.array(cloudstate.camera_inv_view_proj(scene, o.width, o.height))
     wanted = max(camera_footprint_voxel(state, inv, o.width, o.height, scene.nubis.bake_voxel_size), o.voxel_floor)
     voxel = max(camera_fitting_voxel(state, inv, wanted), o.voxel_floor)
     if wanted >= voxel:

@@ -22,7 +22,7 @@ from ...core.state import MAX_STORMS, CloudState
 from ...render import bake as gpu_bake
 from ...render import engine, offscreens
 from ..host import runtime
-from ..scene import cycles_setup, datafield, scene_io, sceneparams, skycapture, vdbclouds
+from ..scene import cloudstate, cycles_setup, datafield, sceneparams, skycapture, vdbclouds
 from . import snapshot, sun_air
 from .snapshot import BakeSnapshot
 
@@ -37,12 +37,12 @@ def sky_background(scene, width: int, height: int) -> np.ndarray:
     """The World as the scene camera sees it behind the clouds (H, W, 3), top row first: the World's
     capture (blender/scene/sky.py) looked up along each pixel's view ray."""
     if scene.camera is None:
-        return np.broadcast_to(np.asarray(scene_io.world_ambient(scene), np.float32), (height, width, 3))
+        return np.broadcast_to(np.asarray(cloudstate.world_ambient(scene), np.float32), (height, width, 3))
     env = skycapture.environment(scene)
     if env.shape[0] > 4 or env.shape[1] > 8:  # not one colour: a sharper capture for pictures
         env = skycapture.capture_world(scene, skycapture.BACKGROUND_WIDTH, samples=4)
-    inv = scene_io.camera_inv_view_proj(scene, width, height)
-    dirs = skymath.camera_directions(inv, scene_io.camera_eye(scene), width, height)
+    inv = cloudstate.camera_inv_view_proj(scene, width, height)
+    dirs = skymath.camera_directions(inv, cloudstate.camera_eye(scene), width, height)
     return skymath.sample(env, dirs).astype(np.float32)
 
 
@@ -131,7 +131,7 @@ def viewport_shot(
 ) -> ViewportShot:
     """`mode` "single" or "full" prepares the shot for a comparison with Cycles; `clip_box` (x0, y0,
     x1, y1) keeps only the clouds inside a bake's box, so both renderers light the same clouds."""
-    state = scene_io.state_from_scene(scene)
+    state = cloudstate.state_from_scene(scene)
     state.clip_box = clip_box
     # A full comparison's reference march measures the real-time light model's own optical depths.
     state.light_mode = 2 if light_mode == 1 and mode == "full" else light_mode
@@ -143,10 +143,10 @@ def viewport_shot(
     if mode in COMPARE_MODES:
         # The atmosphere fade has no counterpart in the Cycles scene.
         state.params["lighting_fade_distance"] = 0.0
-    inv = scene_io.camera_inv_view_proj(scene, width, height)
+    inv = cloudstate.camera_inv_view_proj(scene, width, height)
     # The noise mip levels follow the pixel's footprint, as in the 3D viewport.
     state.pixel_angle, state.pixel_size = camera.pixel_footprint(np.array(inv), width, height)
-    return ViewportShot(state, inv, scene_io.camera_eye(scene), scene.nubis.noise_seed, width, height)
+    return ViewportShot(state, inv, cloudstate.camera_eye(scene), scene.nubis.noise_seed, width, height)
 
 
 def render_shot(
@@ -225,13 +225,13 @@ def render_files(scene, out: str | os.PathLike, options: RenderOptions, progress
 
 def render_motion(scene, width: int, height: int) -> np.ndarray:
     """Motion vectors of the scene camera's view for one frame step: dx, dy (pixels), cloud distance, alpha."""
-    state = scene_io.state_from_scene(scene)
+    state = cloudstate.state_from_scene(scene)
     fps = sceneparams.scene_fps(scene)
     state.motion_dt = scene.nubis.wind_time_scale / fps
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
     clouds.update(state)
-    inv = scene_io.camera_inv_view_proj(scene, width, height)
-    return engine.render_motion(clouds, inv, scene_io.camera_eye(scene), inv.inverted(), width, height)
+    inv = cloudstate.camera_inv_view_proj(scene, width, height)
+    return engine.render_motion(clouds, inv, cloudstate.camera_eye(scene), inv.inverted(), width, height)
 
 
 @dataclass

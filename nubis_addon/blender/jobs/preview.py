@@ -25,7 +25,7 @@ from ...core.jobs import BakeOptions, BenchmarkOptions, PreviewOptions
 from ...render import depthpass, engine, offscreens, temporal
 from ...render.gpu_context import renderer_name
 from ..host import runtime
-from ..scene import cycles_setup, scene_io, sceneparams, surfaces
+from ..scene import cloudstate, cycles_setup, sceneparams, surfaces
 from . import pipeline
 
 Progress = Callable[[float], None]
@@ -55,8 +55,8 @@ def apply_quality(scene, name: str | None) -> str:
 
 
 def camera_view(scene, width: int, height: int) -> temporal.View:
-    inv = scene_io.camera_inv_view_proj(scene, width, height)
-    return temporal.View.of(np.array(inv), scene_io.camera_eye(scene), width, height)
+    inv = cloudstate.camera_inv_view_proj(scene, width, height)
+    return temporal.View.of(np.array(inv), cloudstate.camera_eye(scene), width, height)
 
 
 @contextlib.contextmanager
@@ -64,7 +64,7 @@ def scene_depth(scene, view: temporal.View):
     """The scene's depth from the camera of `view` as the 3D viewport has it (a float texture of window
     depths, 1 where nothing is drawn), drawn by F12's depth pre-pass; yields the view with its depth
     mapping and the texture, for `TemporalViewport.redraw(..., depth=...)`."""
-    window, view_matrix = scene_io.camera_matrices(scene, view.width, view.height)
+    window, view_matrix = cloudstate.camera_matrices(scene, view.width, view.height)
     mapping = camera.depth_mapping(window, view_matrix)
     forward = np.array(window, np.float64) @ np.array(view_matrix, np.float64)
     with depthpass.scene_hits(surfaces.camera_meshes(scene), forward, view.width, view.height) as (_tex, hits):
@@ -134,7 +134,7 @@ def preview(scene, out_dir, options: PreviewOptions, progress: Progress | None =
                 if n and orbit:
                     orbit_camera(scene, orbit)
                 view = camera_view(scene, width, height)
-                state = scene_io.state_from_scene(scene)
+                state = cloudstate.state_from_scene(scene)
                 times = []
                 for _ in range(redraws):
                     t = time.perf_counter()
@@ -265,7 +265,7 @@ def benchmark(scene, out_dir, options: BenchmarkOptions, baseline: dict | None =
     q = apply_quality(scene, options.quality)
     clouds = runtime.cloud_gpu(scene.nubis.noise_seed)
     view = camera_view(scene, options.width, options.height)
-    state = _with_footprint(scene_io.state_from_scene(scene), view)
+    state = _with_footprint(cloudstate.state_from_scene(scene), view)
     clouds.update(state)
     stats = _fetch_stats(clouds, view, options)
     timed = _timed_rounds(scene, clouds, state, view, options.rounds)
@@ -405,7 +405,7 @@ def _benchmark_result(scene, quality_name: str, options: BenchmarkOptions, timed
 def _benchmark_eevee(scene, view, options: BenchmarkOptions, result: dict) -> np.ndarray:
     """EEVEE rendering the bake of the same view; its time into `result`, its display image returned."""
     with interrupt.temporary_dir("nubis-bench-") as tmp:
-        st = scene_io.state_from_scene(scene)
+        st = cloudstate.state_from_scene(scene)
         region = view_footprint(st, np.array(view.inv_view_proj))
         voxel = comparison_voxel_size(st, scene.nubis.bake_voxel_size, region)
         bake_options = BakeOptions(voxel, camera_only=True, size=(options.width, options.height))

@@ -26,7 +26,7 @@ from ...core.state import CloudState
 from ...render.engine import CloudGPU
 from ...render.textures import NoiseTextures
 from ..host import runtime
-from ..scene import scene_io, sceneparams
+from ..scene import cloudstate, sceneparams
 
 # The field arrays a sequence's snapshot may hold when the field changes from frame to frame (keyed
 # layers, storms): frames whose field is unchanged share one copy.
@@ -90,14 +90,14 @@ def bake_plan(scene, options: BakeOptions, wait: bool = True) -> tuple[CloudStat
     refused politely before any GPU work when it does not fit). `wait` False plans without capturing
     the World's light (the plan does not depend on it); `options.vdb` False leaves the VDB clouds out (a
     comparison's Cycles renders their own files: vdbclouds.native)."""
-    state = scene_io.state_from_scene(scene, wait=wait)
+    state = cloudstate.state_from_scene(scene, wait=wait)
     if not options.vdb:
         state.vdb_clouds = ()
     region = None
     if options.camera_only:
         # The camera's aspect only: a camera-only bake renders no image, so the image size limit does not apply.
         w, h = options.size or (scene.render.resolution_x, scene.render.resolution_y)
-        inv = np.array(scene_io.camera_inv_view_proj(scene, w, h))
+        inv = np.array(cloudstate.camera_inv_view_proj(scene, w, h))
         region = view_footprint(state, inv)
     plan = plan_bake(
         state,

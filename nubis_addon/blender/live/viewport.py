@@ -16,7 +16,7 @@ from ...core.errors import NubisError
 from ...render import engine, temporal
 from ...render.gpu_context import release_at_exit
 from ..host import runtime, status, ui
-from ..scene import cycles_setup, datafield, scene_io, vdbclouds
+from ..scene import cloudstate, cycles_setup, datafield, vdbclouds
 
 _handle = None
 _fields_cache: dict = {}  # scene pointer -> (key, field arrays)
@@ -63,7 +63,7 @@ def field_arrays(scene) -> tuple:
 def _state(scene, view_origin):
     """Settings, sun and sky are read every redraw (cheap); the field pixels only when they changed."""
     fields = field_arrays(scene)
-    return scene_io.state_from_scene(scene, camera_location=view_origin, fields=fields, wait=False)
+    return cloudstate.state_from_scene(scene, camera_location=view_origin, fields=fields, wait=False)
 
 
 _MAX_VIEWS = 8  # 3D views with a history of their own; the least recently drawn is freed beyond this
