@@ -278,16 +278,18 @@ def _extra_grids(state: CloudState) -> int:
     return int(rain or bool(state.storms)) + int(bool(state.storms))
 
 
-def _texel_window(lo: float, hi: float, origin: float, size: float, n: int) -> np.ndarray:
-    """Indices of the field texels a bilinear lookup between world coordinates lo and hi can read, with
-    a texel of margin and both the clamped and the wrapped edge (the lookup clamps its uv)."""
+def _texel_window(lo: float, hi: float, origin: float, size: float, n: int) -> slice:
+    """The field texels a bilinear lookup between world coordinates lo and hi can read, with a texel of
+    margin, as a slice: the lookup clamps its uv, so a window past an edge reads the edge's texel."""
     s0 = ((lo - origin) / size + 0.5) * n - 0.5
     s1 = ((hi - origin) / size + 0.5) * n - 0.5
-    a = max(math.floor(s0) - 1, -1)
-    b = min(math.floor(s1) + 2, n)
-    if a >= n or b < 0:
-        return np.array([0 if b < 0 else n - 1])
-    return np.unique(np.clip(np.arange(a, b + 1), 0, n - 1))
+    a = max(math.floor(s0) - 1, 0)
+    b = min(math.floor(s1) + 2, n - 1)
+    if a > n - 1:
+        return slice(n - 1, n)
+    if b < 0:
+        return slice(0, 1)
+    return slice(a, b + 1)
 
 
 def _z_at(altitude: float, r: float, planet: float) -> float:
@@ -403,13 +405,11 @@ def plan_tiles(state: CloudState, plan: BakePlan, tile: int = TILE) -> list[Tile
                 continue
             rmin = math.hypot(max(xa, 0.0, -xb), max(ya, 0.0, -yb))
             rmax = max(math.hypot(x, y) for x in (xa, xb) for y in (ya, yb))
-            window = np.ix_(_texel_window(ya, yb, fy, fs, res_y), _texel_window(xa, xb, fx, fs, res_x))
+            window = (_texel_window(ya, yb, fy, fs, res_y), _texel_window(xa, xb, fx, fs, res_x))
             altitudes = []
             for b in layers:
                 w = b.from_wind
-                upwind = np.ix_(
-                    _texel_window(ya - w, yb + w, fy, fs, res_y), _texel_window(xa - w, xb + w, fx, fs, res_x)
-                )
+                upwind = (_texel_window(ya - w, yb + w, fy, fs, res_y), _texel_window(xa - w, xb + w, fx, fs, res_x))
                 altitudes += _layer_altitudes(b, window, upwind)
             if cirrus is not None and cirrus[window].any():
                 c = p["cirrus_altitude"]
